@@ -1,0 +1,55 @@
+"""The one exception tree of micros_rt.
+
+Every error micros_rt raises derives from :class:`MicrosRtError`. Errors from
+foreign layers (cyclonedds, sockets, XML-RPC, YAML) are wrapped at the boundary
+with ``raise ... from exc`` so the original stays attached.
+
+Value errors in options are both :class:`MicrosRtError` and :class:`ValueError`
+(or :class:`TypeError`), so ``except ValueError`` keeps working for callers who
+treat micros_rt like any other Python library.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "MicrosRtError",
+    "QoSValueError",
+    "QoSTypeError",
+    "UnsupportedQoSError",
+    "ProfileError",
+    "DDSUnavailableError",
+    "TypeMappingError",
+    "NodeNotInitializedError",
+]
+
+
+class MicrosRtError(Exception):
+    """Base class of every error raised by micros_rt."""
+
+
+class QoSValueError(MicrosRtError, ValueError):
+    """A QoS option has a value outside what is allowed (the message names option, value, allowed)."""
+
+
+class QoSTypeError(MicrosRtError, TypeError):
+    """A QoS option has a value of the wrong type (the message names option, type, allowed types)."""
+
+
+class UnsupportedQoSError(QoSValueError):
+    """A QoS option that micros_rt deliberately refuses (e.g. ``data_centric_update=True``)."""
+
+
+class ProfileError(MicrosRtError, ValueError):
+    """A YAML QoS profile is malformed; the message names the file, the key and the line."""
+
+
+class DDSUnavailableError(MicrosRtError):
+    """Cyclone DDS could not be started; micros_rt falls back to TCPROS everywhere."""
+
+
+class TypeMappingError(MicrosRtError):
+    """A ROS 1 message class cannot be mapped to a DDS type."""
+
+
+class NodeNotInitializedError(MicrosRtError):
+    """A NodeHandle was used before :func:`micros_rt.init_node`."""
