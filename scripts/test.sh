@@ -1,0 +1,29 @@
+#!/bin/bash
+# Set up, type-check (mypy strict, config in pyproject.toml) and run the test suite.
+# Extra arguments go to pytest, e.g.  scripts/test.sh -k harness -x
+set -euo pipefail
+
+REPO_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$REPO_ROOT"
+
+scripts/setup.sh
+
+echo "== mypy"
+.venv/bin/mypy
+
+ETH0_TX=/sys/class/net/eth0/statistics/tx_packets
+tx_before=""
+if [[ -r "$ETH0_TX" ]]; then
+    tx_before="$(cat "$ETH0_TX")"
+    echo "== eth0 tx_packets before pytest: $tx_before"
+fi
+
+echo "== pytest"
+rc=0
+.venv/bin/python -m pytest -q tests "$@" || rc=$?
+
+if [[ -n "$tx_before" ]]; then
+    tx_after="$(cat "$ETH0_TX")"
+    echo "== eth0 tx_packets after pytest: $tx_after (+$((tx_after - tx_before)))"
+fi
+exit "$rc"
