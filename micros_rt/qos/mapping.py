@@ -1,0 +1,201 @@
+"""Mapping of micros_rt QoS options (plus rospy's queue_size/latch) onto Cyclone DDS ``Qos`` objects.
+
+Pure functions: no entity is created here. The table (see DESIGN.md):
+
+============================== =====================================================================
+option                         DDS policy
+============================== =====================================================================
+queue_size                     History KEEP_LAST(queue_size); 0/None (rospy "unbounded") ->
+                               KEEP_LAST(:data:`UNBOUNDED_QUEUE_DEPTH`)
+latch / transient_local        Durability TRANSIENT_LOCAL (depth >= 1), else VOLATILE
+transport_priority             TransportPriority(level 0..6)
+latency_budget                 LatencyBudget on the writer; readers request infinite (see below)
+using_best_effort_protocol     Reliability BEST_EFFORT / RELIABLE
+msg_valid_period               Lifespan (absent when infinite, which is the DDS default)
+ordered_by_sending_timestamp   DestinationOrder BY_SOURCE / BY_RECEPTION on the reader; writers
+                               always offer BY_SOURCE
+time_filter_duration           TimeBasedFilter (absent when 0)
+deadline                       not mapped: enforced by the micros_rt subscriber itself
+============================== =====================================================================
+
+Why the asymmetries: DDS matches a writer and a reader only if every "request/offered" policy
+offered by the writer is at least as strong as the reader's request (Reliability, Durability,
+Deadline, LatencyBudget, DestinationOrder, ...); otherwise the pair is silently never connected.
+Writers therefore offer the strongest DestinationOrder, and readers request the weakest LatencyBudget
+and no Deadline, so that these micros_rt options never make two micros_rt endpoints incompatible.
+Cyclone 11 does enforce LatencyBudget RxO (verified: a 10 ms writer and a default reader do not match).
+"""
+
+from __future__ import annotations
+
+import math
+
+from cyclonedds.qos import Policy, Qos
+from cyclonedds.util import duration
+
+from micros_rt.exceptions import QoSTypeError, QoSValueError
+from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions
+
+__all__ = [
+    "RELIABLE_MAX_BLOCKING_TIME",
+    "UNBOUNDED_QUEUE_DEPTH",
+    "duration_ns",
+    "history_depth",
+    "plain_reader_qos",
+    "plain_writer_qos",
+    "reader_qos",
+    "writer_qos",
+]
+
+#: History depth used for rospy's queue_size 0 / None ("unbounded"). Not KEEP_ALL: a reliable KEEP_ALL
+#: writer blocks ``publish()`` when a slow reader has not acknowledged (back-pressure that ROS 1 code
+#: never expects) and lets memory grow without bound; 1000 samples is rospy's own common "big queue".
+UNBOUNDED_QUEUE_DEPTH: int = 1000
+
+#: Seconds a reliable writer may block in ``write()`` when its history is full of unacknowledged
+#: samples (KEEP_LAST only blocks on resource limits, so this is a safety net, not the normal path).
+RELIABLE_MAX_BLOCKING_TIME: float = 1.0
+
+
+def duration_ns(seconds: float) -> int:
+    """Float seconds (``math.inf`` = forever) -> DDS nanoseconds (``DDS_INFINITY`` for forever)."""
+    if math.isinf(seconds):
+        return int(duration(infinite=True))
+    # round(): 0.005 * 1e9 is 5000000.000000001 in binary floating point.
+    return int(round(seconds * 1e9))
+
+
+def history_depth(queue_size: int | None) -> int:
+    """KEEP_LAST depth for a rospy ``queue_size``: itself when > 0, else :data:`UNBOUNDED_QUEUE_DEPTH`.
+
+    rospy reads 0 and None as "no limit"; DDS needs a bound (see :data:`UNBOUNDED_QUEUE_DEPTH`).
+    """
+    if queue_size is None:
+        return UNBOUNDED_QUEUE_DEPTH
+    if isinstance(queue_size, bool) or not isinstance(queue_size, int):
+        raise QoSTypeError(
+            f"queue_size={queue_size!r} is invalid: expected an int >= 0 (0 or None = unbounded)"
+        )
+    if queue_size < 0:
+        raise QoSValueError(
+            f"queue_size={queue_size!r} is invalid: expected an int >= 0 (0 or None = unbounded)"
+        )
+    return queue_size if queue_size > 0 else UNBOUNDED_QUEUE_DEPTH
+
+
+def _reliability(best_effort: bool) -> object:
+    if best_effort:
+        return Policy.Reliability.BestEffort
+    return Policy.Reliability.Reliable(max_blocking_time=duration_ns(RELIABLE_MAX_BLOCKING_TIME))
+
+
+def _user_data(user_data: bytes) -> list[object]:
+    if not isinstance(user_data, (bytes, bytearray, memoryview)):
+        raise QoSTypeError(f"user_data={user_data!r} is invalid: expected bytes")
+    data = bytes(user_data)
+    # Empty USER_DATA is the DDS default; leaving it out keeps the Qos equal to a peer's plain one.
+    return [Policy.Userdata(data=data)] if data else []
+
+
+def writer_qos(
+    options: AdvertiseQoSOptions, *, queue_size: int | None, latch: bool, user_data: bytes = b""
+) -> Qos:
+    """DataWriter Qos for a publisher advertised with ``options``, ``queue_size`` and ``latch``.
+
+    - Reliability RELIABLE (max_blocking_time 1 s) or BEST_EFFORT per ``using_best_effort_protocol``.
+    - History KEEP_LAST(:func:`history_depth`) - always >= 1, which a latched writer needs.
+    - Durability TRANSIENT_LOCAL if ``latch`` (late joiners get the last message) else VOLATILE.
+    - Lifespan(msg_valid_period) only when finite.
+    - LatencyBudget(latency_budget) and TransportPriority(level) always.
+    - DestinationOrder BY_SOURCE_TIMESTAMP always: the strongest offer, compatible with readers of
+      either kind (the subscriber's ``ordered_by_sending_timestamp`` decides).
+    - Userdata(user_data) when non-empty (e.g. the graph tag).
+
+    >>> writer_qos(AdvertiseQoSOptions(), queue_size=10, latch=False)[Policy.History]
+    Policy.History.KeepLast(depth=10)
+    """
+    if not isinstance(options, AdvertiseQoSOptions):
+        raise QoSTypeError(f"options={options!r} is invalid: expected AdvertiseQoSOptions")
+    if not isinstance(latch, bool):
+        raise QoSTypeError(f"latch={latch!r} is invalid: expected True or False")
+    policies: list[object] = [
+        _reliability(options.using_best_effort_protocol),
+        Policy.History.KeepLast(depth=history_depth(queue_size)),
+        Policy.Durability.TransientLocal if latch else Policy.Durability.Volatile,
+        Policy.LatencyBudget(budget=duration_ns(options.latency_budget)),
+        Policy.TransportPriority(priority=int(options.transport_priority)),
+        Policy.DestinationOrder.BySourceTimestamp,
+    ]
+    if not math.isinf(options.msg_valid_period):
+        policies.append(Policy.Lifespan(lifespan=duration_ns(options.msg_valid_period)))
+    policies.extend(_user_data(user_data))
+    return Qos(*policies)
+
+
+def reader_qos(
+    options: SubscribeQoSOptions,
+    *,
+    queue_size: int | None,
+    transient_local: bool = False,
+    user_data: bytes = b"",
+) -> Qos:
+    """DataReader Qos for a subscriber with ``options`` and ``queue_size``.
+
+    - Reliability RELIABLE or BEST_EFFORT per ``using_best_effort_protocol`` (a best-effort reader
+      matches writers of both kinds).
+    - History KEEP_LAST(:func:`history_depth`).
+    - Durability TRANSIENT_LOCAL if ``transient_local`` (to receive a latched publisher's last message;
+      such a reader only matches latched writers) else VOLATILE.
+    - DestinationOrder BY_SOURCE_TIMESTAMP if ``ordered_by_sending_timestamp`` else BY_RECEPTION.
+    - TimeBasedFilter(time_filter_duration) when > 0 (Cyclone filters per instance, by source time).
+    - LatencyBudget INFINITE: DDS requires offered <= requested, so any finite request would make
+      publishers with a larger ``latency_budget`` silently incompatible. Latency budgets are a
+      publisher's hint; micros_rt measures them, it does not match on them.
+    - Deadline deliberately NOT set: a finite requested deadline makes every writer that offers no
+      deadline (all micros_rt and default ROS 2 writers) incompatible. The micros_rt subscriber
+      enforces ``deadline``/``deadline_cb`` itself with a timer, on DDS and TCPROS links alike.
+    - Userdata(user_data) when non-empty.
+    """
+    if not isinstance(options, SubscribeQoSOptions):
+        raise QoSTypeError(f"options={options!r} is invalid: expected SubscribeQoSOptions")
+    if not isinstance(transient_local, bool):
+        raise QoSTypeError(f"transient_local={transient_local!r} is invalid: expected True or False")
+    policies: list[object] = [
+        _reliability(options.using_best_effort_protocol),
+        Policy.History.KeepLast(depth=history_depth(queue_size)),
+        Policy.Durability.TransientLocal if transient_local else Policy.Durability.Volatile,
+        Policy.LatencyBudget(budget=duration_ns(math.inf)),
+        (
+            Policy.DestinationOrder.BySourceTimestamp
+            if options.ordered_by_sending_timestamp
+            else Policy.DestinationOrder.ByReceptionTimestamp
+        ),
+    ]
+    if options.time_filter_duration > 0.0:
+        policies.append(
+            Policy.TimeBasedFilter(filter_time=duration_ns(options.time_filter_duration))
+        )
+    policies.extend(_user_data(user_data))
+    return Qos(*policies)
+
+
+def plain_writer_qos(*, queue_size: int | None, latch: bool, user_data: bytes = b"") -> Qos:
+    """Writer Qos for ``advertise()`` without QoS options: :func:`writer_qos` with the defaults."""
+    return writer_qos(AdvertiseQoSOptions(), queue_size=queue_size, latch=latch, user_data=user_data)
+
+
+def plain_reader_qos(
+    *, queue_size: int | None, transient_local: bool = False, user_data: bytes = b""
+) -> Qos:
+    """Reader Qos for ``subscribe()`` without QoS options.
+
+    Like the defaults except DestinationOrder BY_RECEPTION_TIMESTAMP: that is ROS 1's behaviour (every
+    message in arrival order, whatever the sender's clock) and it matches ROS 2 writers, which offer
+    BY_RECEPTION by default (a BY_SOURCE reader would not match them).
+    """
+    return reader_qos(
+        SubscribeQoSOptions(ordered_by_sending_timestamp=False),
+        queue_size=queue_size,
+        transient_local=transient_local,
+        user_data=user_data,
+    )

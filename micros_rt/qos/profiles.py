@@ -1,0 +1,302 @@
+"""YAML QoS profiles: per-topic QoS options kept out of the code.
+
+Format::
+
+    publishers:
+      /chatter: {transport_priority: HIGH, latency_budget: 0.005}
+      "/camera/*": {using_best_effort_protocol: true, msg_valid_period: 0.1}
+    subscribers:
+      /chatter: {time_filter_duration: 1.0, deadline: 0.5}
+
+Keys are resolved topic names or :mod:`fnmatch` glob patterns (``*``, ``?``, ``[...]``; note that
+``*`` also matches ``/``). Lookup: an exact name beats any pattern; among matching patterns the
+longest wins; equally long patterns: the first in the file wins. Values are the options'
+``to_dict`` forms (durations in seconds, ``inf``/``.inf`` for forever, priority names or 0..6).
+Deadline callbacks cannot be given in YAML; pass ``deadline_cb`` in code.
+
+Code and file together (:func:`merge_advertise`, :func:`merge_subscribe`): **per field, a value given
+in code that differs from the default wins; otherwise the file's value applies.** So a profile can
+tune any option the code left at its default, and cannot override what the code chose explicitly.
+(A code value explicitly set *to* the default cannot be told apart from "not given" and yields to the
+file.)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import fnmatch
+import os
+from dataclasses import dataclass
+from typing import Any, Mapping, Optional, TypeVar, Union
+
+import yaml
+
+from micros_rt.exceptions import MicrosRtError, ProfileError
+from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions
+
+__all__ = ["QoSProfile", "merge_advertise", "merge_subscribe"]
+
+_SECTIONS: dict[str, type[AdvertiseQoSOptions] | type[SubscribeQoSOptions]] = {
+    "publishers": AdvertiseQoSOptions,
+    "subscribers": SubscribeQoSOptions,
+}
+_GLOB_CHARS = frozenset("*?[")
+
+_Options = TypeVar("_Options", AdvertiseQoSOptions, SubscribeQoSOptions)
+
+
+@dataclass(frozen=True)
+class _Entry:
+    key: str
+    options: Union[AdvertiseQoSOptions, SubscribeQoSOptions]
+    order: int
+
+
+class QoSProfile:
+    """Per-topic publisher and subscriber QoS options read from YAML.
+
+    >>> profile = QoSProfile.from_string("publishers: {/chatter: {transport_priority: HIGH}}")
+    >>> profile.advertise_options("/chatter").transport_priority
+    <TransportPriority.HIGH: 4>
+    """
+
+    def __init__(
+        self,
+        publishers: Mapping[str, AdvertiseQoSOptions] | None = None,
+        subscribers: Mapping[str, SubscribeQoSOptions] | None = None,
+        *,
+        source: str = "<code>",
+    ) -> None:
+        """Build a profile from ready option values (keys: topic names or glob patterns)."""
+        self.source = source
+        self._publishers: dict[str, AdvertiseQoSOptions] = dict(publishers or {})
+        self._subscribers: dict[str, SubscribeQoSOptions] = dict(subscribers or {})
+
+    def __repr__(self) -> str:
+        return (
+            f"QoSProfile(source={self.source!r}, publishers={sorted(self._publishers)!r}, "
+            f"subscribers={sorted(self._subscribers)!r})"
+        )
+
+    @property
+    def publishers(self) -> dict[str, AdvertiseQoSOptions]:
+        """A copy of the ``publishers`` section: key (name or pattern) -> options."""
+        return dict(self._publishers)
+
+    @property
+    def subscribers(self) -> dict[str, SubscribeQoSOptions]:
+        """A copy of the ``subscribers`` section: key (name or pattern) -> options."""
+        return dict(self._subscribers)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> QoSProfile:
+        """Read a profile file; errors are :class:`ProfileError` naming the file, line and key."""
+        try:
+            with open(path, encoding="utf-8") as f:
+                text = f.read()
+        except OSError as exc:
+            raise ProfileError(f"{os.fspath(path)}: cannot read QoS profile: {exc}") from exc
+        return cls.from_string(text, source=os.fspath(path))
+
+    @classmethod
+    def from_string(cls, text: str, *, source: str = "<string>") -> QoSProfile:
+        """Parse profile YAML ``text``; ``source`` names it in error messages."""
+        try:
+            # compose() keeps nodes with their line numbers; values are constructed per node below.
+            root = yaml.compose(text, Loader=yaml.SafeLoader)
+        except yaml.YAMLError as exc:
+            raise ProfileError(f"{source}: not valid YAML: {exc}") from exc
+        publishers: dict[str, AdvertiseQoSOptions] = {}
+        subscribers: dict[str, SubscribeQoSOptions] = {}
+        if root is None:  # empty file: an empty profile
+            return cls(publishers, subscribers, source=source)
+        _expect_mapping(root, source, "the top level", "a mapping with 'publishers'/'subscribers'")
+        for section_node, body in _pairs(root, source, ""):
+            section = section_node.value
+            if section not in _SECTIONS:
+                raise ProfileError(
+                    f"{_where(source, section_node)}: unknown section {section!r}; "
+                    f"expected {', '.join(repr(s) for s in _SECTIONS)}"
+                )
+            if _is_null(body):
+                continue
+            _expect_mapping(body, source, section, "a mapping of topic names/patterns to options")
+            for topic_node, options_node in _pairs(body, source, section):
+                topic = topic_node.value
+                path = f"{section}[{topic!r}]"
+                if not topic:
+                    raise ProfileError(f"{_where(source, topic_node)}: {section}: empty topic key")
+                if section == "publishers":
+                    publishers[topic] = _parse_options(
+                        AdvertiseQoSOptions, options_node, source, path
+                    )
+                else:
+                    subscribers[topic] = _parse_options(
+                        SubscribeQoSOptions, options_node, source, path
+                    )
+        return cls(publishers, subscribers, source=source)
+
+    def advertise_options(self, topic: str) -> AdvertiseQoSOptions | None:
+        """Options the profile gives for publishing on the resolved ``topic``, or None."""
+        return _lookup(self._publishers, topic)
+
+    def subscribe_options(self, topic: str) -> SubscribeQoSOptions | None:
+        """Options the profile gives for subscribing to the resolved ``topic``, or None."""
+        return _lookup(self._subscribers, topic)
+
+
+def _is_glob(key: str) -> bool:
+    return any(c in _GLOB_CHARS for c in key)
+
+
+def _lookup(section: Mapping[str, _Options], topic: str) -> _Options | None:
+    exact = section.get(topic)
+    if exact is not None and not _is_glob(topic):
+        return exact
+    best: tuple[int, int] | None = None  # (-length, file order): smaller is better
+    found: _Options | None = None
+    for order, (key, options) in enumerate(section.items()):
+        if _is_glob(key) and fnmatch.fnmatchcase(topic, key):
+            rank = (-len(key), order)
+            if best is None or rank < best:
+                best, found = rank, options
+    return found
+
+
+def _where(source: str, node: yaml.Node) -> str:
+    return f"{source}:{node.start_mark.line + 1}"
+
+
+def _is_null(node: yaml.Node) -> bool:
+    return isinstance(node, yaml.ScalarNode) and node.tag == "tag:yaml.org,2002:null"
+
+
+def _expect_mapping(node: yaml.Node, source: str, what: str, expected: str) -> None:
+    if not isinstance(node, yaml.MappingNode):
+        raise ProfileError(f"{_where(source, node)}: {what}: expected {expected}, got {_kind(node)}")
+
+
+def _kind(node: yaml.Node) -> str:
+    if isinstance(node, yaml.SequenceNode):
+        return "a list"
+    if isinstance(node, yaml.ScalarNode):
+        return f"the value {node.value!r}"
+    return "a mapping"
+
+
+def _pairs(node: yaml.Node, source: str, path: str) -> list[tuple[yaml.ScalarNode, yaml.Node]]:
+    """Key/value node pairs of a mapping, with string keys and no duplicates (YAML allows both)."""
+    assert isinstance(node, yaml.MappingNode)  # callers check with _expect_mapping first
+    seen: dict[str, yaml.Node] = {}
+    pairs: list[tuple[yaml.ScalarNode, yaml.Node]] = []
+    for key_node, value_node in node.value:
+        where = _where(source, key_node)
+        if not isinstance(key_node, yaml.ScalarNode) or key_node.tag != "tag:yaml.org,2002:str":
+            shown = key_node.value if isinstance(key_node, yaml.ScalarNode) else _kind(key_node)
+            raise ProfileError(f"{where}: {path or 'top level'}: key {shown!r} must be a string")
+        if key_node.value in seen:
+            first = seen[key_node.value].start_mark.line + 1
+            raise ProfileError(
+                f"{where}: {path + '.' if path else ''}{key_node.value}: duplicate key "
+                f"(first given on line {first})"
+            )
+        seen[key_node.value] = key_node
+        pairs.append((key_node, value_node))
+    return pairs
+
+
+def _construct(node: yaml.Node) -> Any:
+    # A fresh SafeLoader's constructor turns one scalar node into its Python value (true -> True,
+    # 0.5 -> 0.5, .inf -> inf) exactly as yaml.safe_load would.
+    loader = yaml.SafeLoader("")
+    try:
+        return loader.construct_object(node, deep=True)
+    finally:
+        loader.dispose()
+
+
+def _parse_options(
+    cls: type[_Options], node: yaml.Node, source: str, path: str
+) -> _Options:
+    if _is_null(node):
+        return cls()
+    _expect_mapping(node, source, path, "a mapping of option names to values")
+    values: dict[str, Any] = {}
+    known = cls._KEYS
+    for key_node, value_node in _pairs(node, source, path):
+        key = key_node.value
+        where = _where(source, key_node)
+        if key == "deadline_cb":
+            raise ProfileError(
+                f"{where}: {path}.deadline_cb: deadline callbacks cannot be given in a YAML profile; "
+                f"pass deadline_cb=... in code (the profile may still set deadline)"
+            )
+        if key not in known:
+            raise ProfileError(
+                f"{where}: {path}.{key}: unknown option; known options: {', '.join(known)}"
+            )
+        if not isinstance(value_node, yaml.ScalarNode):
+            raise ProfileError(
+                f"{_where(source, value_node)}: {path}.{key}: expected a single value, "
+                f"got {_kind(value_node)}"
+            )
+        value = _construct(value_node)
+        try:
+            # Validate each option on its own so that the error points at its line.
+            cls.from_dict({key: value}, source=source)
+        except MicrosRtError as exc:
+            raise ProfileError(
+                f"{_where(source, value_node)}: {path}.{key}: {value!r} is invalid: "
+                f"{_expected_part(exc)}"
+            ) from exc
+        values[key] = value
+    try:
+        return cls.from_dict(values, source=source)
+    except MicrosRtError as exc:  # combinations of options (none expressible today, but be safe)
+        raise ProfileError(f"{_where(source, node)}: {path}: {exc}") from exc
+
+
+def _expected_part(exc: Exception) -> str:
+    # options.py phrases errors as "<option>=<value> is invalid: <what is allowed>"; keep the last part.
+    text = str(exc)
+    marker = " is invalid: "
+    return text.split(marker, 1)[1] if marker in text else text
+
+
+def _merge(cls: type[_Options], code: _Options | None, profile: _Options | None) -> _Options:
+    if code is None and profile is None:
+        return cls()
+    if code is None:
+        assert profile is not None
+        return profile
+    if profile is None:
+        return code
+    changes: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        code_value = getattr(code, f.name)
+        if code_value == f.default:
+            changes[f.name] = getattr(profile, f.name)
+    # deadline_cb follows the same rule (None is its default); YAML profiles never carry one.
+    return dataclasses.replace(code, **changes)
+
+
+def merge_advertise(
+    code: AdvertiseQoSOptions | None, profile: AdvertiseQoSOptions | None
+) -> AdvertiseQoSOptions:
+    """Combine options from code and from a profile: per field, a non-default code value wins.
+
+    Fields the code left at their default take the profile's value. Either side may be None;
+    both None gives the defaults.
+    """
+    return _merge(AdvertiseQoSOptions, code, profile)
+
+
+def merge_subscribe(
+    code: SubscribeQoSOptions | None, profile: SubscribeQoSOptions | None
+) -> SubscribeQoSOptions:
+    """Combine options from code and from a profile: per field, a non-default code value wins.
+
+    Fields the code left at their default take the profile's value; ``deadline_cb`` always comes
+    from code. Either side may be None; both None gives the defaults.
+    """
+    return _merge(SubscribeQoSOptions, code, profile)
