@@ -1,0 +1,88 @@
+"""Shared fixtures: real rosmaster, per-run DDS domain, loopback-only DDS, peer processes.
+
+Fixtures
+  dds_domain      (session)  int ROS_DOMAIN_ID for this run (1 + pid % 200); also in os.environ
+  ros_master      (session)  harness.RosMaster: .uri .port .env .pid, shared by the whole run
+  fresh_master    (function) harness.RosMaster private to one test, .restart() keeps the port
+  spawn           (function) harness.Spawner: spawn(argv, env=None, *, name=None, cwd=None) -> Peer;
+                             env defaults to ros_master.env; every peer is stopped at test end
+
+At import time (before any test creates a DDS participant) this module points the in-process
+Cyclone DDS and Fast DDS at the loopback-only configs, so nothing leaves on the LAN.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+from typing import Iterator, Optional
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import harness  # noqa: E402
+
+_DOMAIN_ID = int(os.environ.get("MICROS_RT_TEST_DOMAIN_ID") or harness.dds_domain_id_for_pid())
+# In-process use (micros_rt/cyclonedds inside the pytest process): loopback DDS, our own domain.
+os.environ.update(harness.dds_env(_DOMAIN_ID))
+for _k in ("ROS_HOSTNAME",):
+    os.environ.pop(_k, None)
+os.environ["ROS_IP"] = "127.0.0.1"
+
+
+@pytest.fixture(scope="session")
+def dds_domain() -> int:
+    """This run's DDS domain id (also set as ROS_DOMAIN_ID in os.environ and in every child env)."""
+    os.environ["ROS_DOMAIN_ID"] = str(_DOMAIN_ID)
+    return _DOMAIN_ID
+
+
+@pytest.fixture(scope="session")
+def ros_master(dds_domain: int, tmp_path_factory: pytest.TempPathFactory) -> Iterator[harness.RosMaster]:
+    """One real rosmaster for the whole run; sets ROS_MASTER_URI in os.environ for in-process nodes."""
+    master = harness.RosMaster(workdir=tmp_path_factory.mktemp("ros_master"), domain_id=dds_domain)
+    master.start()
+    old_uri = os.environ.get("ROS_MASTER_URI")
+    os.environ["ROS_MASTER_URI"] = master.uri
+    try:
+        yield master
+    finally:
+        master.cleanup()
+        if old_uri is None:
+            os.environ.pop("ROS_MASTER_URI", None)
+        else:
+            os.environ["ROS_MASTER_URI"] = old_uri
+
+
+@pytest.fixture
+def fresh_master(dds_domain: int, tmp_path: Path) -> Iterator[harness.RosMaster]:
+    """A rosmaster private to this test (its own port); ``restart()`` stops and starts it on the same port.
+
+    Does not touch os.environ: pass ``fresh_master.env`` to children.
+    """
+    master = harness.RosMaster(workdir=tmp_path / "ros_master", domain_id=dds_domain)
+    master.start()
+    try:
+        yield master
+    finally:
+        master.cleanup()
+
+
+@pytest.fixture
+def spawn(request: pytest.FixtureRequest) -> Iterator[harness.Spawner]:
+    """Start peer processes; all are stopped (SIGINT, SIGTERM, SIGKILL; bounded) when the test ends."""
+
+    class _Spawner(harness.Spawner):
+        def __call__(self, argv, env=None, *, name=None, cwd=None):  # type: ignore[no-untyped-def]
+            if env is None and self.default_env is None:
+                self.default_env = dict(request.getfixturevalue("ros_master").env)
+            return super().__call__(argv, env, name=name, cwd=cwd)
+
+    spawner: Optional[harness.Spawner] = _Spawner()
+    assert spawner is not None
+    try:
+        yield spawner
+    finally:
+        spawner.close()
