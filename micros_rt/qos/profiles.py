@@ -31,7 +31,7 @@ from typing import Any, Mapping, Optional, TypeVar, Union
 
 import yaml
 
-from micros_rt.exceptions import MicrosRtError, ProfileError
+from micros_rt.exceptions import MicrosRtError, ProfileError, UnsupportedQoSError
 from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions
 
 __all__ = ["QoSProfile", "merge_advertise", "merge_subscribe"]
@@ -197,12 +197,20 @@ def _pairs(node: yaml.Node, source: str, path: str) -> list[tuple[yaml.ScalarNod
         if key_node.value in seen:
             first = seen[key_node.value].start_mark.line + 1
             raise ProfileError(
-                f"{where}: {path + '.' if path else ''}{key_node.value}: duplicate key "
-                f"(first given on line {first})"
+                f"{where}: {_child(path, key_node.value)}: duplicate key (first given on line {first})"
             )
         seen[key_node.value] = key_node
         pairs.append((key_node, value_node))
     return pairs
+
+
+def _child(path: str, key: str) -> str:
+    # The same spelling as the error messages elsewhere: publishers['/a'].latency_budget
+    if not path:
+        return key
+    if path in _SECTIONS:
+        return f"{path}[{key!r}]"
+    return f"{path}.{key}"
 
 
 def _construct(node: yaml.Node) -> Any:
@@ -244,6 +252,8 @@ def _parse_options(
         try:
             # Validate each option on its own so that the error points at its line.
             cls.from_dict({key: value}, source=source)
+        except UnsupportedQoSError as exc:
+            raise ProfileError(f"{_where(source, value_node)}: {path}.{key}: {exc}") from exc
         except MicrosRtError as exc:
             raise ProfileError(
                 f"{_where(source, value_node)}: {path}.{key}: {value!r} is invalid: "
