@@ -15,7 +15,11 @@ import pytest
 from cyclonedds.qos import Policy, Qos
 
 from micros_rt.exceptions import QoSTypeError, QoSValueError
-from micros_rt.qos.compatibility import check_compatibility, describe_incompatible_policy
+from micros_rt.qos.compatibility import (
+    Compatibility,
+    check_compatibility,
+    describe_incompatible_policy,
+)
 from micros_rt.qos.mapping import (
     UNBOUNDED_QUEUE_DEPTH,
     duration_ns,
@@ -283,6 +287,18 @@ def participant() -> Iterator[Any]:
         mp.undo()
 
 
+def _take_all(reader: Any, timeout: float) -> list[Any]:
+    """Samples taken from ``reader`` once at least one arrived, or [] after ``timeout`` seconds."""
+    got: list[Any] = []
+
+    def arrived() -> bool:
+        got.extend(reader.take(10))
+        return bool(got)
+
+    _wait(arrived, timeout)
+    return got
+
+
 def _wait(predicate: Callable[[], bool], timeout: float) -> bool:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -330,7 +346,7 @@ def test_cyclone_matches_exactly_what_check_compatibility_predicts(participant: 
     class Probe(IdlStruct, typename="micros_rt_test::Probe"):
         value: int
 
-    pairs = []
+    pairs: list[tuple[Case, Any, Any, Compatibility]] = []  # cyclonedds is untyped
     for i, case in enumerate(CASES):
         topic = Topic(participant, f"micros_rt_mapping_{os.getpid()}_{i}", Probe)
         writer = DataWriter(
@@ -367,8 +383,7 @@ def test_cyclone_matches_exactly_what_check_compatibility_predicts(participant: 
 
     for case, _, reader, verdict in pairs:
         if verdict.compatible:
-            got: list[Any] = []
-            assert _wait(lambda: bool(got.extend(reader.take(10)) or got), timeout=5.0), case.name
+            got = _take_all(reader, timeout=5.0)
             assert [s.value for s in got] == [42], case.name
             assert reader.get_requested_incompatible_qos_status().total_count == 0, case.name
         else:
@@ -397,9 +412,7 @@ def test_cyclone_latched_message_reaches_late_joiner(participant: Any) -> None:
         writer.write(Latched(value=value))
     # The reader joins after the writes: only TRANSIENT_LOCAL on both ends delivers the last one.
     reader = DataReader(participant, topic, qos=plain_reader_qos(queue_size=1, transient_local=True))
-    got: list[Any] = []
-    assert _wait(lambda: bool(got.extend(reader.take(10)) or got), timeout=5.0)
-    assert [s.value for s in got] == [3]
+    assert [s.value for s in _take_all(reader, timeout=5.0)] == [3]
 
 
 def test_cases_cover_every_option_in_both_directions() -> None:

@@ -281,7 +281,7 @@ def test_advertise_bools_must_be_real_bools(field_name: str, bad: Any) -> None:
 @pytest.mark.parametrize("field_name", ["latency_budget", "msg_valid_period"])
 def test_advertise_rejects_negative_durations(field_name: str) -> None:
     with pytest.raises(QoSValueError, match=f"{field_name}=-0.5 is invalid"):
-        AdvertiseQoSOptions(**{field_name: -0.5})
+        AdvertiseQoSOptions(**{field_name: -0.5})  # type: ignore[arg-type]
 
 
 def test_advertise_rejects_zero_valid_period() -> None:
@@ -385,13 +385,13 @@ def test_subscribe_rejects_infinite_time_filter() -> None:
 @pytest.mark.parametrize("bad", [-1, float("nan")])
 def test_subscribe_rejects_bad_durations(field_name: str, bad: float) -> None:
     with pytest.raises(QoSValueError, match=f"{field_name}=.* is invalid"):
-        SubscribeQoSOptions(**{field_name: bad})
+        SubscribeQoSOptions(**{field_name: bad})  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("field_name", ["deadline", "time_filter_duration"])
 def test_subscribe_rejects_bool_durations(field_name: str) -> None:
     with pytest.raises(QoSTypeError, match=f"{field_name}=True"):
-        SubscribeQoSOptions(**{field_name: True})
+        SubscribeQoSOptions(**{field_name: True})  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize(
@@ -449,14 +449,14 @@ def test_advertise_round_trips_through_xmlrpc(options: AdvertiseQoSOptions) -> N
     # The real wire: xmlrpc.client refuses inf and enums, so this proves to_dict is XML-RPC-safe.
     wire = xmlrpc.client.dumps((options.to_dict(),))
     (decoded,), _ = xmlrpc.client.loads(wire)
-    assert AdvertiseQoSOptions.from_dict(decoded, source="test") == options
+    assert AdvertiseQoSOptions.from_dict(decoded, source="test") == options  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("options", SUBSCRIBE_SAMPLES)
 def test_subscribe_round_trips_through_xmlrpc(options: SubscribeQoSOptions) -> None:
     wire = xmlrpc.client.dumps((options.to_dict(),))
     (decoded,), _ = xmlrpc.client.loads(wire)
-    assert SubscribeQoSOptions.from_dict(decoded, source="test") == options
+    assert SubscribeQoSOptions.from_dict(decoded, source="test") == options  # type: ignore[arg-type]
 
 
 def test_from_dict_missing_keys_keep_defaults() -> None:
