@@ -1,5 +1,6 @@
 #!/bin/bash
 # Set up, type-check (mypy strict, config in pyproject.toml) and run the test suite.
+# pytest runs even when mypy fails; the script exits non-zero if either failed.
 # Extra arguments go to pytest, e.g.  scripts/test.sh -k harness -x
 set -euo pipefail
 
@@ -9,7 +10,8 @@ cd "$REPO_ROOT"
 scripts/setup.sh
 
 echo "== mypy"
-.venv/bin/mypy
+mypy_rc=0
+.venv/bin/mypy || mypy_rc=$?
 
 ETH0_TX=/sys/class/net/eth0/statistics/tx_packets
 tx_before=""
@@ -25,5 +27,9 @@ rc=0
 if [[ -n "$tx_before" ]]; then
     tx_after="$(cat "$ETH0_TX")"
     echo "== eth0 tx_packets after pytest: $tx_after (+$((tx_after - tx_before)))"
+fi
+if ((mypy_rc != 0)); then
+    echo "== FAILED: mypy (exit $mypy_rc)" >&2
+    exit "$mypy_rc"
 fi
 exit "$rc"
