@@ -1,0 +1,71 @@
+"""micros_rt: real-time QoS and a DDS data plane for ROS 1 Python nodes, inside the ROS 1 graph.
+
+The Python analogue of micROS RT: rospy's publish/subscribe API plus
+``advertise_with_qos``/``subscribe_with_qos``; data between micros_rt nodes flows
+over Cyclone DDS, with stock ROS nodes over TCPROS, negotiated per publisher.
+
+>>> import micros_rt
+>>> from std_msgs.msg import String
+>>> micros_rt.init_node("talker")                                        # doctest: +SKIP
+>>> nh = micros_rt.NodeHandle()                                          # doctest: +SKIP
+>>> pub = nh.advertise_with_qos("chatter", String, 10, micros_rt.TransportPriority.HIGH)  # doctest: +SKIP
+"""
+
+from .exceptions import (
+    DDSUnavailableError,
+    MicrosRtError,
+    NodeNotInitializedError,
+    ProfileError,
+    QoSTypeError,
+    QoSValueError,
+    TypeMappingError,
+    UnsupportedQoSError,
+)
+from .negotiation.hints import TransportHints
+from .node import (
+    DeadlineMissed,
+    NodeHandle,
+    Publisher,
+    Subscriber,
+    init_node,
+    is_shutdown,
+    ok,
+    shutdown,
+    spin,
+)
+from .qos import (
+    DURATION_MAX,
+    DURATION_MIN,
+    AdvertiseQoSOptions,
+    QoSProfile,
+    SubscribeQoSOptions,
+    TransportPriority,
+)
+
+__all__ = [
+    "AdvertiseQoSOptions",
+    "DDSUnavailableError",
+    "DURATION_MAX",
+    "DURATION_MIN",
+    "DeadlineMissed",
+    "MicrosRtError",
+    "NodeHandle",
+    "NodeNotInitializedError",
+    "ProfileError",
+    "Publisher",
+    "QoSProfile",
+    "QoSTypeError",
+    "QoSValueError",
+    "Subscriber",
+    "SubscribeQoSOptions",
+    "TransportHints",
+    "TransportPriority",
+    "TypeMappingError",
+    "UnsupportedQoSError",
+    "init_node",
+    "is_shutdown",
+    "ok",
+    "shutdown",
+    "spin",
+]
+__version__ = "0.1.0"

@@ -1,0 +1,265 @@
+"""The one module that touches rospy's private ``rospy.impl`` layer.
+
+micros_rt plugs into ROS 1's protocol negotiation (``requestTopic``) on both
+sides:
+
+* publisher side: ``ROSHandler.requestTopic`` is wrapped; for a micros_rt
+  publication the 'DDS' entries a subscriber offers are judged by micros_rt
+  (accepted, or declined with a logged reason so the next protocol, TCPROS, is
+  tried); for everything else they are removed and rospy decides as usual.
+* subscriber side: ``ROSHandler._connect_topic`` is wrapped; for a micros_rt
+  subscription the protocol list follows the subscription's TransportHints and
+  a DDS answer creates a DDS pseudo-connection instead of a socket.
+
+Pseudo-connections live in rospy's own connection lists, so ``getBusInfo``
+(``rosnode info``), ``get_num_connections`` and ``has_connection`` stay true.
+"""
+
+from __future__ import annotations
+
+import errno
+import itertools
+import logging
+import threading
+import time
+import xmlrpc.client
+from typing import Any, Callable, List, Optional, Protocol, Tuple
+
+import rospy
+import rospy.core
+import rospy.impl.masterslave as masterslave
+import rospy.names
+import rospy.topics
+from rospy.impl.registration import get_topic_manager
+
+__all__ = [
+    "DDSConnection",
+    "PublicationHook",
+    "SubscriptionHook",
+    "install",
+    "caller_id",
+    "add_pseudo_connection",
+    "remove_pseudo_connection",
+]
+
+_log = logging.getLogger("micros_rt.negotiation")
+
+DDS = "DDS"
+TCPROS = "TCPROS"
+_ids = itertools.count(100000)
+
+
+class PublicationHook(Protocol):
+    """What the publisher side of the negotiation asks micros_rt."""
+
+    def judge_dds(self, topic: str, subscriber: str, params: Any) -> Tuple[bool, Any]:
+        """(True, reply params) to accept DDS, or (False, reason) to decline."""
+
+
+class SubscriptionHook(Protocol):
+    """What the subscriber side of the negotiation asks micros_rt."""
+
+    def protocols(self, topic: str) -> List[List[Any]]:
+        """Protocol entries to offer, in preference order, e.g. [['DDS', {...}], ['TCPROS']]."""
+
+    def connect_dds(self, topic: str, pub_uri: str, params: Any) -> Tuple[int, str, int]:
+        """Create the DDS pseudo-connection after the publisher accepted DDS."""
+
+
+_publications: dict[str, PublicationHook] = {}
+_subscriptions: dict[str, SubscriptionHook] = {}
+_install_lock = threading.Lock()
+_installed = False
+
+
+def register_publication(topic: str, hook: Optional[PublicationHook]) -> None:
+    if hook is None:
+        _publications.pop(topic, None)
+    else:
+        _publications[topic] = hook
+
+
+def register_subscription(topic: str, hook: Optional[SubscriptionHook]) -> None:
+    if hook is None:
+        _subscriptions.pop(topic, None)
+    else:
+        _subscriptions[topic] = hook
+
+
+def caller_id() -> str:
+    return str(rospy.names.get_caller_id())
+
+
+class DDSConnection:
+    """A connection in rospy's bookkeeping whose data flows over DDS.
+
+    It has no socket (``fileno()`` is None) and writes nothing: the DDS writer
+    carries the data once for every DDS reader, however many of these exist.
+    """
+
+    transport_type = "DDS"
+
+    def __init__(self, topic: str, endpoint_id: str, direction: str, info: str,
+                 on_close: Optional[Callable[["DDSConnection"], None]] = None) -> None:
+        self.id = next(_ids)
+        self.name = topic
+        self.endpoint_id = endpoint_id
+        self.direction = direction  # 'i' inbound (subscriber side) / 'o' outbound
+        self.info = info
+        self.done = False
+        self.cleanup_cb: Optional[Callable[[Any], None]] = None
+        self.stat_bytes = 0
+        self.stat_num_msg = 0
+        self.callerid_pub = endpoint_id
+        self._on_close = on_close
+
+    def fileno(self) -> None:
+        return None
+
+    def get_transport_info(self) -> str:
+        return self.info
+
+    def set_cleanup_callback(self, cb: Callable[[Any], None]) -> None:
+        self.cleanup_cb = cb
+
+    def write_data(self, data: bytes) -> bool:
+        return True
+
+    def close(self) -> None:
+        if self.done:
+            return
+        self.done = True
+        if self._on_close is not None:
+            self._on_close(self)
+        if self.cleanup_cb is not None:
+            try:
+                self.cleanup_cb(self)
+            except Exception:  # rospy's own cleanup; never break our close
+                _log.debug("cleanup callback failed", exc_info=True)
+
+
+def add_pseudo_connection(topic: str, conn: DDSConnection, *, publisher: bool) -> bool:
+    """Put ``conn`` into rospy's connection list of ``topic``.
+
+    On the publisher side the base ``_TopicImpl.add_connection`` is used on purpose:
+    ``_PublisherImpl.add_connection`` would wrap it in a queue thread and re-send the
+    latched message through rospy, while DDS durability already does that.
+    """
+    tm = get_topic_manager()
+    impl = tm.get_publisher_impl(topic) if publisher else tm.get_subscriber_impl(topic)
+    if impl is None:
+        return False
+    return bool(rospy.topics._TopicImpl.add_connection(impl, conn))
+
+
+def remove_pseudo_connection(topic: str, conn: DDSConnection, *, publisher: bool) -> None:
+    tm = get_topic_manager()
+    impl = tm.get_publisher_impl(topic) if publisher else tm.get_subscriber_impl(topic)
+    if impl is not None and conn in impl.connections:
+        impl.remove_connection(conn)
+
+
+def count_tcp_connections(impl: Any) -> int:
+    return sum(1 for c in impl.connections if getattr(c, "transport_type", "") != DDS)
+
+
+class _TimeoutTransport(xmlrpc.client.Transport):
+    # rospy sets a process-wide socket timeout for this call; a per-connection
+    # timeout keeps user sockets out of it.
+    def __init__(self, timeout: float) -> None:
+        super().__init__()
+        self._timeout = timeout
+
+    def make_connection(self, host: Any) -> Any:
+        conn = super().make_connection(host)
+        conn.timeout = self._timeout
+        return conn
+
+
+def _request_topic(pub_uri: str, topic: str, protocols: List[List[Any]]) -> Tuple[int, str, Any]:
+    interval = 0.5
+    deadline = time.monotonic() + 60.0
+    while not rospy.core.is_shutdown():
+        proxy = xmlrpc.client.ServerProxy(pub_uri, transport=_TimeoutTransport(10.0), allow_none=False)
+        try:
+            code, msg, result = proxy.requestTopic(caller_id(), topic, protocols)
+            return int(code), str(msg), result
+        except OSError as exc:
+            if exc.errno == errno.ECONNREFUSED or time.monotonic() > deadline:
+                return -1, f"publisher {pub_uri} unreachable: {exc}", None
+        except (xmlrpc.client.Fault, xmlrpc.client.ProtocolError, ValueError, TypeError) as exc:
+            return -1, f"publisher {pub_uri} gave a malformed requestTopic answer: {exc}", None
+        time.sleep(interval)
+        interval = min(interval * 2, 8.0)
+    return -1, "node is shutting down", None
+
+
+def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
+    def _connect_topic(self: Any, topic: str, pub_uri: str) -> Any:
+        hook = _subscriptions.get(topic)
+        if hook is None:
+            return original(self, topic, pub_uri)
+        sub = get_topic_manager().get_subscriber_impl(topic)
+        if not sub:
+            return -1, f"No subscriber for topic [{topic}]", 0
+        if sub.has_connection(pub_uri):
+            return 1, f"_connect_topic[{topic}]: subscriber already connected to publisher [{pub_uri}]", 0
+        protocols = hook.protocols(topic)
+        if not protocols:
+            return 0, "ERROR: no protocol allowed by the TransportHints", 0
+        code, msg, result = _request_topic(pub_uri, topic, protocols)
+        if code <= 0:
+            return code, msg, 0
+        if not isinstance(result, list) or not result or not isinstance(result[0], str):
+            _log.warning("micros_rt: publisher %s answered requestTopic for %s with %r; ignoring it",
+                         pub_uri, topic, result)
+            return 0, f"ERROR: publisher returned invalid protocol choice: {result!r}", 0
+        if result[0] == DDS:
+            return hook.connect_dds(topic, pub_uri, result[1] if len(result) > 1 else None)
+        for h in self.protocol_handlers:
+            if h.supports(result[0]):
+                return h.create_transport(topic, pub_uri, result)
+        return 0, f"ERROR: publisher returned unsupported protocol choice: {result!r}", 0
+
+    return _connect_topic
+
+
+def _wrapped_request_topic(original: Callable[..., Any]) -> Callable[..., Any]:
+    def requestTopic(self: Any, caller_id: str, topic: str, protocols: Any) -> Any:
+        if not isinstance(protocols, list) or not isinstance(caller_id, str) or not isinstance(topic, str):
+            return original(self, caller_id, topic, protocols)
+        # resolve like rospy's _remap_table does for 'topic' before we look it up
+        resolved = rospy.names.resolve_name(topic, caller_id)
+        hook = _publications.get(resolved)
+        remaining: List[Any] = []
+        for entry in protocols:
+            if isinstance(entry, list) and entry and entry[0] == DDS:
+                if hook is None:
+                    continue
+                try:
+                    ok, answer = hook.judge_dds(resolved, caller_id, entry[1] if len(entry) > 1 else None)
+                except Exception as exc:  # malformed parameters must not kill the XML-RPC thread
+                    ok, answer = False, f"malformed DDS parameters from {caller_id}: {exc}"
+                if ok:
+                    return 1, "ready on DDS", [DDS, answer]
+                _log.warning("micros_rt: %s", answer)
+                continue
+            remaining.append(entry)
+        if not remaining:
+            return 0, "no supported protocol implementations (DDS declined)", []
+        return original(self, caller_id, topic, remaining)
+
+    requestTopic.__doc__ = original.__doc__
+    return requestTopic
+
+
+def install() -> None:
+    """Wrap rospy's negotiation once per process (idempotent)."""
+    global _installed
+    with _install_lock:
+        if _installed:
+            return
+        handler_cls = masterslave.ROSHandler
+        handler_cls._connect_topic = _wrapped_connect_topic(handler_cls._connect_topic)
+        handler_cls.requestTopic = _wrapped_request_topic(handler_cls.requestTopic)
+        _installed = True

@@ -1,0 +1,186 @@
+"""DataWriter and DataReader wrappers with a lean raw path.
+
+Samples go through the generated codec of :mod:`micros_rt.dds.types` and the
+binding's raw ``ddspy_write``/``ddspy_take`` calls, skipping the per-sample
+IdlStruct objects of the high-level API.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from typing import Any, Callable, Dict, List, Optional, Tuple
+
+from cyclonedds._clayer import ddspy_take, ddspy_write
+from cyclonedds.core import DDSException, InstanceState, Listener, ReadCondition, SampleState, ViewState
+from cyclonedds.pub import DataWriter
+from cyclonedds.sub import DataReader
+
+from ..exceptions import DDSUnavailableError
+from .participant import DDSParticipant, delete_entity
+from .types import DDSType
+
+__all__ = ["DDSWriter", "DDSReader", "WriterInfo", "USER_DATA_PREFIX", "make_user_data", "parse_user_data"]
+
+_log = logging.getLogger("micros_rt.dds")
+
+USER_DATA_PREFIX = b"micros_rt;"
+_ANY = SampleState.Any | ViewState.Any | InstanceState.Any
+
+
+def make_user_data(**fields: str) -> bytes:
+    """USER_DATA tag of micros_rt endpoints: ``micros_rt;graph=...;node=...;``."""
+    return USER_DATA_PREFIX + b"".join(f"{k}={v};".encode() for k, v in fields.items())
+
+
+def parse_user_data(data: Optional[bytes]) -> Optional[Dict[str, str]]:
+    """The fields of a micros_rt tag, or None for an endpoint micros_rt did not create."""
+    if not data or not data.startswith(USER_DATA_PREFIX):
+        return None
+    out: Dict[str, str] = {}
+    for part in data[len(USER_DATA_PREFIX):].decode("utf-8", "replace").split(";"):
+        if "=" in part:
+            k, _, v = part.partition("=")
+            out[k] = v
+    return out
+
+
+class DDSWriter:
+    """A DataWriter for one topic of one process, fed with genpy messages."""
+
+    def __init__(self, participant: DDSParticipant, topic_name: str, dds_type: DDSType, qos: Any,
+                 on_matched: Optional[Callable[[int], None]] = None) -> None:
+        self.topic_name = topic_name
+        self.dds_type = dds_type
+        self._encode = dds_type.encode
+        self._matched = 0
+        self._on_matched = on_matched
+        topic = participant.topic(topic_name, dds_type.idl_class)
+        listener = Listener(on_publication_matched=self._matched_changed)
+        try:
+            self._writer = DataWriter(participant.dp, topic, qos, listener)
+        except DDSException as exc:
+            raise DDSUnavailableError(f"cannot create a DDS writer for {topic_name}: {exc}") from exc
+        self._ref = self._writer._ref
+        self.guid = str(self._writer.guid)
+        self.closed = False
+
+    def _matched_changed(self, _writer: Any, status: Any) -> None:
+        self._matched = status.current_count
+        if self._on_matched is not None:
+            self._on_matched(status.current_count)
+
+    @property
+    def matched_count(self) -> int:
+        """Readers currently matched (micros_rt and foreign, e.g. ROS 2)."""
+        return self._matched
+
+    def matched_reader_guids(self) -> List[str]:
+        out = []
+        for handle in self._writer.get_matched_subscriptions():
+            data = self._writer.get_matched_subscription_data(handle)
+            if data is not None:
+                out.append(str(data.key))
+        return out
+
+    def write(self, msg: Any) -> None:
+        """Serialize and write one message; raises on bad field values."""
+        data = self._encode(msg)
+        ret = ddspy_write(self._ref, data)
+        if ret < 0:
+            raise DDSException(ret, f"writing to DDS topic {self.topic_name}")
+
+    def write_serialized(self, data: bytes) -> None:
+        ret = ddspy_write(self._ref, data)
+        if ret < 0:
+            raise DDSException(ret, f"writing to DDS topic {self.topic_name}")
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        delete_entity(self._writer)
+
+
+class WriterInfo:
+    """What a reader knows of one matched writer."""
+
+    __slots__ = ("guid", "tag", "participant_guid")
+
+    def __init__(self, guid: str, tag: Optional[Dict[str, str]], participant_guid: str) -> None:
+        self.guid = guid
+        self.tag = tag
+        self.participant_guid = participant_guid
+
+
+class DDSReader:
+    """A DataReader for one subscription, taken from by the subscription's delivery thread."""
+
+    def __init__(self, participant: DDSParticipant, topic_name: str, dds_type: DDSType, qos: Any,
+                 listener: Optional[Listener] = None) -> None:
+        self.topic_name = topic_name
+        self.dds_type = dds_type
+        topic = participant.topic(topic_name, dds_type.idl_class)
+        try:
+            self._reader = DataReader(participant.dp, topic, qos, listener)
+        except DDSException as exc:
+            raise DDSUnavailableError(f"cannot create a DDS reader for {topic_name}: {exc}") from exc
+        self._ref = self._reader._ref
+        self.condition = ReadCondition(self._reader, _ANY)
+        self.guid = str(self._reader.guid)
+        self._writers: Dict[int, WriterInfo] = {}
+        self._lock = threading.Lock()
+        self.closed = False
+
+    @property
+    def entity(self) -> Any:
+        return self._reader
+
+    def take_raw(self, n: int = 256) -> List[Tuple[bytes, Any]]:
+        """Up to ``n`` (serialized sample, SampleInfo) pairs; invalid samples included."""
+        ret = ddspy_take(self._ref, _ANY, n)
+        if isinstance(ret, int):
+            raise DDSException(ret, f"taking from DDS topic {self.topic_name}")
+        return ret  # type: ignore[no-any-return]
+
+    def writer_info(self, handle: int) -> Optional[WriterInfo]:
+        """The writer behind a sample's publication_handle (cached)."""
+        info = self._writers.get(handle)
+        if info is not None:
+            return info
+        try:
+            data = self._reader.get_matched_publication_data(handle)
+        except DDSException:
+            data = None
+        if data is None:
+            return None
+        from cyclonedds.qos import Policy
+
+        user_data = None
+        try:
+            user_data = data.qos[Policy.Userdata].data
+        except (KeyError, AttributeError):
+            user_data = None
+        info = WriterInfo(str(data.key), parse_user_data(user_data), str(data.participant_key))
+        with self._lock:
+            self._writers[handle] = info
+        return info
+
+    def matched_writer_guids(self) -> List[str]:
+        out = []
+        for handle in self._reader.get_matched_publications():
+            info = self.writer_info(handle)
+            if info is not None:
+                out.append(info.guid)
+        return out
+
+    def forget_writer(self, handle: int) -> None:
+        with self._lock:
+            self._writers.pop(handle, None)
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        delete_entity(self.condition)
+        delete_entity(self._reader)

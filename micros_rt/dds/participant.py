@@ -1,0 +1,190 @@
+"""The process's one Cyclone DDS participant, its network configuration, topics.
+
+Cyclone's default configuration multicasts discovery on the machine's LAN
+interface. micros_rt instead follows ROS 1's own idea of the node's address
+(``ROS_IP``, then ``ROS_HOSTNAME``, then the host name): when that is a loopback
+address, Cyclone binds ``lo`` with multicast off and finds peers by unicast on
+127.0.0.1; otherwise it binds the interface holding that address. An explicit
+``CYCLONEDDS_URI`` always wins.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import logging
+import os
+import socket
+import threading
+from typing import Any, Dict, Mapping, Optional
+
+from ..exceptions import DDSUnavailableError
+
+__all__ = [
+    "LOOPBACK_CONFIG",
+    "DDSParticipant",
+    "cyclone_config",
+    "domain_id_from_env",
+    "get_participant",
+    "close_participant",
+    "delete_entity",
+]
+
+_log = logging.getLogger("micros_rt.dds")
+
+LOOPBACK_CONFIG = (
+    '<CycloneDDS><Domain id="any"><General>'
+    '<Interfaces><NetworkInterface name="lo" multicast="false"/></Interfaces>'
+    "<AllowMulticast>false</AllowMulticast></General>"
+    "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
+    "<MaxAutoParticipantIndex>32</MaxAutoParticipantIndex>"
+    '<Peers><Peer address="127.0.0.1"/></Peers></Discovery>'
+    "</Domain></CycloneDDS>"
+)
+
+_INTERFACE_CONFIG = (
+    '<CycloneDDS><Domain id="any"><General>'
+    '<Interfaces><NetworkInterface address="{address}"/></Interfaces>'
+    "</General></Domain></CycloneDDS>"
+)
+
+
+def _ros_address(env: Mapping[str, str]) -> str:
+    """The address a ROS 1 node would advertise, resolved to an IP."""
+    host = env.get("ROS_IP") or env.get("ROS_HOSTNAME") or socket.gethostname()
+    try:
+        return socket.gethostbyname(host)
+    except OSError:
+        return host
+
+
+def cyclone_config(env: Mapping[str, str] = os.environ) -> Optional[str]:
+    """The Cyclone configuration micros_rt uses, or None when ``CYCLONEDDS_URI`` is set.
+
+    >>> cyclone_config({"ROS_IP": "127.0.0.1"}) == LOOPBACK_CONFIG
+    True
+    """
+    if env.get("CYCLONEDDS_URI"):
+        return None
+    address = _ros_address(env)
+    try:
+        if ipaddress.ip_address(address).is_loopback:
+            return LOOPBACK_CONFIG
+    except ValueError:
+        # not an IP: a name we could not resolve; stay on loopback rather than
+        # multicasting on an interface nobody asked for.
+        return LOOPBACK_CONFIG
+    return _INTERFACE_CONFIG.format(address=address)
+
+
+def domain_id_from_env(env: Mapping[str, str] = os.environ) -> int:
+    """``ROS_DOMAIN_ID`` as in ROS 2 (default 0); a bad value is an error that says so."""
+    raw = env.get("ROS_DOMAIN_ID", "").strip()
+    if not raw:
+        return 0
+    try:
+        value = int(raw)
+    except ValueError:
+        raise DDSUnavailableError(f"ROS_DOMAIN_ID={raw!r} is not an integer (expected 0..232)") from None
+    if not 0 <= value <= 232:
+        raise DDSUnavailableError(f"ROS_DOMAIN_ID={value} is out of range (expected 0..232)")
+    return value
+
+
+class DDSParticipant:
+    """One Cyclone domain participant and the topics created on it.
+
+    Created through :func:`get_participant`; ``close()`` releases every entity.
+    """
+
+    def __init__(self, domain_id: int, config: Optional[str]) -> None:
+        from cyclonedds.core import DDSException
+        from cyclonedds.domain import Domain, DomainParticipant
+
+        self.domain_id = domain_id
+        try:
+            # A Domain with an explicit config keeps our settings out of the
+            # process environment (CYCLONEDDS_URI stays the user's).
+            self._domain = Domain(domain_id, config) if config is not None else None
+            self.dp = DomainParticipant(domain_id)
+        except DDSException as exc:
+            raise DDSUnavailableError(
+                f"cannot start a Cyclone DDS participant on domain {domain_id}: {exc}") from exc
+        self.guid = str(self.dp.guid)
+        self._topics: Dict[str, Any] = {}
+        self._lock = threading.Lock()
+        self.closed = False
+
+    def topic(self, name: str, idl_class: Any) -> Any:
+        """The Topic ``name`` with type ``idl_class``, created once per process."""
+        from cyclonedds.topic import Topic
+
+        with self._lock:
+            found = self._topics.get(name)
+            if found is not None:
+                if found.data_type is not idl_class:
+                    raise DDSUnavailableError(
+                        f"DDS topic {name!r} is already used in this process with type "
+                        f"{found.data_type.__idl_typename__}, not {idl_class.__idl_typename__}")
+                return found
+            topic = Topic(self.dp, name, idl_class)
+            self._topics[name] = topic
+            return topic
+
+    def close(self) -> None:
+        """Delete the participant and everything created on it; harmless twice."""
+        if self.closed:
+            return
+        self.closed = True
+        delete_entity(self.dp)  # entities created on it go with it
+
+
+def delete_entity(entity: Any) -> None:
+    """Delete a cyclonedds entity now (not at garbage collection); harmless twice."""
+    try:
+        ref = entity._ref
+        if ref in entity._entities:
+            del entity._entities[ref]
+            entity._delete(ref)
+    except Exception as exc:  # closing must go on
+        _log.debug("deleting DDS entity: %s", exc)
+
+
+_lock = threading.Lock()
+_participant: Optional[DDSParticipant] = None
+_failed: Optional[str] = None
+
+
+def get_participant() -> Optional[DDSParticipant]:
+    """The process participant, created on first use; None when DDS cannot start.
+
+    The failure is logged once, in words, and micros_rt then uses TCPROS for
+    every connection of this process.
+    """
+    global _participant, _failed
+    with _lock:
+        if _participant is not None and not _participant.closed:
+            return _participant
+        if _failed is not None:
+            return None
+        if os.environ.get("MICROS_RT_DISABLE_DDS", "") not in ("", "0"):
+            _failed = "MICROS_RT_DISABLE_DDS is set"
+            _log.warning("micros_rt: DDS disabled (MICROS_RT_DISABLE_DDS is set); using TCPROS for every topic")
+            return None
+        try:
+            _participant = DDSParticipant(domain_id_from_env(), cyclone_config())
+        except Exception as exc:
+            _failed = str(exc)
+            _log.warning(
+                "micros_rt: DDS is unavailable in this process (%s); every topic falls back to TCPROS. "
+                "Check ROS_DOMAIN_ID, CYCLONEDDS_URI and the network interface named by ROS_IP.", exc)
+            return None
+        return _participant
+
+
+def close_participant() -> None:
+    """Close the process participant (at shutdown)."""
+    global _participant
+    with _lock:
+        if _participant is not None:
+            _participant.close()
+            _participant = None
