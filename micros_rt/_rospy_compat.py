@@ -209,6 +209,14 @@ def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
             return 0, "ERROR: no protocol allowed by the TransportHints", 0
         code, msg, result = _request_topic(pub_uri, topic, protocols)
         if code <= 0:
+            offered = [p[0] for p in protocols]
+            if TCPROS not in offered:
+                _log.warning(
+                    "micros_rt: topic %s: publisher %s cannot use %s (%s); it is probably a stock ROS node. "
+                    "Nothing is received from it: add .tcp() to the TransportHints to accept TCPROS.",
+                    topic, pub_uri, "/".join(offered), msg)
+            else:
+                _log.warning("micros_rt: topic %s: publisher %s refused the connection: %s", topic, pub_uri, msg)
             return code, msg, 0
         if not isinstance(result, list) or not result or not isinstance(result[0], str):
             _log.warning("micros_rt: publisher %s answered requestTopic for %s with %r; ignoring it",
@@ -231,7 +239,7 @@ def _wrapped_request_topic(original: Callable[..., Any]) -> Callable[..., Any]:
         # resolve like rospy's _remap_table does for 'topic' before we look it up
         resolved = rospy.names.resolve_name(topic, caller_id)
         hook = _publications.get(resolved)
-        remaining: List[Any] = []
+        # honour the subscriber's order: the first entry we can serve wins
         for entry in protocols:
             if isinstance(entry, list) and entry and entry[0] == DDS:
                 if hook is None:
@@ -244,10 +252,9 @@ def _wrapped_request_topic(original: Callable[..., Any]) -> Callable[..., Any]:
                     return 1, "ready on DDS", [DDS, answer]
                 _log.warning("micros_rt: %s", answer)
                 continue
-            remaining.append(entry)
-        if not remaining:
-            return 0, "no supported protocol implementations (DDS declined)", []
-        return original(self, caller_id, topic, remaining)
+            if isinstance(entry, list) and entry and any(h.supports(entry[0]) for h in self.protocol_handlers):
+                return original(self, caller_id, topic, [entry])
+        return 0, "no supported protocol implementations", []
 
     requestTopic.__doc__ = original.__doc__
     return requestTopic
