@@ -182,7 +182,8 @@ def _request_topic(pub_uri: str, topic: str, protocols: List[List[Any]]) -> Tupl
     while not rospy.core.is_shutdown():
         proxy = xmlrpc.client.ServerProxy(pub_uri, transport=_TimeoutTransport(10.0), allow_none=False)
         try:
-            code, msg, result = proxy.requestTopic(caller_id(), topic, protocols)
+            answer: Any = proxy.requestTopic(caller_id(), topic, protocols)
+            code, msg, result = answer
             return int(code), str(msg), result
         except OSError as exc:
             if exc.errno == errno.ECONNREFUSED or time.monotonic() > deadline:

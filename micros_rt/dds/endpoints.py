@@ -56,7 +56,7 @@ class DDSWriter:
         self._matched = 0
         self._on_matched = on_matched
         topic = participant.topic(topic_name, dds_type.idl_class)
-        listener = Listener(on_publication_matched=self._matched_changed)
+        listener = Listener(on_publication_matched=self._matched_changed)  # type: ignore[no-untyped-call]
         try:
             self._writer = DataWriter(participant.dp, topic, qos, listener)
         except DDSException as exc:

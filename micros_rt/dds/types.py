@@ -92,7 +92,7 @@ def _msg_class(ros_type: str) -> Type[genpy.Message]:
     return cls  # type: ignore[no-any-return]
 
 
-def _fields(cls: type) -> List[Tuple[str, str]]:
+def _fields(cls: Any) -> List[Tuple[str, str]]:
     """(ros field name, slot type) in wire order; Header loses its seq as in ROS 2."""
     pairs = list(zip(cls.__slots__, cls._slot_types))
     if getattr(cls, "_type", None) == _HEADER:
@@ -109,7 +109,9 @@ _idl_cache: Dict[str, Any] = {}
 
 def _idl_class(ros_type: str) -> Any:
     from cyclonedds.idl import make_idl_struct
-    from cyclonedds.idl import types as t
+    from cyclonedds.idl import types as _t
+
+    t: Any = _t
 
     with _idl_lock:
         if ros_type in _idl_cache:
