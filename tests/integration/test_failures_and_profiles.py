@@ -1,0 +1,59 @@
+"""DDS that cannot start, and YAML profiles applied without code changes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import harness
+from helpers import logs, mrt, received, transports
+
+BROKEN_CYCLONE = (
+    '<CycloneDDS><Domain id="any"><General><Interfaces>'
+    '<NetworkInterface name="no_such_interface0"/></Interfaces></General></Domain></CycloneDDS>'
+)
+
+
+def test_dds_that_cannot_start_means_tcpros_with_one_warning(ros_master: harness.RosMaster,
+                                                            spawn: harness.Spawner, tmp_path: Path) -> None:
+    cfg = tmp_path / "broken_cyclone.xml"
+    cfg.write_text(BROKEN_CYCLONE)
+    broken = dict(ros_master.env, CYCLONEDDS_URI=cfg.as_uri())
+    listener = spawn(mrt("listen", "--topic", "/no_dds", "--duration", "20"), env=broken)
+    listener.wait_for("ready", 30)
+    spawn(mrt("talk", "--topic", "/no_dds", "--count", "200", "--rate", "30", "--wait-subscribers", "1"))
+    listener.wait_for_count("recv", 10, timeout=30)
+    assert set(transports(listener)) == {"TCPROS"}
+    warnings = [w for w in logs(listener) if "DDS is unavailable" in w]
+    assert len(warnings) == 1, logs(listener)
+    assert "TCPROS" in warnings[0]
+
+
+def test_yaml_profile_gives_time_filter_without_code_changes(ros_master: harness.RosMaster,
+                                                             spawn: harness.Spawner, tmp_path: Path) -> None:
+    profile = tmp_path / "qos.yaml"
+    profile.write_text("subscribers:\n  /profiled: {time_filter_duration: 1.0}\n")
+    env = dict(ros_master.env, MICROS_RT_QOS_PROFILE=str(profile))
+    # plain subscribe() in the peer: the filter can only come from the file
+    listener = spawn(mrt("listen", "--topic", "/profiled", "--duration", "7"), env=env)
+    unfiltered = spawn(mrt("listen", "--topic", "/profiled", "--duration", "7", "--node-name", "unfiltered"))
+    listener.wait_for("ready", 30)
+    unfiltered.wait_for("ready", 30)
+    talker = spawn(mrt("talk", "--topic", "/profiled", "--count", "200", "--rate", "50", "--wait-subscribers", "2"))
+    talker.wait(30)
+    listener.wait(30)
+    unfiltered.wait(30)
+    n_filtered, n_all = len(received(listener)), len(received(unfiltered))
+    assert n_all >= 150, n_all
+    assert 2 <= n_filtered <= 6, n_filtered  # 4 s of data at 1 message per second
+
+
+def test_bad_yaml_profile_is_a_clear_error(ros_master: harness.RosMaster, spawn: harness.Spawner,
+                                           tmp_path: Path) -> None:
+    profile = tmp_path / "bad.yaml"
+    profile.write_text("subscribers:\n  /x: {time_filter: 1.0}\n")
+    env = dict(ros_master.env, MICROS_RT_QOS_PROFILE=str(profile))
+    peer = spawn(mrt("listen", "--topic", "/x", "--duration", "3"), env=env)
+    rc = peer.wait(30)
+    assert rc != 0
+    tail = peer.stderr_tail()
+    assert "bad.yaml:2" in tail and "time_filter" in tail, tail
