@@ -227,6 +227,15 @@ class _CodecBuilder:
         return out
 
     # -- encode ----------------------------------------------------------
+    def _emit_count(self, v: str, path: str, length: int | None) -> None:
+        """A sequence's element count, or the length check of a fixed-size array."""
+        s = self.enc
+        if length is None:
+            s.emit("b += _Z[:(4 - len(b)) & 3]")
+            s.emit(f"b += _U32.pack(len({v}))")
+        else:
+            s.emit(f"if len({v}) != {length}: raise _bad_len({path!r}, {length}, len({v}))")
+
     def encode_body(self, ros_type: str, path: str) -> None:
         s = self.enc
         run: List[Tuple[str, str]] = []
@@ -257,22 +266,14 @@ class _CodecBuilder:
                 v = s.var()
                 s.emit(f"{v} = {p}")
                 s.emit(f"if {v}.__class__ is not bytes: {v} = _as_bytes({v})")
-                if leaf[2] is None:
-                    s.emit("b += _Z[:(4 - len(b)) & 3]")
-                    s.emit(f"b += _U32.pack(len({v}))")
-                else:
-                    s.emit(f"if len({v}) != {leaf[2]}: raise _bad_len({p!r}, {leaf[2]}, len({v}))")
+                self._emit_count(v, p, leaf[2])
                 s.emit(f"b += {v}")
             elif kind == "primarray":
                 _, p, code, length, _isbool = leaf
                 size = struct.calcsize(code)
                 v = s.var()
                 s.emit(f"{v} = {p}")
-                if length is None:
-                    s.emit("b += _Z[:(4 - len(b)) & 3]")
-                    s.emit(f"b += _U32.pack(len({v}))")
-                else:
-                    s.emit(f"if len({v}) != {length}: raise _bad_len({p!r}, {length}, len({v}))")
+                self._emit_count(v, p, length)
                 s.emit(f"if {v}:")
                 s.emit(f"    b += _Z[:(4 - len(b)) & {size - 1}]")
                 s.emit(f"    b += _pack('{self.endian}%d{code}' % len({v}), *{v})")
@@ -280,11 +281,7 @@ class _CodecBuilder:
                 _, p, length = leaf
                 v, x = s.var(), s.var("x")
                 s.emit(f"{v} = {p}")
-                if length is None:
-                    s.emit("b += _Z[:(4 - len(b)) & 3]")
-                    s.emit(f"b += _U32.pack(len({v}))")
-                else:
-                    s.emit(f"if len({v}) != {length}: raise _bad_len({p!r}, {length}, len({v}))")
+                self._emit_count(v, p, length)
                 s.emit(f"for {x} in {v}:")
                 s.emit(f"    {x} = {x}.encode() if {x}.__class__ is str else bytes({x})")
                 s.emit("    b += _Z[:(4 - len(b)) & 3]")
@@ -295,11 +292,7 @@ class _CodecBuilder:
                 _, p, sub, length = leaf
                 v, x = s.var(), s.var("x")
                 s.emit(f"{v} = {p}")
-                if length is None:
-                    s.emit("b += _Z[:(4 - len(b)) & 3]")
-                    s.emit(f"b += _U32.pack(len({v}))")
-                else:
-                    s.emit(f"if len({v}) != {length}: raise _bad_len({p!r}, {length}, len({v}))")
+                self._emit_count(v, p, length)
                 s.emit(f"for {x} in {v}:")
                 s.indent += 1
                 self.encode_body(sub, x)
