@@ -29,7 +29,7 @@ __all__ = [
     "delete_entity",
 ]
 
-_log = logging.getLogger("micros_rt.dds")
+_log = logging.getLogger("rosout.micros_rt.dds")
 
 LOOPBACK_CONFIG = (
     '<CycloneDDS><Domain id="any"><General>'
