@@ -59,3 +59,23 @@ def test_rostopic_list_info_and_rosnode_see_micros_rt_node(ros_master: harness.R
     hz = subprocess.run(["timeout", "-s", "INT", "6", harness.STOCK_PYTHON, harness.ROSTOPIC, "hz", "-w", "5",
                          "/visible"], env=ros_master.env, capture_output=True, text=True, timeout=20).stdout
     assert "average rate" in hz, hz
+
+
+NAMES_SCRIPT = """
+import micros_rt
+from std_msgs.msg import String
+micros_rt.init_node("namer")
+nh, sub_nh, priv_nh = micros_rt.NodeHandle(), micros_rt.NodeHandle("arm"), micros_rt.NodeHandle("~")
+pub = nh.advertise("chatter", String, 1)
+print(pub.resolved_name, nh.resolve_name("~priv"), sub_nh.resolve_name("joint"), priv_nh.resolve_name("p"),
+      nh.resolve_name("/abs"), flush=True)
+micros_rt.shutdown()
+"""
+
+
+def test_names_resolve_like_rospy(ros_master: harness.RosMaster) -> None:
+    cp = subprocess.run([harness.MICROS_RT_PYTHON, "-c", NAMES_SCRIPT, "__ns:=robot1", "chatter:=talk"],
+                        env=ros_master.env, capture_output=True, text=True, timeout=60)
+    assert cp.returncode == 0, cp.stderr
+    assert cp.stdout.split() == ["/robot1/talk", "/robot1/namer/priv", "/robot1/arm/joint", "/robot1/namer/p",
+                                 "/abs"]
