@@ -434,6 +434,7 @@ class _Subscription:
         self.accepted: Dict[str, _Accepted] = {}
         self.pending: Dict[str, Deque[Tuple[float, bytes, Any, Any]]] = {}
         self.last_ts: Dict[str, int] = {}
+        self.header_seq: Dict[str, int] = {}  # per DDS writer: Header.seq is not on the wire
         self.tcp_inbox: Deque[Tuple[Any, float]] = collections.deque(maxlen=_depth(queue_size))
         self.dds_type: Optional[DDSType] = None
         self.reader: Optional[DDSReader] = None
@@ -609,6 +610,12 @@ class _Subscription:
             _log.warning("micros_rt: topic %s: dropped a malformed DDS sample from writer %s: %s",
                          self.topic, writer, exc)
             return
+        head = msg.header if msg._has_header else msg if msg._type == "std_msgs/Header" else None
+        if head is not None:
+            # ROS 2 Header has no seq: regenerate it per publisher (DDS writer), 1, 2, ... as rospy counts
+            seq = self.header_seq.get(writer, 0) + 1
+            self.header_seq[writer] = seq
+            head.seq = seq
         acc = self.accepted.get(writer)
         msg._connection_header = {
             "callerid": acc.conn.endpoint_id if acc else writer,

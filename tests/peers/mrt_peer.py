@@ -9,6 +9,7 @@ Run with the project's venv (.venv/bin/python). Examples:
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import logging
 import sys
@@ -50,6 +51,55 @@ def fill(msg: Any, text: str, i: int, stamp: bool) -> Any:
     return msg
 
 
+def pattern_bytes(n: int, seed: int) -> bytes:
+    """Deterministic test payload; the same function lives in ros2_peer.py and the interop tests."""
+    base = bytes((seed + 7 * k) & 0xFF for k in range(256))
+    return (base * (n // 256 + 1))[:n]
+
+
+def full_dict(msg: Any) -> Any:
+    """Every field (--full-msg): uint8[] as {bytes_len, sha256, head}, time as {secs, nsecs}."""
+    if isinstance(msg, genpy.Message):
+        return {k: full_dict(getattr(msg, k)) for k in msg.__slots__}
+    if isinstance(msg, (genpy.Time, genpy.Duration)):
+        return {"secs": msg.secs, "nsecs": msg.nsecs}
+    if isinstance(msg, (bytes, bytearray)):
+        return {"bytes_len": len(msg), "sha256": hashlib.sha256(msg).hexdigest(), "head": list(msg[:8])}
+    if isinstance(msg, (list, tuple)):
+        return [full_dict(x) for x in msg]
+    return msg
+
+
+def set_fields(msg: Any, values: Dict[str, Any], i: int) -> Any:
+    """Fill a genpy message from a dict (--data-json): nested dicts for messages and time
+    ({"secs", "nsecs"}), lists of dicts for message arrays, {"$bytes": {"len", "seed"}} for uint8[];
+    "{i}" in strings becomes the message number."""
+    types = dict(zip(msg.__slots__, msg._slot_types))
+    for key, val in values.items():
+        if key not in types:
+            raise SystemExit(f"{msg._type} has no field {key!r}")
+        slot = types[key]
+        base = slot.split("[")[0]
+        if isinstance(val, dict) and "$bytes" in val:
+            spec = val["$bytes"]
+            setattr(msg, key, pattern_bytes(int(spec["len"]), int(spec.get("seed", 0))))
+        elif base in ("time", "duration") and isinstance(val, dict):
+            cls = genpy.Time if base == "time" else genpy.Duration
+            setattr(msg, key, cls(int(val.get("secs", 0)), int(val.get("nsecs", 0))))
+        elif isinstance(val, dict):
+            set_fields(getattr(msg, key), val, i)
+        elif isinstance(val, list) and slot.endswith("]") and val and isinstance(val[0], dict):
+            cls = roslib.message.get_message_class(base if base != "Header" else "std_msgs/Header")
+            setattr(msg, key, [set_fields(cls(), v, i) for v in val])
+        else:
+            if isinstance(val, str):
+                val = val.replace("{i}", str(i))
+            if base in ("uint8", "char") and slot.endswith("]") and isinstance(val, list):
+                val = bytes(val)
+            setattr(msg, key, val)
+    return msg
+
+
 class _JsonLogHandler(logging.Handler):
     def emit(self, record: logging.LogRecord) -> None:
         emit("log", level=record.levelname, text=record.getMessage())
@@ -73,10 +123,24 @@ def main() -> int:
     ap.add_argument("--wait-subscribers", type=int, default=0)
     ap.add_argument("--linger", type=float, default=0.5, help="seconds to stay up after the last message")
     ap.add_argument("--deadline-events", action="store_true")
+    ap.add_argument("--callback-sleep", type=float, default=0.0,
+                    help="listen: seconds every callback sleeps after printing (a slow subscriber)")
+    ap.add_argument("--clock-offset", type=float, default=0.0,
+                    help="talk: add this many seconds to every DDS source timestamp (a host whose clock is off)")
+    ap.add_argument("--log-debug", action="store_true", help="print micros_rt DEBUG log records too")
+    ap.add_argument("--data-json", default=None,
+                    help='talk: JSON dict of field values, e.g. \'{"data": "x {i}"}\' (see set_fields)')
+    ap.add_argument("--full-msg", action="store_true",
+                    help="listen: print every received message in full (recv event key 'msg')")
+    ap.add_argument("--exit-after", type=int, default=0, help="listen: exit after this many messages")
+    ap.add_argument("--with-qos", action="store_true",
+                    help="use advertise_with_qos/subscribe_with_qos even when --qos is empty")
+    ap.add_argument("--wait-dds-readers", type=int, default=0,
+                    help="talk: wait (max 30 s) until the DDS writer matches this many readers (e.g. rclpy)")
     args = ap.parse_args()
 
-    log = logging.getLogger("micros_rt")
-    log.setLevel(logging.INFO)
+    log = logging.getLogger("rosout.micros_rt")
+    log.setLevel(logging.DEBUG if args.log_debug else logging.INFO)
     log.addHandler(_JsonLogHandler())
     log.propagate = False
 
@@ -90,22 +154,39 @@ def main() -> int:
     qos: Dict[str, Any] = json.loads(args.qos) if args.qos else {}
 
     if args.mode == "talk":
-        if qos:
+        if qos or args.with_qos:
             pub = nh.advertise_with_qos(args.topic, data_class, args.queue_size,
                                         micros_rt.AdvertiseQoSOptions.from_dict(qos), latch=args.latch)
         else:
             pub = nh.advertise(args.topic, data_class, args.queue_size, latch=args.latch)
+        if args.clock_offset:
+            writer = getattr(getattr(pub, "_pub", None), "writer", None)
+            if writer is not None:
+                writer.clock_offset_ns = int(args.clock_offset * 1e9)
         emit("ready", topic=pub.resolved_name)
         deadline = time.monotonic() + 30.0
         while pub.get_num_connections() < args.wait_subscribers and time.monotonic() < deadline:
             time.sleep(0.02)
+
+        def dds_readers() -> int:
+            writer = getattr(getattr(pub, "_pub", None), "writer", None)
+            return int(writer.matched_count) if writer is not None else 0
+
+        while dds_readers() < args.wait_dds_readers and time.monotonic() < deadline:
+            time.sleep(0.02)
+        if args.wait_dds_readers:
+            emit("dds_matched", n=dds_readers())
+        values = json.loads(args.data_json) if args.data_json else None
         period = 1.0 / args.rate if args.rate > 0 else 0.0
         start = time.monotonic()
         for i in range(args.count):
             if micros_rt.is_shutdown():
                 break
             text = f"{args.prefix} {i}"
-            pub.publish(fill(data_class(), text, i, args.stamp))
+            if values is not None:
+                pub.publish(set_fields(data_class(), values, i))
+            else:
+                pub.publish(fill(data_class(), text, i, args.stamp))
             emit("sent", seq=i, data=text, connections=pub.get_num_connections())
             next_t = start + (i + 1) * period
             while time.monotonic() < next_t:
@@ -124,13 +205,27 @@ def main() -> int:
         def on_deadline(info: Any) -> None:
             emit("deadline", silent_for=info.silent_for, total=info.total_count)
 
+        received = [0]
+
         def cb(msg: Any) -> None:
+            _cb(msg)
+            if args.callback_sleep:
+                time.sleep(args.callback_sleep)
+
+        def _cb(msg: Any) -> None:
+            received[0] += 1
             header = getattr(msg, "_connection_header", {}) or {}
+            if args.full_msg:
+                data = getattr(msg, "data", None)
+                emit("recv", data=data if isinstance(data, (str, int, float)) else None, t=time.time(),
+                     transport=header.get("transport", "TCPROS"), callerid=header.get("callerid"),
+                     msg=full_dict(msg))
+                return
             emit("recv", data=getattr(msg, "data", None), t=time.time(),
                  transport=header.get("transport", "TCPROS"), callerid=header.get("callerid"),
                  msg=msg_to_dict(msg) if not hasattr(msg, "data") or not isinstance(msg.data, (str, int)) else None)
 
-        if qos or args.deadline_events:
+        if qos or args.deadline_events or args.with_qos:
             if args.deadline_events:
                 qos = dict(qos)
             opts = micros_rt.SubscribeQoSOptions.from_dict(qos)
@@ -144,14 +239,15 @@ def main() -> int:
         end = time.monotonic() + args.duration
         got_all = False
         while time.monotonic() < end and not micros_rt.is_shutdown():
-            if args.count and not got_all:
-                pass
+            if args.exit_after and received[0] >= args.exit_after:
+                break
             time.sleep(0.05)
             emit_status = getattr(main, "_last_status", 0.0)
             if time.monotonic() - emit_status > 0.5:
                 main._last_status = time.monotonic()  # type: ignore[attr-defined]
                 emit("status", transports=sub.connection_transports())
-        emit("done", transports=sub.connection_transports(), latency_count=sub.latency.count)
+        emit("done", transports=sub.connection_transports(), latency_count=sub.latency.count,
+             latency=sub.latency.summary(), expired=getattr(getattr(sub, "_sub", None), "expired_total", None))
     micros_rt.shutdown()
     return 0
 

@@ -13,12 +13,15 @@ Subcommands (one JSON object per stdout line):
 
 "data" is the value of a message's single ``data`` field (std_msgs/msg/String, Int32, ...), else the full dict.
 "stamp" is {"secs","nsecs"} for messages with a header (ROS 2 Header has sec/nanosec and no seq).
+With --full-msg, "msg" holds every field and uint8[] fields print as {"bytes_len","sha256","head"}
+(set_fields/--data-json accept {"$bytes": {"len": N, "seed": S}} for them).
 """
 
 from __future__ import annotations
 
 import argparse
 import array
+import hashlib
 import importlib
 import json
 import sys
@@ -71,18 +74,82 @@ def _plain(value: Any) -> Any:
     return value
 
 
+_BYTE_ELEMS = ("uint8", "octet", "char", "byte")
+
+
+def pattern_bytes(n: int, seed: int) -> bytes:
+    """Deterministic test payload; the same function lives in mrt_peer.py and the interop tests."""
+    base = bytes((seed + 7 * k) & 0xFF for k in range(256))
+    return (base * (n // 256 + 1))[:n]
+
+
+def bytes_summary(data: bytes) -> Dict[str, Any]:
+    """How both test peers print uint8[] fields: length, sha256 and the first 8 bytes."""
+    return {"bytes_len": len(data), "sha256": hashlib.sha256(data).hexdigest(), "head": list(data[:8])}
+
+
+def _elem_type(field_type: str) -> Tuple[str, bool]:
+    """'sequence<sensor_msgs/PointField>' -> ('sensor_msgs/PointField', True); 'double[9]' -> ('double', True)."""
+    if field_type.startswith("sequence<"):
+        inner = field_type[len("sequence<"):].split(">")[0].split(",")[0]
+        return inner, True
+    if field_type.endswith("]"):
+        return field_type.split("[")[0], True
+    return field_type, False
+
+
+def _is_bytes_field(field_type: str) -> bool:
+    elem, is_array = _elem_type(field_type)
+    return is_array and elem in _BYTE_ELEMS
+
+
 def set_fields(msg: Any, values: Dict[str, Any], i: int) -> None:
-    """Set fields from a dict (nested dicts for nested messages); '{i}' in strings becomes the sequence number."""
+    """Set fields from a dict (nested dicts for nested messages); '{i}' in strings becomes the sequence number.
+
+    Lists of dicts fill message arrays; ``{"$bytes": {"len": N, "seed": S}}`` fills a uint8[] field with
+    :func:`pattern_bytes` (a 640x480 image does not fit on a command line).
+    """
+    types = msg.get_fields_and_field_types()
     for key, val in values.items():
-        if not hasattr(msg, key):
+        if key not in types:
             raise SystemExit(f"{type(msg).__name__} has no field {key!r}")
         cur = getattr(msg, key)
-        if isinstance(val, dict) and hasattr(cur, "get_fields_and_field_types"):
+        elem, is_array = _elem_type(types[key])
+        if isinstance(val, dict) and "$bytes" in val:
+            spec = val["$bytes"]
+            setattr(msg, key, array.array("B", pattern_bytes(int(spec["len"]), int(spec.get("seed", 0)))))
+        elif isinstance(val, dict) and hasattr(cur, "get_fields_and_field_types"):
             set_fields(cur, val, i)
+        elif isinstance(val, list) and is_array and "/" in elem:
+            cls = msg_class(elem)
+            items = []
+            for v in val:
+                item = cls()
+                set_fields(item, v, i)
+                items.append(item)
+            setattr(msg, key, items)
         else:
             if isinstance(val, str):
                 val = val.replace("{i}", str(i))
+            if is_array and elem in _BYTE_ELEMS and isinstance(val, list):
+                val = array.array("B", val) if types[key].startswith("sequence") else val
             setattr(msg, key, val)
+
+
+def full_dict(msg: Any) -> Any:
+    """Every field of an rclpy message, uint8[] fields as :func:`bytes_summary` (--full-msg)."""
+    out: Dict[str, Any] = {}
+    for name, ftype in msg.get_fields_and_field_types().items():
+        val = getattr(msg, name)
+        if _is_bytes_field(ftype):
+            out[name] = bytes_summary(bytes(bytearray(val)) if not isinstance(val, bytes) else val)
+        elif hasattr(val, "get_fields_and_field_types"):
+            out[name] = full_dict(val)
+        elif isinstance(val, (list, tuple)) and val and hasattr(val[0], "get_fields_and_field_types"):
+            out[name] = [full_dict(v) for v in val]
+        else:
+            out[name] = _plain(val)
+    return out
 
 
 def fill(msg: Any, i: int, prefix: str, node: Any) -> None:
@@ -106,8 +173,8 @@ def fill(msg: Any, i: int, prefix: str, node: Any) -> None:
         pose.orientation.w = 1.0
 
 
-def summary(msg: Any) -> Tuple[Any, Dict[str, Any]]:
-    full = to_dict(msg)
+def summary(msg: Any, full_msg: bool = False) -> Tuple[Any, Dict[str, Any]]:
+    full = full_dict(msg) if full_msg else to_dict(msg)
     data = full["data"] if list(full) == ["data"] else full
     extra: Dict[str, Any] = {"msg": full}
     header = msg if type(msg).__name__ == "Header" else getattr(msg, "header", None)
@@ -203,7 +270,7 @@ class Runner:
             else:
                 fill(msg, sent, a.prefix, self.node)
             pub.publish(msg)
-            data, extra = summary(msg)
+            data, extra = summary(msg, a.full_msg)
             emit("sent", seq=sent, data=data, t=time.time(), **extra)
             sent += 1
             poll()
@@ -229,7 +296,7 @@ class Runner:
         def callback(msg: Any) -> None:
             nonlocal received
             t = time.time()
-            data, extra = summary(msg)
+            data, extra = summary(msg, a.full_msg)
             emit("recv", seq=received, data=data, t=t, **extra)
             received += 1
 
@@ -278,6 +345,8 @@ def main(argv: Optional[List[str]] = None) -> int:
             p.add_argument("--reliability", choices=["reliable", "best_effort"], default="reliable")
             p.add_argument("--durability", choices=["volatile", "transient_local"], default="volatile")
             p.add_argument("--depth", type=int, default=10)
+            p.add_argument("--full-msg", action="store_true",
+                           help="print every field, uint8[] fields as {bytes_len, sha256, head}")
         if cmd == "talk":
             p.add_argument("--rate", type=float, default=10.0, help="Hz (0 = as fast as possible)")
             p.add_argument("--prefix", default="hello")

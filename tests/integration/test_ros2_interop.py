@@ -1,0 +1,168 @@
+"""micros_rt topics are native ROS 2 topics: micros_rt peers and real rclpy (Fast DDS) peers, no bridge.
+
+Every test runs two processes: tests/peers/mrt_peer.py (project venv, rospy + Cyclone DDS) and
+tests/peers/ros2_peer.py (.venv-ros2, rclpy + Fast DDS), both with ros_master.env (loopback DDS, this
+run's ROS_DOMAIN_ID). Messages are described once in ROS 1 form; :func:`to_ros2` applies the mapping
+rules (DESIGN.md, wire format): Header.seq dropped, time/duration secs/nsecs -> sec/nanosec, field
+names lower-cased (CameraInfo D K R P -> d k r p). uint8[] fields travel as
+``{"$bytes": {"len", "seed"}}`` and come back as ``{"bytes_len", "sha256", "head"}`` from both peers.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+from typing import Any, Dict, List
+
+import pytest
+
+import harness
+from helpers import logs, mrt
+
+pytestmark = pytest.mark.integration
+
+T = 15.0  # per-wait bound, seconds
+
+
+def pattern_bytes(n: int, seed: int) -> bytes:
+    """The same payload generator as in both peers."""
+    base = bytes((seed + 7 * k) & 0xFF for k in range(256))
+    return (base * (n // 256 + 1))[:n]
+
+
+def expected_form(value: Any) -> Any:
+    """A --data-json value as the peers print it back (uint8[] -> summary)."""
+    if isinstance(value, dict):
+        if "$bytes" in value:
+            data = pattern_bytes(int(value["$bytes"]["len"]), int(value["$bytes"].get("seed", 0)))
+            return {"bytes_len": len(data), "sha256": hashlib.sha256(data).hexdigest(), "head": list(data[:8])}
+        return {k: expected_form(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [expected_form(v) for v in value]
+    return value
+
+
+def to_ros2(value: Any) -> Any:
+    """ROS 1 field dict -> the ROS 2 one: no Header.seq, sec/nanosec, lower-case names."""
+    if isinstance(value, dict):
+        if "$bytes" in value:
+            return value
+        out = {}
+        for k, v in value.items():
+            if k == "seq" and {"stamp", "frame_id"} <= set(value):
+                continue  # Header.seq does not exist in ROS 2
+            k2 = {"secs": "sec", "nsecs": "nanosec"}.get(k, k.lower())
+            out[k2] = to_ros2(v)
+        return out
+    if isinstance(value, list):
+        return [to_ros2(v) for v in value]
+    return value
+
+
+def header(frame: str, secs: int = 1700000000, nsecs: int = 123456789) -> Dict[str, Any]:
+    return {"seq": 0, "stamp": {"secs": secs, "nsecs": nsecs}, "frame_id": frame}
+
+
+# Every field of every type (the full received dict must equal these). float32 fields use values
+# exactly representable in float32 so equality is exact after the round trip.
+CASES: Dict[str, Dict[str, Any]] = {
+    "std_msgs/String": {"data": "héllo ROS 2 ✓"},
+    "std_msgs/Int32": {"data": -2147483000},
+    "std_msgs/Float64": {"data": 3.141592653589793},
+    "std_msgs/Header": header("base_link"),
+    "geometry_msgs/Twist": {"linear": {"x": 0.5, "y": -1.25, "z": 2.0},
+                            "angular": {"x": -0.1, "y": 0.2, "z": 1.5707963267948966}},
+    "geometry_msgs/PoseStamped": {
+        "header": header("map", 1700000001, 999999999),
+        "pose": {"position": {"x": 1.0, "y": 2.5, "z": -3.75},
+                 "orientation": {"x": 0.0, "y": 0.0, "z": 0.7071067811865476, "w": 0.7071067811865476}},
+    },
+    "sensor_msgs/Image": {
+        "header": header("camera_optical"), "height": 480, "width": 640, "encoding": "rgb8",
+        "is_bigendian": 0, "step": 1920, "data": {"$bytes": {"len": 640 * 480 * 3, "seed": 3}},
+    },
+    "sensor_msgs/LaserScan": {
+        "header": header("laser"), "angle_min": -1.5, "angle_max": 1.5, "angle_increment": 0.25,
+        "time_increment": 0.0009765625, "scan_time": 0.125, "range_min": 0.125, "range_max": 30.0,
+        "ranges": [1.0, 2.5, 3.75, 0.5, 29.0, 0.125, 7.0, 8.5, 9.25, 10.0, 11.5, 12.0, 13.0],
+        "intensities": [100.0, 200.0, 50.5, 0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0],
+    },
+    "sensor_msgs/PointCloud2": {
+        "header": header("velodyne"), "height": 1, "width": 64,
+        "fields": [
+            {"name": "x", "offset": 0, "datatype": 7, "count": 1},
+            {"name": "y", "offset": 4, "datatype": 7, "count": 1},
+            {"name": "z", "offset": 8, "datatype": 7, "count": 1},
+            {"name": "intensity", "offset": 12, "datatype": 7, "count": 1},
+        ],
+        "is_bigendian": False, "point_step": 16, "row_step": 1024,
+        "data": {"$bytes": {"len": 1024, "seed": 11}}, "is_dense": True,
+    },
+    "sensor_msgs/CameraInfo": {
+        "header": header("camera"), "height": 480, "width": 640, "distortion_model": "plumb_bob",
+        "D": [-0.25, 0.125, 0.001, -0.002, 0.0],
+        "K": [525.0, 0.0, 319.5, 0.0, 525.0, 239.5, 0.0, 0.0, 1.0],
+        "R": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        "P": [525.0, 0.0, 319.5, 0.0, 0.0, 525.0, 239.5, 0.0, 0.0, 0.0, 1.0, 0.0],
+        "binning_x": 1, "binning_y": 2,
+        "roi": {"x_offset": 10, "y_offset": 20, "height": 100, "width": 200, "do_rectify": True},
+    },
+}
+
+
+def ros2_type(ros1: str) -> str:
+    pkg, name = ros1.split("/")
+    return f"{pkg}/msg/{name}"
+
+
+def topic_for(ros1: str, direction: str) -> str:
+    return "/interop/" + ros1.replace("/", "_").lower() + "_" + direction
+
+
+def ros2(*args: Any) -> List[str]:
+    return harness.ros2_peer_argv(*[str(a) for a in args])
+
+
+@pytest.mark.parametrize("ros1", list(CASES))
+def test_micros_rt_talker_to_rclpy_listener(ros_master: harness.RosMaster, spawn: harness.Spawner,
+                                            ros1: str) -> None:
+    topic = topic_for(ros1, "to_ros2")
+    values = CASES[ros1]
+    listener = spawn(ros2("listen", "--topic", topic, "--type", ros2_type(ros1), "--count", 3,
+                          "--full-msg", "--duration", 25), name="rclpy_listener")
+    listener.wait_for("ready", T)
+    talker = spawn(mrt("talk", "--topic", topic, "--type", ros1, "--count", 100, "--rate", 20,
+                       "--data-json", json.dumps(values), "--wait-dds-readers", 1, "--linger", 0.2),
+                   name="mrt_talker")
+    talker.wait_for("dds_matched", T)
+    got = listener.wait_for_count("recv", 3, T)
+    want = expected_form(to_ros2(values))
+    for ev in got:
+        assert ev["msg"] == want
+    assert talker.alive() or talker.returncode == 0
+
+
+@pytest.mark.parametrize("ros1", list(CASES))
+def test_rclpy_talker_to_micros_rt_listener(ros_master: harness.RosMaster, spawn: harness.Spawner,
+                                            ros1: str) -> None:
+    topic = topic_for(ros1, "from_ros2")
+    values = CASES[ros1]
+    listener = spawn(mrt("listen", "--topic", topic, "--type", ros1, "--full-msg", "--exit-after", 3,
+                         "--duration", 25), name="mrt_listener")
+    listener.wait_for("ready", T)
+    talker = spawn(ros2("talk", "--topic", topic, "--type", ros2_type(ros1), "--count", 100, "--rate", 20,
+                        "--data-json", json.dumps(to_ros2(values)), "--wait-subscribers", 1,
+                        "--wait-timeout", T, "--duration", 25), name="rclpy_talker")
+    got = listener.wait_for_count("recv", 3, T)
+    assert all(ev["transport"] == "DDS" for ev in got)
+    want = expected_form(values)
+    for n, ev in enumerate(got, start=1):
+        msg = copy.deepcopy(ev["msg"])
+        seq_holder = msg if ros1 == "std_msgs/Header" else msg.get("header")
+        if seq_holder is not None:
+            # the wire has no seq; micros_rt regenerates it per writer, counting from 1
+            assert seq_holder["seq"] == n, ev["msg"]
+            seq_holder["seq"] = 0
+        assert msg == want
+    assert talker.alive() or talker.returncode == 0
