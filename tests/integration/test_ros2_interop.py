@@ -166,3 +166,93 @@ def test_rclpy_talker_to_micros_rt_listener(ros_master: harness.RosMaster, spawn
             seq_holder["seq"] = 0
         assert msg == want
     assert talker.alive() or talker.returncode == 0
+
+
+# ---------------------------------------------------------------------------
+# QoS as ROS 2 sees it. Fast DDS does not report the history depth of remote endpoints (rclpy shows
+# depth 0 / "unknown" history for them), so depth is never asserted here.
+
+@pytest.mark.parametrize("kind,args,reliability,durability", [
+    ("plain", [], "reliable", "volatile"),
+    ("latched", ["--latch"], "reliable", "transient_local"),
+    ("best_effort", ["--qos", json.dumps({"using_best_effort_protocol": True})], "best_effort", "volatile"),
+])
+def test_publisher_qos_as_rclpy_sees_it(ros_master: harness.RosMaster, spawn: harness.Spawner,
+                                        kind: str, args: List[str], reliability: str, durability: str) -> None:
+    topic = f"/interop/qos_pub_{kind}"
+    talker = spawn(mrt("talk", "--topic", topic, "--count", 1000, "--rate", 5, *args), name="mrt_talker")
+    talker.wait_for("ready", T)
+    info = spawn(ros2("info", "--topic", topic, "--wait", 10, "--min-publishers", 1, "--duration", 20),
+                 name="rclpy_info")
+    ev = info.wait_for("info", T)
+    assert len(ev["publishers"]) == 1, ev
+    pub = ev["publishers"][0]
+    assert pub["topic_type"] == "std_msgs/msg/String"
+    assert (pub["qos"]["reliability"], pub["qos"]["durability"]) == (reliability, durability), pub
+
+
+@pytest.mark.parametrize("kind,args,reliability", [
+    ("plain", [], "reliable"),
+    ("with_qos_reliable", ["--with-qos"], "reliable"),
+    ("best_effort", ["--qos", json.dumps({"using_best_effort_protocol": True})], "best_effort"),
+])
+def test_subscriber_qos_as_rclpy_sees_it(ros_master: harness.RosMaster, spawn: harness.Spawner,
+                                         kind: str, args: List[str], reliability: str) -> None:
+    topic = f"/interop/qos_sub_{kind}"
+    listener = spawn(mrt("listen", "--topic", topic, "--duration", 20, *args), name="mrt_listener")
+    listener.wait_for("ready", T)
+    info = spawn(ros2("info", "--topic", topic, "--wait", 10, "--min-subscriptions", 1, "--duration", 20),
+                 name="rclpy_info")
+    ev = info.wait_for("info", T)
+    assert len(ev["subscriptions"]) == 1, ev
+    sub = ev["subscriptions"][0]
+    assert sub["topic_type"] == "std_msgs/msg/String"
+    # a plain subscriber's reader is volatile; the transient-local one exists only for latched publishers
+    assert (sub["qos"]["reliability"], sub["qos"]["durability"]) == (reliability, "volatile"), sub
+
+
+def _incompatible_warning(listener: harness.Peer, policy: str) -> str:
+    ev = listener.wait_for(lambda e: e.get("event") == "log" and e.get("level") == "WARNING"
+                           and f"DDS {policy}" in e.get("text", ""), T)
+    return str(ev["text"])
+
+
+def test_rclpy_best_effort_publisher_vs_reliable_subscriber_is_reported(
+        ros_master: harness.RosMaster, spawn: harness.Spawner) -> None:
+    topic = "/interop/incompatible_reliability"
+    listener = spawn(mrt("listen", "--topic", topic, "--duration", 20, "--qos",
+                         json.dumps({"using_best_effort_protocol": False, "ordered_by_sending_timestamp": False})),
+                     name="mrt_listener")
+    listener.wait_for("ready", T)
+    spawn(ros2("talk", "--topic", topic, "--count", 0, "--rate", 20, "--reliability", "best_effort",
+               "--duration", 20), name="rclpy_talker")
+    text = _incompatible_warning(listener, "RELIABILITY")
+    assert topic in text and "using_best_effort_protocol" in text and "best effort" in text, text
+    assert listener.count("recv") == 0
+
+
+def test_rclpy_writer_vs_source_timestamp_ordering_is_reported(
+        ros_master: harness.RosMaster, spawn: harness.Spawner) -> None:
+    """subscribe_with_qos defaults to ordered_by_sending_timestamp=True (BY_SOURCE_TIMESTAMP); ROS 2
+    writers offer BY_RECEPTION_TIMESTAMP, so DDS refuses the match: micros_rt must say so in words."""
+    topic = "/interop/incompatible_order"
+    listener = spawn(mrt("listen", "--topic", topic, "--duration", 20, "--with-qos"), name="mrt_listener")
+    listener.wait_for("ready", T)
+    spawn(ros2("talk", "--topic", topic, "--count", 0, "--rate", 20, "--duration", 20), name="rclpy_talker")
+    text = _incompatible_warning(listener, "DESTINATIONORDER")
+    assert topic in text and "ordered_by_sending_timestamp=False" in text, text
+    assert listener.count("recv") == 0
+
+
+def test_same_rclpy_writer_matches_when_ordering_relaxed(ros_master: harness.RosMaster,
+                                                        spawn: harness.Spawner) -> None:
+    """The fix the warning suggests works: ordered_by_sending_timestamp=False matches a ROS 2 writer."""
+    topic = "/interop/order_relaxed"
+    listener = spawn(mrt("listen", "--topic", topic, "--duration", 20, "--exit-after", 3,
+                         "--qos", json.dumps({"ordered_by_sending_timestamp": False})), name="mrt_listener")
+    listener.wait_for("ready", T)
+    spawn(ros2("talk", "--topic", topic, "--count", 0, "--rate", 20, "--prefix", "r2", "--duration", 20),
+          name="rclpy_talker")
+    got = listener.wait_for_count("recv", 3, T)
+    assert all(str(e["data"]).startswith("r2 ") for e in got)
+    assert not [t for t in logs(listener) if "incompatible" in t]
