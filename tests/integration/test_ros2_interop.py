@@ -256,3 +256,18 @@ def test_same_rclpy_writer_matches_when_ordering_relaxed(ros_master: harness.Ros
     got = listener.wait_for_count("recv", 3, T)
     assert all(str(e["data"]).startswith("r2 ") for e in got)
     assert not [t for t in logs(listener) if "incompatible" in t]
+
+
+def test_latched_micros_rt_publisher_reaches_late_rclpy_transient_local_subscriber(
+        ros_master: harness.RosMaster, spawn: harness.Spawner) -> None:
+    """ROS 1 latch = TRANSIENT_LOCAL writer: a ROS 2 subscriber that asks for transient_local and joins
+    after the last publish gets the latched (last) message, as a late ROS 1 subscriber would."""
+    topic = "/interop/latched"
+    talker = spawn(mrt("talk", "--topic", topic, "--count", 3, "--rate", 20, "--latch", "--linger", 20,
+                       "--prefix", "latched"), name="mrt_talker")
+    talker.wait_for(lambda e: e.get("event") == "sent" and e.get("seq") == 2, T)
+    # the listener runs a fixed 4 s and exits: everything it was ever going to receive is in by "done"
+    listener = spawn(ros2("listen", "--topic", topic, "--durability", "transient_local", "--duration", 4),
+                     name="rclpy_listener")
+    listener.wait_for("done", T)
+    assert [e["data"] for e in listener.events("recv")] == ["latched 2"]
