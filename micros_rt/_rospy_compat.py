@@ -30,7 +30,14 @@ import rospy.core
 import rospy.impl.masterslave as masterslave
 import rospy.names
 import rospy.topics
-from rospy.impl.registration import get_topic_manager
+import rosgraph
+from rospy.impl.registration import (
+    RegManager,
+    Registration,
+    get_registration_listeners,
+    get_service_manager,
+    get_topic_manager,
+)
 
 __all__ = [
     "DDSConnection",
@@ -42,7 +49,7 @@ __all__ = [
     "remove_pseudo_connection",
 ]
 
-_log = logging.getLogger("micros_rt.negotiation")
+_log = logging.getLogger("rosout.micros_rt.negotiation")
 
 DDS = "DDS"
 TCPROS = "TCPROS"
@@ -261,6 +268,108 @@ def _wrapped_request_topic(original: Callable[..., Any]) -> Callable[..., Any]:
     return requestTopic
 
 
+def transport_socket(conn: Any) -> Any:
+    """The socket of a rospy TCPROS transport (also through rospy's QueuedConnection), or None."""
+    for _ in range(3):
+        sock = getattr(conn, "socket", None)
+        if sock is not None:
+            return sock
+        conn = getattr(conn, "_connection", None)
+        if conn is None:
+            return None
+    return None
+
+
+def _wrapped_publisher_add_connection(original: Callable[..., Any]) -> Callable[..., Any]:
+    # Publisher side: every accepted TCPROS subscriber link passes here (before rospy wraps it in a
+    # QueuedConnection); micros_rt publications mark the socket with their transport priority.
+    def add_connection(self: Any, c: Any) -> Any:
+        hook = _publications.get(getattr(self, "resolved_name", ""))
+        on_tcp = getattr(hook, "on_tcpros_connection", None)
+        if on_tcp is not None and getattr(c, "transport_type", "TCPROS") != DDS:
+            try:
+                on_tcp(c, transport_socket(c))
+            except Exception:
+                _log.warning("micros_rt: topic %s: could not mark a TCPROS connection", self.resolved_name,
+                             exc_info=True)
+        return original(self, c)
+
+    add_connection.__doc__ = original.__doc__
+    return add_connection
+
+
+class MasterWatch:
+    """Notices a ROS master that went away or restarted, and re-registers this node with it.
+
+    rospy registers once; after a master restart the node is invisible (no new connections,
+    ``rosnode list`` misses it). Data already flowing keeps flowing meanwhile: DDS needs no
+    master at all, and TCPROS links stay up.
+    """
+
+    def __init__(self, uri: Optional[str] = None, period: float = 1.0) -> None:
+        self.uri = uri or str(rosgraph.get_master_uri())
+        self.period = period
+        self._next = 0.0
+        self._pid: Optional[int] = None
+        self._down_since: Optional[float] = None
+
+    def _master_pid(self) -> Optional[int]:
+        proxy = xmlrpc.client.ServerProxy(self.uri, transport=_TimeoutTransport(2.0))
+        try:
+            answer: Any = proxy.getPid(caller_id())
+            code, _msg, pid = answer
+            return int(pid) if code == 1 else None
+        except (OSError, xmlrpc.client.Error, ValueError, TypeError):
+            return None
+
+    def check(self) -> None:
+        now = time.monotonic()
+        if now < self._next:
+            return
+        self._next = now + self.period
+        pid = self._master_pid()
+        if pid is None:
+            if self._down_since is None:
+                self._down_since = now
+                _log.warning("micros_rt: the ROS master at %s does not answer; connections already made keep "
+                             "delivering (DDS needs no master), new ones wait for it", self.uri)
+            return
+        restarted = self._pid is not None and pid != self._pid
+        back = self._down_since is not None
+        self._pid = pid
+        self._down_since = None
+        if restarted or back:
+            counts = reregister_all()
+            _log.warning("micros_rt: the ROS master at %s is back%s; re-registered %d publications, "
+                         "%d subscriptions and %d services", self.uri, " (restarted)" if restarted else "",
+                         *counts)
+
+
+def _reg_manager() -> Any:
+    for listener in get_registration_listeners().listeners:
+        if isinstance(listener, RegManager):
+            return listener
+    return None
+
+
+def reregister_all() -> Tuple[int, int, int]:
+    """Register every publication, subscription and service of this node again with the master."""
+    reg = _reg_manager()
+    if reg is None:
+        return 0, 0, 0
+    tm = get_topic_manager()
+    pubs = tm.get_publications()
+    subs = tm.get_subscriptions()
+    srvs = get_service_manager().get_services()
+    for name, type_ in pubs:
+        reg.reg_added(name, type_, Registration.PUB)
+    for name, type_ in subs:
+        reg.reg_added(name, type_, Registration.SUB)  # also connects to the publishers it returns
+    for name, uri in srvs:
+        reg.reg_added(name, uri, Registration.SRV)
+    return len(pubs), len(subs), len(srvs)
+
+
 def install() -> None:
     """Wrap rospy's negotiation once per process (idempotent)."""
     global _installed
@@ -270,4 +379,6 @@ def install() -> None:
         handler_cls = masterslave.ROSHandler
         handler_cls._connect_topic = _wrapped_connect_topic(handler_cls._connect_topic)
         handler_cls.requestTopic = _wrapped_request_topic(handler_cls.requestTopic)
+        pub_cls = rospy.topics._PublisherImpl
+        pub_cls.add_connection = _wrapped_publisher_add_connection(pub_cls.add_connection)
         _installed = True

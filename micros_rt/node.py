@@ -47,6 +47,8 @@ from .qos import (
     merge_advertise,
     merge_subscribe,
     plain_reader_qos,
+    priority_socket_priority,
+    priority_tos,
     reader_qos,
     to_seconds,
     writer_qos,
@@ -64,9 +66,12 @@ __all__ = [
     "DeadlineMissed",
 ]
 
-_log = logging.getLogger("micros_rt")
+_log = logging.getLogger("rosout.micros_rt")  # rospy prints it and sends it to /rosout
 
 _PENDING_SECONDS = 5.0  # how long samples of a not-yet-negotiated writer wait for the answer
+#: A writer whose samples arrive stamped further than this from our clock is reported (once).
+CLOCK_SKEW_WARN_SECONDS = 1.0
+_SKEW_SAMPLES = 10  # samples per writer whose smallest age estimates its clock offset
 
 
 @dataclass
@@ -104,8 +109,14 @@ def init_node(name: str, argv: Optional[List[str]] = None, anonymous: bool = Fal
 
 
 def _housekeeping_loop() -> None:
-    # Publisher-side bookkeeping that no data event drives: subscribers gone from DDS.
+    # Publisher-side bookkeeping that no data event drives: subscribers gone from DDS;
+    # and the master: rospy never re-registers after a master restart, micros_rt does.
+    watch = compat.MasterWatch()
     while not rospy.is_shutdown():
+        try:
+            watch.check()
+        except Exception:
+            _log.debug("master check failed", exc_info=True)
         with _node.lock:
             pubs = list(_node.publications.values())
         for p in pubs:
@@ -245,6 +256,31 @@ class _Publication:
         return True, {"writer": self.writer.guid, "latch": self.latch, "qos": self.options.to_dict(),
                       "participant": participant.guid}
 
+    def on_tcpros_connection(self, conn: Any, sock: Any) -> None:
+        """A TCPROS subscriber connected (rospy thread): mark its socket with our transport priority.
+
+        IP_TOS carries the DSCP (:func:`priority_tos`); SO_PRIORITY (:func:`priority_socket_priority`)
+        picks the local queueing band. SO_PRIORITY is set after IP_TOS, which overwrites it on Linux.
+        NORMAL leaves the socket as it is.
+        """
+        prio = self.options.transport_priority
+        if prio == TransportPriority.NORMAL or sock is None:
+            return
+        import socket as _socket
+
+        tos = priority_tos(prio)
+        family = sock.family
+        if family == _socket.AF_INET6:
+            sock.setsockopt(_socket.IPPROTO_IPV6, _socket.IPV6_TCLASS, tos)
+        elif family == _socket.AF_INET:
+            sock.setsockopt(_socket.IPPROTO_IP, _socket.IP_TOS, tos)
+        else:
+            return  # unix sockets carry no TOS
+        if hasattr(_socket, "SO_PRIORITY"):
+            sock.setsockopt(_socket.SOL_SOCKET, _socket.SO_PRIORITY, priority_socket_priority(prio))
+        _log.debug("micros_rt: topic %s: TCPROS link to %s marked TOS 0x%02x (%s)", self.topic,
+                   getattr(conn, "endpoint_id", "?"), tos, prio.name)
+
     def _connection_closed(self, conn: compat.DDSConnection) -> None:
         with self.lock:
             if self.connections.get(conn.endpoint_id) is conn:
@@ -259,7 +295,7 @@ class _Publication:
             if conn.reader_guid in matched:  # type: ignore[attr-defined]
                 conn.seen = True  # type: ignore[attr-defined]
             elif conn.seen:  # type: ignore[attr-defined]
-                _log.info("micros_rt: topic %s: DDS subscriber %s is gone", self.topic, conn.endpoint_id)
+                _log.debug("micros_rt: topic %s: DDS subscriber %s is gone", self.topic, conn.endpoint_id)
                 compat.remove_pseudo_connection(self.topic, conn, publisher=True)
                 conn.close()
 
@@ -446,6 +482,12 @@ class _Subscription:
         self.deadline_missed_total = 0
         self.last_filter_pass = -math.inf
         self.stats = LatencyStats()
+        # per DDS writer guid: the publisher's QoS from the negotiation answer (budget, lifespan)
+        self.writer_qos: Dict[str, AdvertiseQoSOptions] = {}
+        self.skew_reported: set[str] = set()
+        self.skew_min: Dict[str, Tuple[int, int]] = {}  # writer -> (samples seen, min age ns)
+        self.expired_total = 0
+        self._delivering_writer: Optional[str] = None
         if self.participant is not None:
             try:
                 self.dds_type = dds_type_for(data_class)
@@ -474,8 +516,9 @@ class _Subscription:
         else:
             qos = reader_qos(self.options, queue_size=depth, transient_local=transient_local,
                              user_data=user_data)
-        listener = Listener(on_requested_incompatible_qos=self._incompatible,
-                            on_subscription_matched=lambda *_: self.inbox.wake())
+        listener = Listener(  # type: ignore[no-untyped-call]
+            on_requested_incompatible_qos=self._incompatible,
+            on_subscription_matched=lambda *_: self.inbox.wake())
         return DDSReader(self.participant, dds_topic_name(self.topic), self.dds_type, qos, listener)
 
     def _incompatible(self, _reader: Any, status: Any) -> None:
@@ -525,13 +568,19 @@ class _Subscription:
                 self.inbox.attach(self.tl_reader.condition)
             except MicrosRtError as exc:
                 _log.warning("micros_rt: topic %s: no latched message over DDS: %s", topic, exc)
+        try:
+            self.writer_qos[writer] = AdvertiseQoSOptions.from_dict(params.get("qos") or {},
+                                                                    source=f"publisher {pub_uri}")
+        except MicrosRtError as exc:
+            _log.warning("micros_rt: topic %s: publisher %s sent unreadable QoS (%s); its latency budget "
+                         "and msg_valid_period are not checked", topic, pub_uri, exc)
         with self.lock:
             self.accepted[writer] = _Accepted(pub_uri, latch, str(params.get("node", "")), conn)
         if not compat.add_pseudo_connection(topic, conn, publisher=False):
             with self.lock:
                 self.accepted.pop(writer, None)
             return 0, "subscriber closed", 0
-        _log.info("micros_rt: topic %s: receiving from %s over DDS", topic, pub_uri)
+        _log.debug("micros_rt: topic %s: receiving from %s over DDS", topic, pub_uri)
         self.inbox.wake()
         return 1, f"Connected topic[{topic}] over DDS", 0
 
@@ -587,11 +636,13 @@ class _Subscription:
             if wi is None:
                 continue
             if wi.tag is not None:
-                if wi.tag.get("graph") != _node.graph:
-                    continue  # another ROS graph on the same DDS domain
                 with self.lock:
                     acc = self.accepted.get(wi.guid)
-                if acc is None:
+                if acc is None and wi.guid not in self.writer_qos:
+                    # not negotiated (yet). A writer negotiated before and now gone (a publisher
+                    # that exited) still has the samples it sent us delivered.
+                    if wi.tag.get("graph") != _node.graph:
+                        continue  # another ROS graph on the same DDS domain
                     q = self.pending.setdefault(wi.guid, collections.deque(maxlen=_depth(self.queue_size)))
                     q.append((time.monotonic(), data, info, reader))
                     continue
@@ -600,7 +651,55 @@ class _Subscription:
                 if info.source_timestamp <= last:
                     continue  # the same sample through the other reader
                 self.last_ts[wi.guid] = info.source_timestamp
-            self._deliver_dds(data, info, wi.guid)
+            if wi.guid not in self.skew_reported:
+                self._check_clock_skew(wi, info.source_timestamp)
+            self._deliver_dds_checked(data, info, wi.guid)
+
+    def _deliver_dds_checked(self, data: bytes, info: Any, writer: str) -> None:
+        # Lifespan: Cyclone expires samples in its reader cache; a sample taken into our batch
+        # can still wait behind slow callbacks, so check its age again right before delivery.
+        vp = self._valid_period(writer)
+        if math.isfinite(vp) and time.time_ns() - info.source_timestamp > vp * 1e9:
+            self.expired_total += 1
+            _log.debug("micros_rt: topic %s: dropped a sample of writer %s older than its msg_valid_period "
+                       "%.3f s", self.topic, writer, vp)
+            return
+        self._delivering_writer = writer
+        try:
+            self._deliver_dds(data, info, writer)
+        finally:
+            self._delivering_writer = None
+
+    def _check_clock_skew(self, wi: Any, source_ts_ns: int) -> None:
+        # Same-host or NTP-synced clocks put source stamps within milliseconds of ours. A writer
+        # whose stamps are seconds off has a wrong clock: with ordered_by_sending_timestamp its
+        # samples lose against every other writer's, and Lifespan expires them on arrival.
+        # A sample's age is the clock offset plus its latency, which queueing (a slow callback)
+        # only makes longer. So: stamped in the future means a clock ahead at once; a clock
+        # behind is the *smallest* age of a writer's first samples (one of them found us idle).
+        age = time.time_ns() - source_ts_ns
+        n, lowest = self.skew_min.get(wi.guid, (0, age))
+        n, lowest = n + 1, min(lowest, age)
+        self.skew_min[wi.guid] = (n, lowest)
+        if age < -CLOCK_SKEW_WARN_SECONDS * 1e9:
+            skew = age / 1e9
+        elif n >= _SKEW_SAMPLES and lowest > CLOCK_SKEW_WARN_SECONDS * 1e9:
+            skew = lowest / 1e9
+        else:
+            if n >= _SKEW_SAMPLES:
+                self.skew_reported.add(wi.guid)  # judged: in sync, stop checking
+            return
+        self.skew_reported.add(wi.guid)
+        with self.lock:
+            acc = self.accepted.get(wi.guid)
+        who = acc.pub_uri if acc else wi.guid
+        node = (wi.tag or {}).get("node") or (acc.node if acc else "") or "a non-micros_rt node"
+        direction = "behind" if skew > 0 else "ahead of"
+        _log.warning("micros_rt: topic %s: the clock of publisher %s (%s, writer %s) runs %.1f s %s this "
+                     "node's clock (its samples arrive stamped %.1f s %s). Subscribers ordered by sending "
+                     "timestamp drop its samples in favour of other publishers', and msg_valid_period expires "
+                     "them; synchronise the clocks (NTP/chrony)", self.topic, who, node, wi.guid, abs(skew),
+                     direction, abs(skew), "in the past" if skew > 0 else "in the future")
 
     def _deliver_dds(self, data: bytes, info: Any, writer: str) -> None:
         assert self.dds_type is not None
@@ -640,7 +739,12 @@ class _Subscription:
                 if now_wall - source_ts_ns / 1e9 > self._valid_period():
                     return
         if source_ts_ns is not None:
-            self.stats.add(now_wall - source_ts_ns / 1e9)
+            latency = now_wall - source_ts_ns / 1e9
+            budget = self._latency_budget(self._delivering_writer)
+            if self.stats.add(latency, budget):
+                _log.debug("micros_rt: topic %s: latency %.3f ms over the publisher's latency_budget %.3f ms "
+                           "(%d misses of %d)", self.topic, latency * 1e3, budget * 1e3,
+                           self.stats.budget_misses, self.stats.count)
         self.last_delivery = time.monotonic()
         for cb, cb_args in list(self.callbacks):
             try:
@@ -651,8 +755,18 @@ class _Subscription:
             except Exception:
                 _log.exception("micros_rt: topic %s: callback raised (continuing)", self.topic)
 
-    def _valid_period(self) -> float:
-        return math.inf
+    def _valid_period(self, writer: Optional[str] = None) -> float:
+        """The publisher's msg_valid_period (seconds), known for micros_rt publishers on DDS links.
+
+        A TCPROS link carries no QoS (stock publishers have none, and the TCPROS handshake has no
+        field for it), so there it is unknown and nothing expires.
+        """
+        q = self.writer_qos.get(writer) if writer is not None else None
+        return q.msg_valid_period if q is not None else math.inf
+
+    def _latency_budget(self, writer: Optional[str]) -> float:
+        q = self.writer_qos.get(writer) if writer is not None else None
+        return q.latency_budget if q is not None else 0.0
 
     def _check_deadline(self, now: float) -> None:
         d = self.effective.deadline
@@ -676,7 +790,7 @@ class _Subscription:
             if acc is not None:
                 del self.pending[guid]
                 for _t, data, info, _r in q:
-                    self._deliver_dds(data, info, guid)
+                    self._deliver_dds_checked(data, info, guid)
             else:
                 while q and now - q[0][0] > _PENDING_SECONDS:
                     q.popleft()
@@ -698,7 +812,7 @@ class _Subscription:
                                  "discovered in 30 s; check both nodes' network (ROS_IP, CYCLONEDDS_URI)",
                                  self.topic, acc.pub_uri)
                 else:
-                    _log.info("micros_rt: topic %s: DDS publisher %s is gone", self.topic, acc.pub_uri)
+                    _log.debug("micros_rt: topic %s: DDS publisher %s is gone", self.topic, acc.pub_uri)
                 compat.remove_pseudo_connection(self.topic, conn, publisher=False)
                 conn.close()
 
@@ -724,20 +838,69 @@ class _Subscription:
 
 
 class LatencyStats:
-    """Source stamp to callback latency of one subscription (seconds)."""
+    """Source stamp to callback latency of one subscription (seconds).
+
+    The latency is measured from the publisher's source timestamp (DDS) or Header stamp (TCPROS,
+    stamped messages only) to the moment the callback is called, so it includes time spent waiting
+    behind earlier callbacks. ``count``, ``mean`` and ``max`` cover every message; ``p50``/``p99``
+    the last ``keep`` ones. ``budget_misses`` counts messages later than their publisher's
+    ``latency_budget`` (only publishers that declare a budget > 0, i.e. micros_rt publishers on DDS).
+    """
 
     def __init__(self, keep: int = 4096) -> None:
         self.samples: Deque[float] = collections.deque(maxlen=keep)
         self.count = 0
         self.total = 0.0
         self.max = 0.0
+        self.budget_checked = 0
+        self.budget_misses = 0
 
-    def add(self, latency: float) -> None:
+    def add(self, latency: float, budget: float = 0.0) -> bool:
+        """Record one latency; True when it missed ``budget`` (> 0)."""
         self.samples.append(latency)
         self.count += 1
         self.total += latency
         if latency > self.max:
             self.max = latency
+        if budget > 0.0:
+            self.budget_checked += 1
+            if latency > budget:
+                self.budget_misses += 1
+                return True
+        return False
+
+    @property
+    def mean(self) -> float:
+        return self.total / self.count if self.count else math.nan
+
+    def percentile(self, q: float) -> float:
+        """The ``q``-th percentile (0..100, nearest rank) of the recent latencies; NaN when empty."""
+        data = sorted(self.samples)
+        if not data:
+            return math.nan
+        rank = max(1, math.ceil(q / 100.0 * len(data)))
+        return data[min(rank, len(data)) - 1]
+
+    @property
+    def p50(self) -> float:
+        return self.percentile(50)
+
+    @property
+    def p99(self) -> float:
+        return self.percentile(99)
+
+    def summary(self) -> Dict[str, float]:
+        """count, mean, p50, p99, max (seconds), budget_checked and budget_misses, as a dict."""
+        data = sorted(self.samples)
+
+        def pct(q: float) -> float:
+            if not data:
+                return math.nan
+            return data[min(max(1, math.ceil(q / 100.0 * len(data))), len(data)) - 1]
+
+        return {"count": self.count, "mean": self.mean, "p50": pct(50), "p99": pct(99),
+                "max": self.max if self.count else math.nan,
+                "budget_checked": self.budget_checked, "budget_misses": self.budget_misses}
 
 
 def _depth(queue_size: Optional[int]) -> int:

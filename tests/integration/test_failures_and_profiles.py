@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import harness
-from helpers import logs, mrt, received, transports
+from helpers import logs, mrt, received, stock_talker, transports
 
 BROKEN_CYCLONE = (
     '<CycloneDDS><Domain id="any"><General><Interfaces>'
@@ -57,3 +57,26 @@ def test_bad_yaml_profile_is_a_clear_error(ros_master: harness.RosMaster, spawn:
     assert rc != 0
     tail = peer.stderr_tail()
     assert "bad.yaml:2" in tail and "time_filter" in tail, tail
+
+
+def test_master_restart_keeps_data_flowing_and_reregisters(fresh_master: harness.RosMaster,
+                                                           spawn: harness.Spawner) -> None:
+    env = fresh_master.env
+    listener = spawn(mrt("listen", "--topic", "/survivor", "--duration", "60", "--node-name", "survivor_l"), env=env)
+    listener.wait_for("ready", 30)
+    talker = spawn(mrt("talk", "--topic", "/survivor", "--count", "2000", "--rate", "20",
+                       "--node-name", "survivor_t"), env=env)
+    listener.wait_for_count("recv", 10, timeout=30)
+    fresh_master.stop()
+    # no master at all: DDS still carries the data
+    before = listener.count("recv")
+    listener.wait_for_count("recv", before + 20, timeout=15)
+    talker.wait_for(lambda e: e.get("event") == "log" and "does not answer" in e.get("text", ""), 15)
+    fresh_master.start()
+    listener.wait_for(lambda e: e.get("event") == "log" and "re-registered" in e.get("text", ""), 20)
+    harness.wait_until(lambda: {"/survivor_l", "/survivor_t"} <= set(
+        harness.rosnode(fresh_master, "list", check=False).stdout.split()), 20, interval=0.5,
+        message="nodes re-registered with the restarted master")
+    # a publisher that appears after the restart is found through the re-registered subscription
+    spawn(stock_talker("--topic", "/survivor", "--count", "200", "--rate", "20", "--prefix", "late_stock"), env=env)
+    listener.wait_for(lambda e: e.get("event") == "recv" and str(e.get("data", "")).startswith("late_stock"), 30)

@@ -139,10 +139,15 @@ def main() -> int:
                     help="talk: wait (max 30 s) until the DDS writer matches this many readers (e.g. rclpy)")
     args = ap.parse_args()
 
-    log = logging.getLogger("rosout.micros_rt")
-    log.setLevel(logging.DEBUG if args.log_debug else logging.INFO)
-    log.addHandler(_JsonLogHandler())
-    log.propagate = False
+    def capture_logs() -> None:
+        # micros_rt logs under rospy's "rosout" logger; rospy's logging setup in init_node
+        # resets its children, so this runs before (early errors) and again after it.
+        log = logging.getLogger("rosout.micros_rt")
+        log.setLevel(logging.DEBUG if args.log_debug else logging.INFO)
+        log.handlers = [_JsonLogHandler()]
+        log.propagate = False
+
+    capture_logs()
 
     data_class = roslib.message.get_message_class(args.type)
     if data_class is None:
@@ -150,6 +155,7 @@ def main() -> int:
         return 2
     name = args.node_name or f"mrt_{args.mode}"
     micros_rt.init_node(name, disable_signals=False)
+    capture_logs()
     nh = micros_rt.NodeHandle()
     qos: Dict[str, Any] = json.loads(args.qos) if args.qos else {}
 
