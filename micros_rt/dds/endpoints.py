@@ -11,7 +11,9 @@ import logging
 import threading
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
-from cyclonedds._clayer import ddspy_take, ddspy_write
+import time
+
+from cyclonedds._clayer import ddspy_take, ddspy_write, ddspy_write_ts
 from cyclonedds.core import DDSException, InstanceState, Listener, ReadCondition, SampleState, ViewState
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
@@ -64,6 +66,9 @@ class DDSWriter:
         self._ref = self._writer._ref
         self.guid = str(self._writer.guid)
         self.closed = False
+        #: Added to every source timestamp (ns). 0 normally; tests and simulations set it to play
+        #: a publisher whose clock is off (a lagging host) without touching the system clock.
+        self.clock_offset_ns = 0
 
     def _matched_changed(self, _writer: Any, status: Any) -> None:
         self._matched = status.current_count
@@ -86,7 +91,10 @@ class DDSWriter:
     def write(self, msg: Any) -> None:
         """Serialize and write one message; raises on bad field values."""
         data = self._encode(msg)
-        ret = ddspy_write(self._ref, data)
+        if self.clock_offset_ns:
+            ret = ddspy_write_ts(self._ref, data, time.time_ns() + self.clock_offset_ns)
+        else:
+            ret = ddspy_write(self._ref, data)
         if ret < 0:
             raise DDSException(ret, f"writing to DDS topic {self.topic_name}")
 
