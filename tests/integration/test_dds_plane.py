@@ -153,6 +153,9 @@ def test_publisher_killed_and_restarted_is_heard_again(ros_master: harness.RosMa
     listener.wait_for_count("recv", 5, timeout=30)
     first.proc.kill()
     first.wait(10)
+    # DDS tells the subscriber its publisher is gone (participant lease): bus info stays true
+    n = len(listener.events())
+    listener.wait_for(lambda e: e.get("event") == "status" and e.get("transports") == {}, 20, start=n)
     spawn(mrt("talk", "--topic", "/phoenix", "--count", "1000", "--rate", "20", "--prefix", "second",
               "--node-name", "phoenix"))
     listener.wait_for(lambda e: e.get("event") == "recv" and str(e.get("data", "")).startswith("second"), 30)
