@@ -446,6 +446,12 @@ def ros_child(args, stop, use_mrt):
 def child_main(args):
     stop = _Stop(args.timeout)
     prof = None
+    instrument = None
+    if os.environ.get("BENCH_INSTRUMENT") and args.impl in ("mrt", "dds"):
+        sys.path.insert(0, str(HERE))
+        import instrument
+
+        instrument.install() if args.impl == "mrt" else instrument.install_dds()
     if args.profile:
         import cProfile
 
@@ -462,6 +468,8 @@ def child_main(args):
     except BaseException as exc:  # report, never hang
         _result({"ok": False, "error": f"{type(exc).__name__}: {exc}"})
     finally:
+        if instrument is not None:
+            instrument.report()
         if prof is not None:
             prof.disable()
             prof.dump_stats(args.profile)
