@@ -34,6 +34,7 @@ def _assert_about_one_per_second(times: List[float], sent: int) -> None:
     assert sent >= 150, sent
     assert 3 <= len(times) <= 7, (len(times), times)
     gaps = [b - a for a, b in zip(times, times[1:])]
+    print(f"time filter: {len(times)} of {sent} delivered, gaps {[round(g, 2) for g in gaps]}")
     assert min(gaps) >= 0.8, gaps  # never two deliveries within the filter window (20 ms jitter allowed)
     assert span <= 6.0
 
@@ -96,6 +97,7 @@ def test_deadline_fires_in_silence_and_stops_while_messages_flow(ros_master: har
     assert set(transports(listener)) == {"DDS" if kind == "dds" else "TCPROS"}
     assert listener.count("recv") >= 55
     before, during, after = _deadline_phases(listener)
+    print(f"deadline {kind}: before={before} during={during} after(1 s)={after}")
     # 30 Hz = 33 ms gaps, far inside the 0.2 s deadline: nothing fires while data flows
     assert during == 0, listener.events("deadline")
     assert before >= 3, before
@@ -137,6 +139,7 @@ def test_msg_valid_period_drops_messages_that_wait_too_long_on_dds(ros_master: h
     assert sent == 40
     assert set(transports(listener)) == {"DDS"}
     done = listener.events("done")[0]
+    print(f"lifespan: {len(got)} of {sent} delivered, max age {done['latency']['max']:.3f} s")
     # the burst lasts 1 s, messages older than 0.5 s expire: ~15 of 40 delivered at 10/s
     assert 5 <= len(got) <= 25, got
     assert done["latency"]["max"] < 0.5 + 0.1, done["latency"]
@@ -158,6 +161,7 @@ def test_latency_statistics_within_budget(ros_master: harness.RosMaster, spawn: 
     assert s["count"] == len(received(fast)) >= 55
     assert 0 < s["p50"] <= s["p99"] <= s["max"]
     assert s["p50"] < 0.05, s
+    print(f"latency fast: {s}")
     assert s["budget_checked"] == s["count"] and s["budget_misses"] == 0, s
 
 
@@ -171,6 +175,7 @@ def test_latency_budget_misses_are_counted_and_logged(ros_master: harness.RosMas
               qos={"latency_budget": 0.05}))
     s = slow.wait_for("done", 15)["latency"]
     assert s["count"] == 40
+    print(f"latency slow: {s}")
     assert s["budget_misses"] >= 20, s
     assert s["max"] > 0.3
     debug = logs(slow, "DEBUG")
@@ -202,6 +207,7 @@ def test_destination_order_with_interleaved_source_stamps(ros_master: harness.Ro
     n_now = sum(1 for x in got if x.startswith("now"))
     n_late = sum(1 for x in got if x.startswith("late"))
     assert set(transports(listener)) == {"DDS"}
+    print(f"order by_source={by_source}: now={n_now}/120 late={n_late}/40")
     assert n_now == 120, n_now
     if by_source:
         assert n_late <= 3, got  # only while "now" is silent could one slip through
@@ -219,6 +225,7 @@ def test_lagging_publisher_clock_is_reported(ros_master: harness.RosMaster, spaw
     assert ev["level"] == "WARNING"
     assert "skewed_talker" in text and "behind" in text
     lag = float(re.search(r"runs ([0-9.]+) s behind", text).group(1))  # type: ignore[union-attr]
+    print(f"skew: {text}")
     assert 4.5 <= lag <= 6.0, text
     time.sleep(1.0)
     assert sum("clock" in t for t in logs(listener)) == 1  # reported once, not per sample
@@ -264,6 +271,7 @@ def test_transport_priority_marks_tcpros_packets(ros_master: harness.RosMaster, 
         out, err = cap.communicate()
     toses = [int(m, 16) for m in re.findall(r"tos (0x[0-9a-f]+)", out)]
     assert len(toses) >= 3, (out, err)
+    print(f"tos {priority}: {sorted(set(hex(t) for t in toses))} on {len(toses)} packets")
     assert set(toses) == {tos}, out
 
 
