@@ -24,7 +24,7 @@ from .types import DDSType
 
 __all__ = ["DDSWriter", "DDSReader", "WriterInfo", "USER_DATA_PREFIX", "make_user_data", "parse_user_data"]
 
-_log = logging.getLogger("micros_rt.dds")
+_log = logging.getLogger("rosout.micros_rt.dds")
 
 USER_DATA_PREFIX = b"micros_rt;"
 _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
