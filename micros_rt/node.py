@@ -314,7 +314,7 @@ class _Publication:
                         f"topic {self.topic}: cannot serialize {type(msg).__name__}: {exc}") from exc
                 except Exception as exc:  # DDS write failure: keep TCPROS peers served
                     _log.warning("micros_rt: topic %s: DDS write failed: %s", self.topic, exc)
-            if compat.count_tcp_connections(impl):
+            if len(impl.connections) > len(self.connections):  # some are TCPROS links
                 try:
                     impl.publish(msg)
                 except genpy.SerializationError as exc:
@@ -464,7 +464,9 @@ class _Subscription:
         self.effective = options or SubscribeQoSOptions(ordered_by_sending_timestamp=False)
         self.hints = hints
         self.refcount = 0
-        self.callbacks: List[Tuple[Callable[..., None], Any]] = []
+        # replaced, never mutated: the delivery thread iterates it without a copy or a lock
+        self.callbacks: Tuple[Tuple[Callable[..., None], Any], ...] = ()
+        self._conn_headers: Dict[str, Dict[str, str]] = {}
         self.lock = threading.Lock()
         self.closed = False
         self.accepted: Dict[str, _Accepted] = {}
@@ -576,6 +578,7 @@ class _Subscription:
                          "and msg_valid_period are not checked", topic, pub_uri, exc)
         with self.lock:
             self.accepted[writer] = _Accepted(pub_uri, latch, str(params.get("node", "")), conn)
+            self._conn_headers.pop(writer, None)
         if not compat.add_pseudo_connection(topic, conn, publisher=False):
             with self.lock:
                 self.accepted.pop(writer, None)
@@ -636,8 +639,7 @@ class _Subscription:
             if wi is None:
                 continue
             if wi.tag is not None:
-                with self.lock:
-                    acc = self.accepted.get(wi.guid)
+                acc = self.accepted.get(wi.guid)  # a dict read is atomic; writers hold self.lock
                 if acc is None and wi.guid not in self.writer_qos:
                     # not negotiated (yet). A writer negotiated before and now gone (a publisher
                     # that exited) still has the samples it sent us delivered.
@@ -715,12 +717,18 @@ class _Subscription:
             seq = self.header_seq.get(writer, 0) + 1
             self.header_seq[writer] = seq
             head.seq = seq
-        acc = self.accepted.get(writer)
-        msg._connection_header = {
-            "callerid": acc.conn.endpoint_id if acc else writer,
-            "topic": self.topic, "type": self.data_class._type, "md5sum": self.data_class._md5sum,
-            "transport": "DDS",
-        }
+        header = self._conn_headers.get(writer)
+        if header is None:
+            # one dict per writer, shared by its messages as rospy shares one per connection
+            acc = self.accepted.get(writer)
+            header = {
+                "callerid": acc.conn.endpoint_id if acc else writer,
+                "topic": self.topic, "type": self.data_class._type, "md5sum": self.data_class._md5sum,
+                "transport": "DDS",
+            }
+            if acc is not None:
+                self._conn_headers[writer] = header
+        msg._connection_header = header
         self._deliver(msg, info.source_timestamp)
 
     def _deliver(self, msg: Any, source_ts_ns: Optional[int]) -> None:
@@ -746,7 +754,7 @@ class _Subscription:
                            "(%d misses of %d)", self.topic, latency * 1e3, budget * 1e3,
                            self.stats.budget_misses, self.stats.count)
         self.last_delivery = time.monotonic()
-        for cb, cb_args in list(self.callbacks):
+        for cb, cb_args in self.callbacks:
             try:
                 if cb_args is None:
                     cb(msg)
@@ -955,7 +963,9 @@ class Subscriber:
             return
         with sub.lock:
             if self._entry in sub.callbacks:
-                sub.callbacks.remove(self._entry)
+                entries = list(sub.callbacks)
+                entries.remove(self._entry)
+                sub.callbacks = tuple(entries)
         with _node.lock:
             sub.refcount -= 1
             last = sub.refcount <= 0
@@ -1091,7 +1101,7 @@ class NodeHandle:
             sub.refcount += 1
             entry = (callback, callback_args)
             with sub.lock:
-                sub.callbacks.append(entry)
+                sub.callbacks = sub.callbacks + (entry,)
         return Subscriber(sub, callback, callback_args)
 
 
