@@ -208,6 +208,8 @@ class _Publication:
                 qos = writer_qos(options, queue_size=queue_size, latch=latch,
                                  user_data=make_user_data(graph=_node.graph, node=compat.caller_id()))
                 self.writer = DDSWriter(participant, dds_topic_name(topic), self.dds_type, qos)
+                prio = options.transport_priority
+                participant.mark_priority(int(prio), priority_tos(prio), priority_socket_priority(prio))
             except MicrosRtError as exc:
                 _log.warning("micros_rt: topic %s will use TCPROS only: %s", topic, exc)
                 self.writer = None

@@ -101,6 +101,9 @@ class DDSParticipant:
         from cyclonedds.domain import Domain, DomainParticipant
 
         self.domain_id = domain_id
+        from .marking import process_udp_sockets
+
+        before = set(process_udp_sockets())
         try:
             # A Domain with an explicit config keeps our settings out of the
             # process environment (CYCLONEDDS_URI stays the user's).
@@ -110,9 +113,29 @@ class DDSParticipant:
             raise DDSUnavailableError(
                 f"cannot start a Cyclone DDS participant on domain {domain_id}: {exc}") from exc
         self.guid = str(self.dp.guid)
+        # the sockets Cyclone just opened: what transport priority marks (see marking.py)
+        self._sockets = set(process_udp_sockets()) - before
         self._topics: Dict[str, Any] = {}
         self._lock = threading.Lock()
+        self._priority: Optional[int] = None
         self.closed = False
+
+    def mark_priority(self, level: int, tos: int, so_priority: int) -> None:
+        """Mark this process's DDS traffic for a writer of transport priority ``level``.
+
+        The highest level among the process's writers wins (see :mod:`micros_rt.dds.marking`).
+        """
+        from .marking import mark_udp_sockets
+
+        with self._lock:
+            if self._priority is not None and level <= self._priority:
+                return
+            first = self._priority is None
+            self._priority = level
+        if first and tos == 0:
+            return  # unmarked is the default
+        n = mark_udp_sockets(self._sockets, tos, so_priority)
+        _log.debug("micros_rt: DDS traffic of this process marked TOS 0x%02x on %d sockets", tos, n)
 
     def topic(self, name: str, idl_class: Any) -> Any:
         """The Topic ``name`` with type ``idl_class``, created once per process."""

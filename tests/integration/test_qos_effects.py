@@ -286,3 +286,42 @@ def test_data_centric_update_is_refused_through_public_api() -> None:
         micros_rt.SubscribeQoSOptions(data_centric_update=True)
     with pytest.raises(UnsupportedQoSError):
         micros_rt.AdvertiseQoSOptions.from_dict({"data_centric_update": True}, source="a test")
+
+
+# ---------------------------------------------------------------------------
+# transport_priority on DDS: micros_rt marks Cyclone's UDP sockets (per process)
+
+
+def _udp_ports_of(pid: int) -> set[int]:
+    out = subprocess.run(["ss", "-unapH"], capture_output=True, text=True, timeout=10).stdout
+    ports = set()
+    for line in out.splitlines():
+        if f"pid={pid}," in line:
+            ports.add(int(line.split()[3].rsplit(":", 1)[1]))
+    return ports
+
+
+@pytest.mark.parametrize("priority,tos", [("EXTREMELY_HIGH", 0xb8), ("NORMAL", 0x0)])
+def test_transport_priority_marks_dds_packets(ros_master: harness.RosMaster, spawn: harness.Spawner,
+                                             priority: str, tos: int) -> None:
+    topic = f"/qprio_dds_{priority.lower()}"
+    listener = spawn(mrt("listen", "--topic", topic, "--duration", "12"))
+    listener.wait_for("ready", 30)
+    talker = spawn(mrt("talk", "--topic", topic, "--count", "400", "--rate", "40", "--wait-subscribers", "1",
+                       qos={"transport_priority": priority}))
+    listener.wait_for_count("recv", 3, timeout=20)
+    assert set(transports(listener)) == {"DDS"}
+    ports = _udp_ports_of(talker.pid)  # the talker's only UDP sockets are Cyclone's
+    assert ports, "talker has no UDP socket"
+    flt = " or ".join(f"src port {p}" for p in sorted(ports))
+    cap = subprocess.Popen(["tcpdump", "-i", "lo", "-nn", "-v", "-l", "-c", "6", f"udp and ({flt})"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        out, err = cap.communicate(timeout=15)
+    except subprocess.TimeoutExpired:
+        cap.kill()
+        out, err = cap.communicate()
+    toses = [int(m, 16) for m in re.findall(r"tos (0x[0-9a-f]+)", out)]
+    assert len(toses) >= 3, (out, err)
+    print(f"DDS tos {priority}: {sorted(set(hex(t) for t in toses))} on {len(toses)} packets")
+    assert set(toses) == {tos}, out
