@@ -365,7 +365,10 @@ class Publisher:
         pub = self._pub
         if pub is None:
             raise rospy.ROSException("publish() to an unregistered() handle")
-        pub.publish(rospy.topics.args_kwds_to_message(pub.data_class, args, kwds))
+        if len(args) == 1 and not kwds and type(args[0]) is pub.data_class:
+            pub.publish(args[0])  # the common case, without rospy's argument parsing
+        else:
+            pub.publish(rospy.topics.args_kwds_to_message(pub.data_class, args, kwds))
 
     def get_num_connections(self) -> int:
         """Subscribers connected to this topic, over DDS and TCPROS."""
@@ -421,6 +424,7 @@ class _Inbox:
 
     def __init__(self, participant: Optional[DDSParticipant]) -> None:
         self._event = threading.Event()
+        self._guard_up = False
         self.waitset: Any = None
         self.guard: Any = None
         if participant is not None:
@@ -441,14 +445,19 @@ class _Inbox:
 
     def wake(self) -> None:
         if self.guard is not None:
+            # trigger first, flag second: wait() may then spin once until it sees the flag,
+            # but never leaves the guard raised with the flag down (a busy loop)
             self.guard.set(True)
+            self._guard_up = True
         else:
             self._event.set()
 
     def wait(self, timeout: float) -> None:
         if self.waitset is not None:
             self.waitset.wait(int(max(timeout, 0.0) * 1e9))
-            self.guard.set(False)
+            if self._guard_up:  # reset only when raised: one C call less per DDS sample
+                self._guard_up = False
+                self.guard.set(False)
         else:
             self._event.wait(timeout)
             self._event.clear()
