@@ -660,6 +660,24 @@ def print_table(results, impls):
     return "\n".join(lines)
 
 
+def combine_rounds(runs):
+    """One result per figure: the median over rounds of each round's figure (all rounds must be ok)."""
+    if len(runs) == 1:
+        return runs[0]
+    out = dict(runs[0])
+    out["rounds"] = len(runs)
+    if not all(r.get("ok") for r in runs):
+        bad = next(r for r in runs if not r.get("ok"))
+        return dict(bad, rounds=len(runs))
+    for field in ("median_us", "p90_us", "p99_us", "msg_per_s", "MB_per_s"):
+        if field in runs[0]:
+            out[field] = statistics.median(r[field] for r in runs)
+    for field in ("lost", "lost_in_window"):
+        if field in runs[0]:
+            out[field] = sum(r.get(field) or 0 for r in runs)
+    return out
+
+
 def parent_main(args):
     cfg = {"lat_count_small": 2000, "lat_count_large": 500, "tp_warmup": 1.0, "tp_window": 4.0,
            "depth_small": 1000, "depth_large": 32}
@@ -700,19 +718,29 @@ def parent_main(args):
             phases += [("lat", 64), ("lat", 64 * KiB)]
         if "tp" in kinds:
             phases += [("tp", 64), ("tp", MiB)]
-        for kind, size in phases:
-            for impl in impls:
-                res = run_phase(impl, kind, size, cfg, env, log_dir, profile_dir)
-                results[impl][f"{kind}_{size}"] = res
-                if not res.get("ok"):
-                    summary = f"FAILED: {res.get('error')}"
-                elif kind == "lat":
-                    summary = (f"median {res['median_us']:.1f} us  p90 {res['p90_us']:.1f}  p99 {res['p99_us']:.1f}"
-                               f"  (n={res['n']}, transport {res.get('transport')})")
-                else:
-                    summary = (f"{res['msg_per_s']:,.0f} msg/s  {res['MB_per_s']:.1f} MB/s  "
-                               f"(lost {res['lost_in_window']}, transport {res.get('transport')})")
-                print(f"  {kind} {size:>8} B  {IMPL_NAMES[impl]:<18} {summary}  [{res['phase_s']:.1f}s]", flush=True)
+        rounds: dict = {i: {} for i in impls}
+        for rnd in range(args.rounds):
+            # rotate the order each round: this VM's speed drifts, and a fixed order would
+            # hand the same implementation the same slot every time
+            order = impls[rnd % len(impls):] + impls[:rnd % len(impls)]
+            if args.rounds > 1:
+                print(f"round {rnd + 1}/{args.rounds} (order {', '.join(order)})", flush=True)
+            for kind, size in phases:
+                for impl in order:
+                    res = run_phase(impl, kind, size, cfg, env, log_dir, profile_dir)
+                    rounds[impl].setdefault(f"{kind}_{size}", []).append(res)
+                    if not res.get("ok"):
+                        summary = f"FAILED: {res.get('error')}"
+                    elif kind == "lat":
+                        summary = (f"median {res['median_us']:.1f} us  p90 {res['p90_us']:.1f}  p99 {res['p99_us']:.1f}"
+                                   f"  (n={res['n']}, transport {res.get('transport')})")
+                    else:
+                        summary = (f"{res['msg_per_s']:,.0f} msg/s  {res['MB_per_s']:.1f} MB/s  "
+                                   f"(lost {res['lost_in_window']}, transport {res.get('transport')})")
+                    print(f"  {kind} {size:>8} B  {IMPL_NAMES[impl]:<18} {summary}  [{res['phase_s']:.1f}s]", flush=True)
+        for impl in impls:
+            for key, runs in rounds[impl].items():
+                results[impl][key] = combine_rounds(runs)
     finally:
         stop_proc(master)
     tx1 = eth0_tx()
@@ -736,6 +764,9 @@ def main():
     ap.add_argument("--json", metavar="FILE", help="save the results as JSON")
     ap.add_argument("--impls", default="mrt,dds,ros", help="comma list of mrt,dds,ros (default all)")
     ap.add_argument("--phases", default="lat,tp", help="comma list of lat,tp (default both)")
+    ap.add_argument("--rounds", type=int, default=3,
+                    help="repeat every phase this many times, rotating the implementations' order; "
+                         "each figure is the median over rounds (default 3)")
     ap.add_argument("--profile-dir", help="run the children under cProfile, dumping .prof files here")
     ap.add_argument("--profile-impls", default="mrt", help="which implementations to profile (default mrt)")
     # child-only options
