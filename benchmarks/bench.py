@@ -163,7 +163,6 @@ def _raw_string_type():
 def _dds_entities(args, role):
     from cyclonedds.core import InstanceState, Policy, Qos, ReadCondition, SampleState, ViewState, WaitSet
     from cyclonedds.domain import DomainParticipant
-    from cyclonedds.idl import IdlStruct
     from cyclonedds.pub import DataWriter
     from cyclonedds.sub import DataReader
     from cyclonedds.topic import Topic

@@ -26,23 +26,23 @@ def _wrap(owner, name, label):
 
 
 def install():
+    import micros_rt._publication as publication
+    import micros_rt._subscription as subscription
     import micros_rt.node as node
     import micros_rt.dds.endpoints as ep
-    from micros_rt import _rospy_compat as compat
 
     _wrap(node.Publisher, "publish", "Publisher.publish (total)")
-    _wrap(node._Publication, "publish", "_Publication.publish")
+    _wrap(publication._Publication, "publish", "_Publication.publish")
     _wrap(ep.DDSWriter, "write", "DDSWriter.write (encode+ddspy_write)")
     _wrap(ep, "ddspy_write", "ddspy_write (C)")
     _wrap(ep, "ddspy_take", "ddspy_take (C)")
     _wrap(ep.DDSReader, "take_raw", "DDSReader.take_raw")
     _wrap(ep.DDSReader, "writer_info", "DDSReader.writer_info")
-    _wrap(node._Subscription, "_take", "_Subscription._take (whole batch)")
-    _wrap(node._Subscription, "_deliver_dds", "_Subscription._deliver_dds")
-    _wrap(node._Subscription, "_deliver", "_Subscription._deliver (incl. callback)")
-    _wrap(node._Subscription, "_check_deadline", "_Subscription._check_deadline")
-    _wrap(node._Inbox, "wait", "_Inbox.wait (blocking)")
-    _wrap(compat, "count_tcp_connections", "compat.count_tcp_connections")
+    _wrap(subscription._Subscription, "_take", "_Subscription._take (whole batch)")
+    _wrap(subscription._Subscription, "_deliver_dds", "_Subscription._deliver_dds")
+    _wrap(subscription._Subscription, "_deliver", "_Subscription._deliver (incl. callback)")
+    _wrap(subscription._Subscription, "_check_deadline", "_Subscription._check_deadline")
+    _wrap(subscription._Inbox, "wait", "_Inbox.wait (blocking)")
     import rospy.topics
     _wrap(rospy.topics, "args_kwds_to_message", "args_kwds_to_message")
 

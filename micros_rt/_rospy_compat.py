@@ -166,10 +166,6 @@ def remove_pseudo_connection(topic: str, conn: DDSConnection, *, publisher: bool
         impl.remove_connection(conn)
 
 
-def count_tcp_connections(impl: Any) -> int:
-    return sum(1 for c in impl.connections if getattr(c, "transport_type", "") != DDS)
-
-
 class _TimeoutTransport(xmlrpc.client.Transport):
     # rospy sets a process-wide socket timeout for this call; a per-connection
     # timeout keeps user sockets out of it.

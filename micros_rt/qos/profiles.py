@@ -27,7 +27,7 @@ import dataclasses
 import fnmatch
 import os
 from dataclasses import dataclass
-from typing import Any, Mapping, Optional, TypeVar, Union
+from typing import Any, Mapping, TypeVar, Union
 
 import yaml
 

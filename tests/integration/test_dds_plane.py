@@ -8,7 +8,7 @@ import time
 import pytest
 
 import harness
-from helpers import bus_info, logs, mrt, received, stock_talker, tcp_links_between, transports
+from helpers import bus_info, mrt, received, stock_talker, tcp_links_between, transports
 
 
 def test_micros_rt_pair_uses_dds_not_tcp(ros_master: harness.RosMaster, spawn: harness.Spawner) -> None:

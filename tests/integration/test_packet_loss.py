@@ -11,7 +11,6 @@ from __future__ import annotations
 import os
 import subprocess
 import time
-import xmlrpc.client
 from typing import Dict, Iterator, List
 
 import pytest

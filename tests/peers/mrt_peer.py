@@ -243,14 +243,13 @@ def main() -> int:
             sub = nh.subscribe(args.topic, data_class, cb, args.queue_size, hints)
         emit("ready", topic=sub.resolved_name)
         end = time.monotonic() + args.duration
-        got_all = False
+        last_status = 0.0
         while time.monotonic() < end and not micros_rt.is_shutdown():
             if args.exit_after and received[0] >= args.exit_after:
                 break
             time.sleep(0.05)
-            emit_status = getattr(main, "_last_status", 0.0)
-            if time.monotonic() - emit_status > 0.5:
-                main._last_status = time.monotonic()  # type: ignore[attr-defined]
+            if time.monotonic() - last_status > 0.5:
+                last_status = time.monotonic()
                 emit("status", transports=sub.connection_transports())
         emit("done", transports=sub.connection_transports(), latency_count=sub.latency.count,
              latency=sub.latency.summary(), expired=getattr(getattr(sub, "_sub", None), "expired_total", None))
