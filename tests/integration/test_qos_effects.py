@@ -245,9 +245,18 @@ def test_synchronised_publisher_clock_is_not_reported(ros_master: harness.RosMas
 # 6. transport_priority on the wire (TCPROS)
 
 
-def _capture_tos(port: int, n: int = 6, timeout: float = 15.0) -> subprocess.Popen[str]:
-    return subprocess.Popen(["tcpdump", "-i", "lo", "-nn", "-v", "-l", "-c", str(n), f"tcp src port {port}"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def _captured_tos(bpf_filter: str, n: int = 6, timeout: float = 15.0) -> list[int]:
+    """The IP TOS byte of the next ``n`` loopback packets matching ``bpf_filter`` (tcpdump)."""
+    cap = subprocess.Popen(["tcpdump", "-i", "lo", "-nn", "-v", "-l", "-c", str(n), bpf_filter],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        out, err = cap.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        cap.kill()
+        out, err = cap.communicate()
+    toses = [int(m, 16) for m in re.findall(r"tos (0x[0-9a-f]+)", out)]
+    assert len(toses) >= 3, (out, err)
+    return toses
 
 
 @pytest.mark.parametrize("priority,tos", [("HIGH", 0x88), ("EXTREMELY_HIGH", 0xb8), ("NORMAL", 0x0)])
@@ -263,16 +272,9 @@ def test_transport_priority_marks_tcpros_packets(ros_master: harness.RosMaster, 
     links = tcp_links_between(talker.pid, listener.pid)
     assert len(links) == 1, links
     port = int(links[0][0].rsplit(":", 1)[1])
-    cap = _capture_tos(port)
-    try:
-        out, err = cap.communicate(timeout=15)
-    except subprocess.TimeoutExpired:
-        cap.kill()
-        out, err = cap.communicate()
-    toses = [int(m, 16) for m in re.findall(r"tos (0x[0-9a-f]+)", out)]
-    assert len(toses) >= 3, (out, err)
+    toses = _captured_tos(f"tcp src port {port}")
     print(f"tos {priority}: {sorted(set(hex(t) for t in toses))} on {len(toses)} packets")
-    assert set(toses) == {tos}, out
+    assert set(toses) == {tos}, toses
 
 
 # ---------------------------------------------------------------------------
@@ -314,14 +316,6 @@ def test_transport_priority_marks_dds_packets(ros_master: harness.RosMaster, spa
     ports = _udp_ports_of(talker.pid)  # the talker's only UDP sockets are Cyclone's
     assert ports, "talker has no UDP socket"
     flt = " or ".join(f"src port {p}" for p in sorted(ports))
-    cap = subprocess.Popen(["tcpdump", "-i", "lo", "-nn", "-v", "-l", "-c", "6", f"udp and ({flt})"],
-                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        out, err = cap.communicate(timeout=15)
-    except subprocess.TimeoutExpired:
-        cap.kill()
-        out, err = cap.communicate()
-    toses = [int(m, 16) for m in re.findall(r"tos (0x[0-9a-f]+)", out)]
-    assert len(toses) >= 3, (out, err)
+    toses = _captured_tos(f"udp and ({flt})")
     print(f"DDS tos {priority}: {sorted(set(hex(t) for t in toses))} on {len(toses)} packets")
-    assert set(toses) == {tos}, out
+    assert set(toses) == {tos}, toses
