@@ -122,6 +122,7 @@ class _Subscription:
         self.refcount = 0
         # replaced, never mutated: the delivery thread iterates it without a copy or a lock
         self.callbacks: Tuple[Tuple[Callable[..., None], Any], ...] = ()
+        self.malformed: Dict[str, int] = {}  # writer -> malformed samples dropped
         self._conn_headers: Dict[str, Dict[str, str]] = {}
         self.lock = threading.Lock()
         self.closed = False
@@ -364,8 +365,15 @@ class _Subscription:
         try:
             msg = self.dds_type.decode(data)
         except Exception as exc:
-            _log.warning("micros_rt: topic %s: dropped a malformed DDS sample from writer %s: %s",
-                         self.topic, writer, exc)
+            # once per writer in words, then counted: a broken peer must not flood the log
+            n = self.malformed.get(writer, 0) + 1
+            self.malformed[writer] = n
+            if n == 1:
+                _log.warning("micros_rt: topic %s: dropped a malformed DDS sample from writer %s (%s); is its "
+                             "type really %s? Further malformed samples from it are counted, not logged",
+                             self.topic, writer, exc, self.data_class._type)
+            else:
+                _log.debug("micros_rt: topic %s: malformed sample %d from writer %s", self.topic, n, writer)
             return
         head = msg.header if msg._has_header else msg if msg._type == "std_msgs/Header" else None
         if head is not None:

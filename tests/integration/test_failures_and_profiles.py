@@ -80,3 +80,27 @@ def test_master_restart_keeps_data_flowing_and_reregisters(fresh_master: harness
     # a publisher that appears after the restart is found through the re-registered subscription
     spawn(stock_talker("--topic", "/survivor", "--count", "200", "--rate", "20", "--prefix", "late_stock"), env=env)
     listener.wait_for(lambda e: e.get("event") == "recv" and str(e.get("data", "")).startswith("late_stock"), 30)
+
+
+def test_malformed_request_topic_is_answered_and_the_node_keeps_serving(ros_master: harness.RosMaster,
+                                                                        spawn: harness.Spawner) -> None:
+    talker = spawn(mrt("talk", "--topic", "/robust", "--count", "1000", "--rate", "20", "--node-name", "robust"))
+    talker.wait_for("ready", 30)
+    uri = harness.lookup_node(ros_master, "/robust")
+    # DDS parameters that are not a dict: DDS is declined in words, TCPROS is chosen
+    code, msg, proto = harness.node_call_raw(uri, "requestTopic", "/robust", [["DDS", "garbage"], ["TCPROS"]])
+    assert code == 1 and proto[0] == "TCPROS", (code, msg, proto)
+    # DDS parameters with wrong values and nothing else offered: a refusal, not a crash
+    code, msg, proto = harness.node_call_raw(uri, "requestTopic", "/robust",
+                                             [["DDS", {"domain": "x", "qos": {"bogus": 1}}]])
+    assert code == 0 and proto == [], (code, msg, proto)
+    # not even a protocol list
+    code, msg, _ = harness.node_call_raw(uri, "requestTopic", "/robust", "not a list")
+    assert code != 1
+    code, msg, _ = harness.node_call_raw(uri, "requestTopic", "/robust", [[]])
+    assert code != 1
+    declines = [w for w in logs(talker) if "DDS" in w]
+    assert declines, logs(talker)
+    # and it still serves a stock subscriber
+    cp = harness.rostopic(ros_master, "echo", "-n", "1", "/robust", timeout=30)
+    assert "hello" in cp.stdout, cp.stdout
