@@ -87,14 +87,13 @@ class _Publication:
         info = (f"DDS connection on topic {dds_topic_name(topic)} to reader {reader} "
                 f"(writer {self.writer.guid}, {'best effort' if self.options.using_best_effort_protocol else 'reliable'}"
                 f", priority {self.options.transport_priority.name})")
-        conn = compat.DDSConnection(topic, subscriber, "o", info, on_close=self._connection_closed)
+        conn = compat.DDSConnection(topic, subscriber, "o", info, peer_guid=reader,
+                                    on_close=self._connection_closed)
         with self.lock:
             old = self.connections.get(subscriber)
             self.connections[subscriber] = conn
         if old is not None:
             old.close()
-        conn.reader_guid = reader  # type: ignore[attr-defined]
-        conn.seen = False  # type: ignore[attr-defined]
         compat.add_pseudo_connection(topic, conn, publisher=True)
         return True, {"writer": self.writer.guid, "latch": self.latch, "qos": self.options.to_dict(),
                       "participant": participant.guid}
@@ -135,12 +134,27 @@ class _Publication:
             return
         matched = set(self.writer.matched_reader_guids())
         for conn in list(self.connections.values()):
-            if conn.reader_guid in matched:  # type: ignore[attr-defined]
-                conn.seen = True  # type: ignore[attr-defined]
-            elif conn.seen:  # type: ignore[attr-defined]
+            if conn.peer_guid in matched:
+                conn.seen = True
+            elif conn.seen:
                 _log.debug("micros_rt: topic %s: DDS subscriber %s is gone", self.topic, conn.endpoint_id)
                 compat.remove_pseudo_connection(self.topic, conn, publisher=True)
                 conn.close()
+
+    def ready_connections(self) -> int:
+        """Subscribers a message published now reaches: TCPROS links, and DDS subscribers whose
+        reader the writer has matched (negotiation precedes DDS discovery by a few milliseconds;
+        counting those early would let a "wait for a subscriber, then publish" loop lose its first
+        messages)."""
+        impl = self.impl
+        if impl is None:
+            return 0
+        conns = list(self.connections.values())
+        n_tcp = max(len(impl.connections) - len(conns), 0)
+        if not conns or self.writer is None:
+            return n_tcp
+        matched = set(self.writer.matched_reader_guids())
+        return n_tcp + sum(1 for c in conns if c.peer_guid in matched)
 
     def publish(self, msg: Any) -> None:
         impl = self.impl
@@ -212,8 +226,8 @@ class Publisher:
             pub.publish(rospy.topics.args_kwds_to_message(pub.data_class, args, kwds))
 
     def get_num_connections(self) -> int:
-        """Subscribers connected to this topic, over DDS and TCPROS."""
-        return 0 if self._pub is None or self._pub.impl is None else len(self._pub.impl.connections)
+        """Subscribers this topic reaches now, over TCPROS and DDS (DDS ones once discovery matched them)."""
+        return 0 if self._pub is None else self._pub.ready_connections()
 
     def get_dds_connections(self) -> int:
         return 0 if self._pub is None else len(self._pub.connections)

@@ -106,9 +106,12 @@ class DDSConnection:
 
     transport_type = "DDS"
 
-    def __init__(self, topic: str, endpoint_id: str, direction: str, info: str,
+    def __init__(self, topic: str, endpoint_id: str, direction: str, info: str, peer_guid: str = "",
                  on_close: Optional[Callable[["DDSConnection"], None]] = None) -> None:
         self.id = next(_ids)
+        self.peer_guid = peer_guid  # the DDS reader (publisher side) or writer (subscriber side)
+        self.seen = False  # has DDS discovery matched the peer yet?
+        self.created = time.monotonic()
         self.name = topic
         self.endpoint_id = endpoint_id
         self.direction = direction  # 'i' inbound (subscriber side) / 'o' outbound

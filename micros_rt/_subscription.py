@@ -217,10 +217,8 @@ class _Subscription:
         writer = params["writer"]
         latch = bool(params.get("latch", False))
         info = f"DDS connection on topic {dds_topic_name(topic)} from writer {writer}"
-        conn = compat.DDSConnection(topic, pub_uri, "i", info, on_close=self._connection_closed)
-        conn.writer_guid = writer  # type: ignore[attr-defined]
-        conn.seen = False  # type: ignore[attr-defined]
-        conn.created = time.monotonic()  # type: ignore[attr-defined]
+        conn = compat.DDSConnection(topic, pub_uri, "i", info, peer_guid=writer,
+                                    on_close=self._connection_closed)
         if latch and self.tl_reader is None and self.participant is not None:
             try:
                 self.tl_reader = self._make_reader(transient_local=True)
@@ -246,9 +244,9 @@ class _Subscription:
 
     def _connection_closed(self, conn: compat.DDSConnection) -> None:
         with self.lock:
-            acc = self.accepted.get(conn.writer_guid)  # type: ignore[attr-defined]
+            acc = self.accepted.get(conn.peer_guid)
             if acc is not None and acc.conn is conn:
-                del self.accepted[conn.writer_guid]  # type: ignore[attr-defined]
+                del self.accepted[conn.peer_guid]
 
     # -- TCPROS (rospy's receive threads): enqueue only ---------------------
     def _on_tcpros(self, msg: Any) -> None:
@@ -477,9 +475,9 @@ class _Subscription:
         for guid, acc in list(self.accepted.items()):
             conn = acc.conn
             if guid in matched:
-                conn.seen = True  # type: ignore[attr-defined]
-            elif conn.seen or now - conn.created > 30.0:  # type: ignore[attr-defined]
-                if not conn.seen:  # type: ignore[attr-defined]
+                conn.seen = True
+            elif conn.seen or now - conn.created > 30.0:
+                if not conn.seen:
                     _log.warning("micros_rt: topic %s: publisher %s accepted DDS but its writer was never "
                                  "discovered in 30 s; check both nodes' network (ROS_IP, CYCLONEDDS_URI)",
                                  self.topic, acc.pub_uri)
