@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+import subprocess
 from pathlib import Path
 
 import harness
@@ -104,3 +106,42 @@ def test_malformed_request_topic_is_answered_and_the_node_keeps_serving(ros_mast
     # and it still serves a stock subscriber
     cp = harness.rostopic(ros_master, "echo", "-n", "1", "/robust", timeout=30)
     assert "hello" in cp.stdout, cp.stdout
+
+
+RELEASE_SCRIPT = """
+import json, threading, time
+import micros_rt
+from cyclonedds.core import Entity
+from cyclonedds.pub import DataWriter
+from cyclonedds.sub import DataReader
+from std_msgs.msg import String
+
+def state():
+    live = list(Entity._entities.values())  # cyclonedds' registry of entities not yet deleted
+    return {"writers": sum(isinstance(e, DataWriter) for e in live),
+            "readers": sum(isinstance(e, DataReader) for e in live),
+            "delivery_threads": sum(t.name.startswith("micros_rt delivery") for t in threading.enumerate())}
+
+micros_rt.init_node("releaser")
+nh = micros_rt.NodeHandle()
+base = state()
+pub = nh.advertise("released", String, 10, latch=True)
+sub = nh.subscribe("released", String, lambda m: None, 10)
+during = state()
+pub.unregister()
+sub.unregister()
+sub.unregister()  # twice is harmless
+after = state()
+print(json.dumps({"base": base, "during": during, "after": after}), flush=True)
+micros_rt.shutdown()
+"""
+
+
+def test_unregister_releases_writers_readers_and_threads(ros_master: harness.RosMaster) -> None:
+    cp = subprocess.run([harness.MICROS_RT_PYTHON, "-c", RELEASE_SCRIPT], env=ros_master.env,
+                        capture_output=True, text=True, timeout=60)
+    assert cp.returncode == 0, cp.stderr
+    report = json.loads(cp.stdout.strip().splitlines()[-1])
+    assert report["base"] == {"writers": 0, "readers": 0, "delivery_threads": 0}, report
+    assert report["during"] == {"writers": 1, "readers": 1, "delivery_threads": 1}, report
+    assert report["after"] == report["base"], report
