@@ -10,7 +10,7 @@ import rospy
 import rospy.topics
 
 from . import _rospy_compat as compat
-from ._runtime import _dds_participant, _log, _node
+from ._runtime import _dds_participant, _log, _node, announce_to_ros2
 from .dds.endpoints import DDSWriter, make_user_data
 from .dds.types import DDSType, dds_topic_name, dds_type_for
 from .exceptions import MicrosRtError
@@ -49,6 +49,7 @@ class _Publication:
                 qos = writer_qos(options, queue_size=queue_size, latch=latch,
                                  user_data=make_user_data(graph=_node.graph, node=compat.caller_id()))
                 self.writer = DDSWriter(participant, dds_topic_name(topic), self.dds_type, qos)
+                announce_to_ros2(add_writer=self.writer.guid)
                 prio = options.transport_priority
                 participant.mark_priority(int(prio), priority_tos(prio), priority_socket_priority(prio))
             except MicrosRtError as exc:
@@ -189,6 +190,8 @@ class _Publication:
         for conn in list(self.connections.values()):
             conn.close()
         if self.writer is not None:
+            if not rospy.is_shutdown():
+                announce_to_ros2(remove=self.writer.guid)
             self.writer.close()
             self.writer = None
         try:

@@ -6,7 +6,7 @@ import logging
 import os
 import threading
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Dict, Optional
+from typing import TYPE_CHECKING, Any, Dict, Optional
 
 import rospy
 
@@ -29,6 +29,7 @@ class _NodeState:
     publications: Dict[str, "_Publication"] = field(default_factory=dict)
     subscriptions: Dict[str, "_Subscription"] = field(default_factory=dict)
     lock: threading.RLock = field(default_factory=threading.RLock)
+    ros2_graph: Any = None  # Ros2GraphAnnouncer, created with the first DDS endpoint
 
 
 _node = _NodeState()
@@ -56,3 +57,24 @@ def _dds_participant() -> Optional[DDSParticipant]:
 
 def _depth(queue_size: Optional[int]) -> int:
     return queue_size if queue_size and queue_size > 0 else 1000
+
+
+def announce_to_ros2(*, add_reader: str = "", add_writer: str = "", remove: str = "") -> None:
+    """Keep ROS 2's graph (``ros_discovery_info``) told which endpoints this node has.
+
+    A courtesy to ROS 2 tools: failures are logged at debug level and change nothing else.
+    """
+    participant = get_participant()
+    if participant is None or not _node.initialized:
+        return
+    with _node.lock:
+        if _node.ros2_graph is None or _node.ros2_graph.participant is not participant:
+            from .dds.ros2_graph import Ros2GraphAnnouncer
+
+            try:
+                _node.ros2_graph = Ros2GraphAnnouncer(participant, str(rospy.get_caller_id()))
+            except Exception as exc:
+                _log.debug("micros_rt: no ROS 2 graph announcement: %s", exc)
+                return
+        announcer = _node.ros2_graph
+    announcer.update(add_reader=add_reader, add_writer=add_writer, remove=remove)

@@ -24,7 +24,7 @@ import genpy
 import rospy
 
 from . import _rospy_compat as compat
-from ._runtime import _dds_participant, _depth, _log, _node
+from ._runtime import _dds_participant, _depth, _log, _node, announce_to_ros2
 from .dds.endpoints import DDSReader, make_user_data
 from .dds.participant import DDSParticipant
 from .dds.types import DDSType, dds_topic_name, dds_type_for
@@ -178,7 +178,9 @@ class _Subscription:
         listener = Listener(  # type: ignore[no-untyped-call]
             on_requested_incompatible_qos=self._incompatible,
             on_subscription_matched=lambda *_: self.inbox.wake())
-        return DDSReader(self.participant, dds_topic_name(self.topic), self.dds_type, qos, listener)
+        reader = DDSReader(self.participant, dds_topic_name(self.topic), self.dds_type, qos, listener)
+        announce_to_ros2(add_reader=reader.guid)
+        return reader
 
     def _incompatible(self, _reader: Any, status: Any) -> None:
         # Cyclone thread: only log, never block. A ROS 2 (or foreign) writer whose QoS
@@ -503,6 +505,8 @@ class _Subscription:
             self.thread.join(timeout=2.0)
         for r in (self.reader, self.tl_reader):
             if r is not None:
+                if not rospy.is_shutdown():
+                    announce_to_ros2(remove=r.guid)
                 r.close()
         self.reader = self.tl_reader = None
 

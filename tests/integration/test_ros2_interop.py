@@ -271,3 +271,21 @@ def test_latched_micros_rt_publisher_reaches_late_rclpy_transient_local_subscrib
                      name="rclpy_listener")
     listener.wait_for("done", T)
     assert [e["data"] for e in listener.events("recv")] == ["latched 2"]
+
+
+def test_ros2_graph_names_micros_rt_nodes(ros_master: harness.RosMaster, spawn: harness.Spawner) -> None:
+    """ros_discovery_info: ROS 2 sees the ROS 1 node's name on its endpoints and in its node list."""
+    topic = "/interop/named"
+    talker = spawn(mrt("talk", "--topic", topic, "--count", 1000, "--rate", 5, "--node-name", "mrt_named_talker"),
+                   name="mrt_talker")
+    listener = spawn(mrt("listen", "--topic", topic, "--duration", 30, "--node-name", "mrt_named_listener"),
+                     name="mrt_listener")
+    talker.wait_for("ready", T)
+    listener.wait_for("ready", T)
+    info = spawn(ros2("info", "--topic", topic, "--wait", 10, "--min-publishers", 1, "--min-subscriptions", 1,
+                      "--wait-node", "mrt_named_talker", "--duration", 20), name="rclpy_info")
+    ev = info.wait_for("info", T)
+    assert [p["node_name"] for p in ev["publishers"]] == ["mrt_named_talker"], ev
+    assert [p["node_namespace"] for p in ev["publishers"]] == ["/"], ev
+    assert "mrt_named_listener" in [s["node_name"] for s in ev["subscriptions"]], ev
+    assert ["/", "mrt_named_talker"] in ev["nodes"] and ["/", "mrt_named_listener"] in ev["nodes"], ev

@@ -322,11 +322,16 @@ class Runner:
             pubs = self.node.get_publishers_info_by_topic(a.topic)
             subs = self.node.get_subscriptions_info_by_topic(a.topic)
             enough = len(pubs) >= a.min_publishers and len(subs) >= a.min_subscriptions
-            if (enough and (a.min_publishers or a.min_subscriptions)) or time.monotonic() >= deadline:
+            if a.wait_node:  # also wait until ROS 2's graph names that node (ros_discovery_info)
+                named = {e.node_name for e in pubs + subs}
+                enough = enough and a.wait_node in named
+            if (enough and (a.min_publishers or a.min_subscriptions or a.wait_node)) \
+                    or time.monotonic() >= deadline:
                 break
             self.spin_once(0.05)
         emit("info", topic=a.topic, publishers=[endpoint_info(e) for e in pubs],
-             subscriptions=[endpoint_info(e) for e in subs])
+             subscriptions=[endpoint_info(e) for e in subs],
+             nodes=[[ns, name] for name, ns in self.node.get_node_names_and_namespaces()])
         return 0
 
 
@@ -360,6 +365,8 @@ def main(argv: Optional[List[str]] = None) -> int:
                            help="seconds of discovery before printing (less once the --min-* counts are seen)")
             p.add_argument("--min-publishers", type=int, default=0)
             p.add_argument("--min-subscriptions", type=int, default=0)
+            p.add_argument("--wait-node", default="",
+                           help="also wait until the endpoints are attributed to this node name")
     args = ap.parse_args(argv)
 
     rclpy.init()
