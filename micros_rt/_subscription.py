@@ -26,7 +26,7 @@ import rospy
 from . import _rospy_compat as compat
 from ._runtime import _dds_participant, _depth, _log, _node, announce_to_ros2
 from .dds.endpoints import DDSReader, make_user_data
-from .dds.participant import DDSParticipant
+from .dds.participant import DDSParticipant, delete_entity
 from .dds.types import DDSType, dds_topic_name, dds_type_for
 from .exceptions import MicrosRtError
 from .negotiation.hints import DDS, TCPROS, TransportHints
@@ -106,6 +106,13 @@ class _Inbox:
         else:
             self._event.wait(timeout)
             self._event.clear()
+
+    def close(self) -> None:
+        """Delete the waitset and guard (after the delivery thread stopped waiting on them)."""
+        for entity in (self.waitset, self.guard):
+            if entity is not None:
+                delete_entity(entity)
+        self.waitset = self.guard = None
 
 
 class _Subscription:
@@ -509,6 +516,8 @@ class _Subscription:
                     announce_to_ros2(remove=r.guid)
                 r.close()
         self.reader = self.tl_reader = None
+        if not self.thread.is_alive():
+            self.inbox.close()
 
 
 class LatencyStats:

@@ -111,15 +111,18 @@ def test_malformed_request_topic_is_answered_and_the_node_keeps_serving(ros_mast
 RELEASE_SCRIPT = """
 import json, threading, time
 import micros_rt
-from cyclonedds.core import Entity
+from cyclonedds.core import Entity, GuardCondition, WaitSet
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from std_msgs.msg import String
 
 def state():
     live = list(Entity._entities.values())  # cyclonedds' registry of entities not yet deleted
-    return {"writers": sum(isinstance(e, DataWriter) for e in live),
-            "readers": sum(isinstance(e, DataReader) for e in live),
+    # data endpoints only (rt/...): the node's ros_discovery_info announcement lives with the node
+    data = [e for e in live if isinstance(e, (DataWriter, DataReader)) and e.topic.get_name().startswith("rt/")]
+    return {"writers": sum(isinstance(e, DataWriter) for e in data),
+            "readers": sum(isinstance(e, DataReader) for e in data),
+            "waitsets": sum(isinstance(e, (WaitSet, GuardCondition)) for e in live),
             "delivery_threads": sum(t.name.startswith("micros_rt delivery") for t in threading.enumerate())}
 
 micros_rt.init_node("releaser")
@@ -142,6 +145,6 @@ def test_unregister_releases_writers_readers_and_threads(ros_master: harness.Ros
                         capture_output=True, text=True, timeout=60)
     assert cp.returncode == 0, cp.stderr
     report = json.loads(cp.stdout.strip().splitlines()[-1])
-    assert report["base"] == {"writers": 0, "readers": 0, "delivery_threads": 0}, report
-    assert report["during"] == {"writers": 1, "readers": 1, "delivery_threads": 1}, report
+    assert report["base"] == {"writers": 0, "readers": 0, "waitsets": 0, "delivery_threads": 0}, report
+    assert report["during"] == {"writers": 1, "readers": 1, "waitsets": 2, "delivery_threads": 1}, report
     assert report["after"] == report["base"], report
