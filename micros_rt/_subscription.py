@@ -277,6 +277,8 @@ class _Subscription:
                     msg, _t = self.tcp_inbox.popleft()
                     self._deliver(msg, None)
                 now = time.monotonic()
+                if self.pending:  # connect_dds wakes us: held samples go out right away, in order
+                    self._flush_pending(now)
                 self._check_deadline(now)
                 if now >= next_housekeeping:
                     next_housekeeping = now + 0.5
@@ -312,6 +314,8 @@ class _Subscription:
                     q = self.pending.setdefault(wi.guid, collections.deque(maxlen=_depth(self.queue_size)))
                     q.append((time.monotonic(), data, info, reader))
                     continue
+                if self.pending and wi.guid in self.pending:
+                    self._flush_pending(time.monotonic())  # what it sent before the answer goes first
             if two_readers:
                 last = self.last_ts.get(wi.guid, -1)
                 if info.source_timestamp <= last:
@@ -460,13 +464,11 @@ class _Subscription:
             except Exception:
                 _log.exception("micros_rt: topic %s: deadline_cb raised (continuing)", self.topic)
 
-    def _housekeeping(self, now: float) -> None:
-        # flush samples of writers whose negotiation finished; expire the others
+    def _flush_pending(self, now: float) -> None:
+        """Deliver held samples of writers whose negotiation finished; expire the others."""
         for guid in list(self.pending):
-            with self.lock:
-                acc = self.accepted.get(guid)
             q = self.pending[guid]
-            if acc is not None:
+            if guid in self.accepted:
                 del self.pending[guid]
                 for _t, data, info, _r in q:
                     self._deliver_dds_checked(data, info, guid)
@@ -475,6 +477,8 @@ class _Subscription:
                     q.popleft()
                 if not q:
                     del self.pending[guid]
+
+    def _housekeeping(self, now: float) -> None:
         # a DDS publisher that vanished: drop its pseudo-connection so a restart reconnects
         if self.reader is None:
             return
