@@ -283,7 +283,7 @@ def test_ros2_graph_names_micros_rt_nodes(ros_master: harness.RosMaster, spawn: 
     talker.wait_for("ready", T)
     listener.wait_for("ready", T)
     info = spawn(ros2("info", "--topic", topic, "--wait", 10, "--min-publishers", 1, "--min-subscriptions", 1,
-                      "--wait-node", "mrt_named_talker", "--duration", 20), name="rclpy_info")
+                      "--wait-node", "mrt_named_talker,mrt_named_listener", "--duration", 20), name="rclpy_info")
     ev = info.wait_for("info", T)
     assert [p["node_name"] for p in ev["publishers"]] == ["mrt_named_talker"], ev
     assert [p["node_namespace"] for p in ev["publishers"]] == ["/"], ev

@@ -324,7 +324,7 @@ class Runner:
             enough = len(pubs) >= a.min_publishers and len(subs) >= a.min_subscriptions
             if a.wait_node:  # also wait until ROS 2's graph names that node (ros_discovery_info)
                 named = {e.node_name for e in pubs + subs}
-                enough = enough and a.wait_node in named
+                enough = enough and set(a.wait_node.split(",")) <= named
             if (enough and (a.min_publishers or a.min_subscriptions or a.wait_node)) \
                     or time.monotonic() >= deadline:
                 break
@@ -366,7 +366,7 @@ def main(argv: Optional[List[str]] = None) -> int:
             p.add_argument("--min-publishers", type=int, default=0)
             p.add_argument("--min-subscriptions", type=int, default=0)
             p.add_argument("--wait-node", default="",
-                           help="also wait until the endpoints are attributed to this node name")
+                           help="also wait until endpoints are attributed to these node names (comma list)")
     args = ap.parse_args(argv)
 
     rclpy.init()
