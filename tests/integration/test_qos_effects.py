@@ -265,14 +265,16 @@ def test_transport_priority_marks_tcpros_packets(ros_master: harness.RosMaster, 
     topic = f"/qprio_{priority.lower()}"
     listener = spawn(mrt("listen", "--topic", topic, "--duration", "12", "--hints", "tcp"))
     listener.wait_for("ready", 30)
+    talker_name = f"prio_talker_{priority.lower()}"
     talker = spawn(mrt("talk", "--topic", topic, "--count", "400", "--rate", "40", "--wait-subscribers", "1",
-                       qos={"transport_priority": priority}))
+                       "--node-name", talker_name, qos={"transport_priority": priority}))
     listener.wait_for_count("recv", 3, timeout=20)
     assert set(transports(listener)) == {"TCPROS"}
-    links = tcp_links_between(talker.pid, listener.pid)
-    assert len(links) == 1, links
-    port = int(links[0][0].rsplit(":", 1)[1])
-    toses = _captured_tos(f"tcp src port {port}")
+    # the talker's TCPROS server port, as ROS 1 hands it out (the source port of its data packets)
+    proto = harness.node_call(harness.lookup_node(ros_master, talker_name), "requestTopic", topic, [["TCPROS"]])
+    assert proto[0] == "TCPROS", proto
+    assert any(local.endswith(f":{proto[2]}") for local, _peer in tcp_links_between(talker.pid, listener.pid))
+    toses = _captured_tos(f"tcp src port {proto[2]} and greater 70")  # data packets, not bare ACKs (66 B)
     print(f"tos {priority}: {sorted(set(hex(t) for t in toses))} on {len(toses)} packets")
     assert set(toses) == {tos}, toses
 
