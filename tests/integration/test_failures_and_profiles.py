@@ -148,3 +148,44 @@ def test_unregister_releases_writers_readers_and_threads(ros_master: harness.Ros
     assert report["base"] == {"writers": 0, "readers": 0, "waitsets": 0, "delivery_threads": 0}, report
     assert report["during"] == {"writers": 1, "readers": 1, "waitsets": 2, "delivery_threads": 1}, report
     assert report["after"] == report["base"], report
+
+
+BAD_WRITER_SCRIPT = """
+import os, struct, sys, time
+from cyclonedds._clayer import ddspy_write
+from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.pub import DataWriter
+from cyclonedds.topic import Topic
+from std_msgs.msg import String
+from micros_rt.dds.types import dds_type_for
+
+# a foreign (untagged) DDS writer on the micros_rt topic: first broken samples, then good ones
+t = dds_type_for(String)
+dp = DomainParticipant(int(os.environ["ROS_DOMAIN_ID"]))
+writer = DataWriter(dp, Topic(dp, "rt/poisoned", t.idl_class))
+time.sleep(1.5)  # discovery
+for i in range(5):
+    bad = b"\\x00\\x01\\x00\\x00" + struct.pack("<I", 3) + b"\\xff\\xfe\\x00"  # not UTF-8
+    ddspy_write(writer._ref, bad + bytes(-len(bad) % 4))
+    time.sleep(0.05)
+for i in range(5):
+    writer.write(t.idl_class(data=f"good {i}"))
+    time.sleep(0.05)
+time.sleep(1.0)
+print("sent", flush=True)
+"""
+
+
+def test_malformed_dds_samples_are_reported_once_and_good_ones_still_arrive(ros_master: harness.RosMaster,
+                                                                            spawn: harness.Spawner) -> None:
+    listener = spawn(mrt("listen", "--topic", "/poisoned", "--duration", "20"))
+    listener.wait_for("ready", 30)
+    cp = subprocess.run([harness.MICROS_RT_PYTHON, "-c", BAD_WRITER_SCRIPT], env=ros_master.env,
+                        capture_output=True, text=True, timeout=60)
+    assert cp.returncode == 0 and "sent" in cp.stdout, cp.stderr
+    listener.wait_for_count("recv", 5, timeout=10)
+    assert received(listener) == [f"good {i}" for i in range(5)]
+    warnings = [w for w in logs(listener) if "malformed DDS sample" in w]
+    assert len(warnings) == 1, logs(listener)  # once per writer, not once per sample
+    assert "std_msgs/String" in warnings[0]
+    assert listener.alive()
