@@ -82,12 +82,6 @@ class _Inbox:
     def attach(self, condition: Any) -> None:
         self.waitset.attach(condition)
 
-    def detach(self, condition: Any) -> None:
-        try:
-            self.waitset.detach(condition)
-        except Exception:
-            pass
-
     def wake(self) -> None:
         if self.guard is not None:
             # trigger first, flag second: wait() may then spin once until it sees the flag,

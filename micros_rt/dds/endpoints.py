@@ -98,11 +98,6 @@ class DDSWriter:
         if ret < 0:
             raise DDSException(ret, f"writing to DDS topic {self.topic_name}")
 
-    def write_serialized(self, data: bytes) -> None:
-        ret = ddspy_write(self._ref, data)
-        if ret < 0:
-            raise DDSException(ret, f"writing to DDS topic {self.topic_name}")
-
     def close(self) -> None:
         if self.closed:
             return
@@ -139,10 +134,6 @@ class DDSReader:
         self._writers: Dict[int, WriterInfo] = {}
         self._lock = threading.Lock()
         self.closed = False
-
-    @property
-    def entity(self) -> Any:
-        return self._reader
 
     def take_raw(self, n: int = 256) -> List[Tuple[bytes, Any]]:
         """Up to ``n`` (serialized sample, SampleInfo) pairs; invalid samples included."""
@@ -181,10 +172,6 @@ class DDSReader:
             if info is not None:
                 out.append(info.guid)
         return out
-
-    def forget_writer(self, handle: int) -> None:
-        with self._lock:
-            self._writers.pop(handle, None)
 
     def close(self) -> None:
         if self.closed:
