@@ -147,7 +147,6 @@ class _Subscription:
         self.skew_reported: set[str] = set()
         self.skew_min: Dict[str, Tuple[int, int]] = {}  # writer -> (samples seen, min age ns)
         self.expired_total = 0
-        self._delivering_writer: Optional[str] = None
         if self.participant is not None:
             try:
                 self.dds_type = dds_type_for(data_class)
@@ -328,11 +327,7 @@ class _Subscription:
             _log.debug("micros_rt: topic %s: dropped a sample of writer %s older than its msg_valid_period "
                        "%.3f s", self.topic, writer, vp)
             return
-        self._delivering_writer = writer
-        try:
-            self._deliver_dds(data, info, writer)
-        finally:
-            self._delivering_writer = None
+        self._deliver_dds(data, info, writer)
 
     def _check_clock_skew(self, wi: Any, source_ts_ns: int) -> None:
         # Same-host or NTP-synced clocks put source stamps within milliseconds of ours. A writer
@@ -398,9 +393,10 @@ class _Subscription:
             if acc is not None:
                 self._conn_headers[writer] = header
         msg._connection_header = header
-        self._deliver(msg, info.source_timestamp)
+        self._deliver(msg, info.source_timestamp, writer)
 
-    def _deliver(self, msg: Any, source_ts_ns: Optional[int]) -> None:
+    def _deliver(self, msg: Any, source_ts_ns: Optional[int], writer: Optional[str] = None) -> None:
+        """Hand one message to the callbacks; ``writer`` is the DDS writer (None on TCPROS)."""
         now_wall = time.time()
         if source_ts_ns is None:
             stamp = _header_stamp(msg)
@@ -412,12 +408,9 @@ class _Subscription:
                 if now_wall - self.last_filter_pass < f:
                     return
                 self.last_filter_pass = now_wall
-            if math.isfinite(self._valid_period()) and source_ts_ns is not None:
-                if now_wall - source_ts_ns / 1e9 > self._valid_period():
-                    return
         if source_ts_ns is not None:
             latency = now_wall - source_ts_ns / 1e9
-            budget = self._latency_budget(self._delivering_writer)
+            budget = self._latency_budget(writer)
             if self.stats.add(latency, budget):
                 _log.debug("micros_rt: topic %s: latency %.3f ms over the publisher's latency_budget %.3f ms "
                            "(%d misses of %d)", self.topic, latency * 1e3, budget * 1e3,
@@ -432,13 +425,13 @@ class _Subscription:
             except Exception:
                 _log.exception("micros_rt: topic %s: callback raised (continuing)", self.topic)
 
-    def _valid_period(self, writer: Optional[str] = None) -> float:
+    def _valid_period(self, writer: str) -> float:
         """The publisher's msg_valid_period (seconds), known for micros_rt publishers on DDS links.
 
         A TCPROS link carries no QoS (stock publishers have none, and the TCPROS handshake has no
         field for it), so there it is unknown and nothing expires.
         """
-        q = self.writer_qos.get(writer) if writer is not None else None
+        q = self.writer_qos.get(writer)
         return q.msg_valid_period if q is not None else math.inf
 
     def _latency_budget(self, writer: Optional[str]) -> float:
