@@ -16,11 +16,14 @@ from .exceptions import (
     MicrosRtError,
     NodeNotInitializedError,
     ProfileError,
+    PublishTimeoutError,
     QoSTypeError,
     QoSValueError,
+    TransportError,
     TypeMappingError,
     UnsupportedQoSError,
 )
+from ._stats import PublisherStatistics, SubscriberStatistics
 from .negotiation.hints import TransportHints
 from .node import (
     DeadlineMissed,
@@ -52,12 +55,16 @@ __all__ = [
     "NodeHandle",
     "NodeNotInitializedError",
     "ProfileError",
+    "PublishTimeoutError",
     "Publisher",
+    "PublisherStatistics",
     "QoSProfile",
     "QoSTypeError",
     "QoSValueError",
     "Subscriber",
     "SubscribeQoSOptions",
+    "SubscriberStatistics",
+    "TransportError",
     "TransportHints",
     "TransportPriority",
     "TypeMappingError",

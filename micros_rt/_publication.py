@@ -1,8 +1,13 @@
-"""A micros_rt publication: per topic and process, the rospy publisher and the DDS writer."""
+"""A micros_rt publication: per topic and process, the rospy publisher (master registration, TCPROS for
+stock peers and TCPROS-preferring subscribers) and a back-end writer (DDS) for micros_rt subscribers."""
 
 from __future__ import annotations
 
+import logging
+import socket
+import struct
 import threading
+import time
 from typing import Any, Dict, Optional, Tuple, Type
 
 import genpy
@@ -10,117 +15,110 @@ import rospy
 import rospy.topics
 
 from . import _rospy_compat as compat
-from ._runtime import _dds_participant, _log, _node, announce_to_ros2
-from .dds.endpoints import DDSWriter, make_user_data
-from .dds.types import DDSType, dds_topic_name, dds_type_for
+from ._registry import EndpointRegistry
+from ._rospy_compat import short
+from ._stats import PublisherStatistics
+from .backends import EndpointSpec
+from .dds.backend import DDSBackend, DDSTopicWriter
 from .exceptions import MicrosRtError
-from .qos import (
-    AdvertiseQoSOptions,
-    SubscribeQoSOptions,
-    TransportPriority,
-    check_compatibility,
-    priority_socket_priority,
-    priority_tos,
-    writer_qos,
+from .negotiation import (
+    UNMATCHED_READER_TIMEOUT,
+    DDSAnswer,
+    DDSOffer,
+    PublicationFacts,
+    RateLimitedLog,
+    Verdict,
+    decide,
 )
+from .qos import AdvertiseQoSOptions, TransportPriority, priority_socket_priority, priority_tos
 
 __all__ = ["Publisher"]
 
+_log = logging.getLogger("rosout.micros_rt")
+_housekeeping_log = RateLimitedLog(_log, interval=60.0)
+
 
 class _Publication:
-    """Per topic and process: the rospy publisher and the DDS writer."""
+    """Per topic and process: the rospy publisher and the DDS writer. Owned by the registry."""
 
-    def __init__(self, topic: str, data_class: Type[genpy.Message], queue_size: Optional[int],
-                 latch: bool, options: AdvertiseQoSOptions) -> None:
+    def __init__(self, topic: str, data_class: Type[genpy.Message], queue_size: Optional[int], latch: bool,
+                 options: AdvertiseQoSOptions, *, dds: Optional[DDSBackend], tag: Dict[str, str]) -> None:
         self.topic = topic
         self.data_class = data_class
         self.latch = latch
         self.options = options
         self.queue_size = queue_size
-        self.refcount = 0
         self.lock = threading.Lock()
-        self.connections: Dict[str, compat.DDSConnection] = {}
-        self.dds_type: Optional[DDSType] = None
-        self.writer: Optional[DDSWriter] = None
-        participant = _dds_participant()
-        if participant is not None:
+        self.connections: Dict[str, compat.DDSConnection] = {}  # subscriber caller id -> DDS link
+        self.published = 0
+        self.blocked_seconds = 0.0
+        self.rospy_pub: Any = None
+        self.impl: Any = None
+        self.dds: Optional[DDSTopicWriter] = None
+        self._dds_backend = dds
+        if dds is not None:
             try:
-                self.dds_type = dds_type_for(data_class)
-                qos = writer_qos(options, queue_size=queue_size, latch=latch,
-                                 user_data=make_user_data(graph=_node.graph, node=compat.caller_id()))
-                self.writer = DDSWriter(participant, dds_topic_name(topic), self.dds_type, qos)
-                announce_to_ros2(add_writer=self.writer.guid)
-                prio = options.transport_priority
-                participant.mark_priority(int(prio), priority_tos(prio), priority_socket_priority(prio))
+                self.dds = dds.open_writer(EndpointSpec(topic, data_class, queue_size, latch, tag), options)
             except MicrosRtError as exc:
                 _log.warning("micros_rt: topic %s will use TCPROS only: %s", topic, exc)
-                self.writer = None
-        # the hook first: a subscriber may call requestTopic as soon as rospy registers
-        compat.register_publication(topic, self)
-        self.rospy_pub = rospy.Publisher(topic, data_class, queue_size=queue_size, latch=latch)
+
+    def start(self) -> None:
+        self.rospy_pub = rospy.Publisher(self.topic, self.data_class, queue_size=self.queue_size, latch=self.latch)
         self.impl = self.rospy_pub.impl
 
-    # negotiation (XML-RPC thread)
-    def judge_dds(self, topic: str, subscriber: str, params: Any) -> Tuple[bool, Any]:
-        if self.writer is None or self.dds_type is None:
-            return False, (f"topic {topic}: subscriber {subscriber} asked for DDS but DDS is unavailable in "
-                           f"this publisher process; using TCPROS")
-        if not isinstance(params, dict):
-            return False, f"topic {topic}: malformed DDS parameters from {subscriber}: {params!r}"
-        participant = _dds_participant()
-        domain = params.get("domain")
-        if participant is None or domain != participant.domain_id:
-            return False, (f"topic {topic}: subscriber {subscriber} is on DDS domain {domain}, this publisher on "
-                           f"{participant.domain_id if participant else 'none'}; set the same ROS_DOMAIN_ID on "
-                           f"both to use DDS. Using TCPROS")
-        md5 = params.get("md5")
-        if md5 not in ("*", self.dds_type.md5sum):
-            return False, (f"topic {topic}: message type mismatch with {subscriber} (md5 {md5} vs "
-                           f"{self.dds_type.md5sum}); not using DDS")
-        if params.get("type") != self.dds_type.type_name:
-            return False, f"topic {topic}: DDS type {params.get('type')} != {self.dds_type.type_name}"
-        requested = SubscribeQoSOptions.from_dict(params.get("qos") or {}, source=f"subscriber {subscriber}")
-        verdict = check_compatibility(self.options, requested, topic=topic, offered_latch=self.latch)
-        if not verdict.compatible:
-            return False, (f"DDS QoS mismatch with subscriber {subscriber}, falling back to TCPROS: "
-                           f"{verdict.reason}")
-        reader = str(params.get("reader", ""))
-        info = (f"DDS connection on topic {dds_topic_name(topic)} to reader {reader} "
-                f"(writer {self.writer.guid}, {'best effort' if self.options.using_best_effort_protocol else 'reliable'}"
-                f", priority {self.options.transport_priority.name})")
-        conn = compat.DDSConnection(topic, subscriber, "o", info, peer_guid=reader,
+    # -- negotiation (XML-RPC threads) -------------------------------------
+    def facts(self) -> PublicationFacts:
+        dds = self.dds
+        with self.lock:
+            pending = sum(1 for c in self.connections.values() if not c.seen)
+        return PublicationFacts(
+            topic=self.topic, dds_topic=dds.dds_topic if dds else "",
+            domain=self._dds_backend.domain_id if dds is not None and self._dds_backend else None,
+            type_name=dds.dds_type.type_name if dds else "", md5=self.data_class._md5sum,
+            options=self.options, latch=self.latch, pending=pending)
+
+    def judge(self, offer: DDSOffer, subscriber: str) -> Tuple[Verdict, Optional[DDSAnswer]]:
+        verdict = decide(offer, self.facts(), subscriber=short(subscriber))
+        dds = self.dds
+        if not verdict.accepted or dds is None or self.impl is None:
+            return verdict, None
+        info = (f"DDS connection on topic {dds.dds_topic} to reader {offer.reader} (writer {dds.guid}, "
+                f"{'best effort' if self.options.using_best_effort_protocol else 'reliable'}, "
+                f"priority {self.options.transport_priority.name})")
+        conn = compat.DDSConnection(self.topic, subscriber, "o", info, peer_guid=offer.reader,
                                     on_close=self._connection_closed)
         with self.lock:
             old = self.connections.get(subscriber)
             self.connections[subscriber] = conn
         if old is not None:
+            compat.remove_pseudo_connection(self.topic, old, publisher=True)
             old.close()
-        compat.add_pseudo_connection(topic, conn, publisher=True)
-        return True, {"writer": self.writer.guid, "latch": self.latch, "qos": self.options.to_dict(),
-                      "participant": participant.guid}
+        if not compat.add_pseudo_connection(self.topic, conn, publisher=True):
+            conn.close()
+            return Verdict(False, "closing", f"topic {self.topic} is being unregistered"), None
+        assert self._dds_backend is not None
+        return verdict, DDSAnswer(writer=dds.guid, participant=self._dds_backend.participant.guid,
+                                  latch=self.latch, qos=self.options, node=compat.caller_id())
 
     def on_tcpros_connection(self, conn: Any, sock: Any) -> None:
         """A TCPROS subscriber connected (rospy thread): mark its socket with our transport priority.
 
         IP_TOS carries the DSCP (:func:`priority_tos`); SO_PRIORITY (:func:`priority_socket_priority`)
-        picks the local queueing band. SO_PRIORITY is set after IP_TOS, which overwrites it on Linux.
-        NORMAL leaves the socket as it is.
+        picks the local queueing band, set after IP_TOS, which overwrites it on Linux. NORMAL leaves
+        the socket as it is.
         """
         prio = self.options.transport_priority
         if prio == TransportPriority.NORMAL or sock is None:
             return
-        import socket as _socket
-
         tos = priority_tos(prio)
-        family = sock.family
-        if family == _socket.AF_INET6:
-            sock.setsockopt(_socket.IPPROTO_IPV6, _socket.IPV6_TCLASS, tos)
-        elif family == _socket.AF_INET:
-            sock.setsockopt(_socket.IPPROTO_IP, _socket.IP_TOS, tos)
+        if sock.family == socket.AF_INET6:
+            sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_TCLASS, tos)
+        elif sock.family == socket.AF_INET:
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_TOS, tos)
         else:
             return  # unix sockets carry no TOS
-        if hasattr(_socket, "SO_PRIORITY"):
-            sock.setsockopt(_socket.SOL_SOCKET, _socket.SO_PRIORITY, priority_socket_priority(prio))
+        if hasattr(socket, "SO_PRIORITY"):
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_PRIORITY, priority_socket_priority(prio))
         _log.debug("micros_rt: topic %s: TCPROS link to %s marked TOS 0x%02x (%s)", self.topic,
                    getattr(conn, "endpoint_id", "?"), tos, prio.name)
 
@@ -129,18 +127,31 @@ class _Publication:
             if self.connections.get(conn.endpoint_id) is conn:
                 del self.connections[conn.endpoint_id]
 
-    def housekeeping(self) -> None:
-        """Drop pseudo-connections whose DDS reader went away (matched status)."""
-        if self.writer is None or not self.connections:
+    def housekeeping(self, now: float) -> None:
+        """Drop DDS links whose reader went away, or that discovery never matched in time
+        (an offer nobody follows up must not stay a connection forever)."""
+        dds = self.dds
+        with self.lock:
+            conns = list(self.connections.values())
+        if dds is None or not conns:
             return
-        matched = set(self.writer.matched_reader_guids())
-        for conn in list(self.connections.values()):
+        matched = dds.matched_peers()
+        for conn in conns:
             if conn.peer_guid in matched:
                 conn.seen = True
-            elif conn.seen:
-                _log.debug("micros_rt: topic %s: DDS subscriber %s is gone", self.topic, conn.endpoint_id)
-                compat.remove_pseudo_connection(self.topic, conn, publisher=True)
-                conn.close()
+                continue
+            if conn.seen:
+                _log.debug("micros_rt: topic %s: DDS subscriber %s is gone", self.topic, short(conn.endpoint_id))
+            elif now - conn.created > UNMATCHED_READER_TIMEOUT:
+                _housekeeping_log.warning(
+                    (self.topic, "unmatched"),
+                    f"topic {self.topic}: DDS subscriber {short(conn.endpoint_id)} was accepted but its reader "
+                    f"{conn.peer_guid} never appeared in DDS discovery within {UNMATCHED_READER_TIMEOUT:.0f} s; "
+                    f"dropped the connection (check both nodes' ROS_IP/CYCLONEDDS_URI and ROS_DOMAIN_ID)")
+            else:
+                continue
+            compat.remove_pseudo_connection(self.topic, conn, publisher=True)
+            conn.close()
 
     def ready_connections(self) -> int:
         """Subscribers a message published now reaches: TCPROS links, and DDS subscribers whose
@@ -150,61 +161,68 @@ class _Publication:
         impl = self.impl
         if impl is None:
             return 0
-        conns = list(self.connections.values())
+        with self.lock:
+            conns = list(self.connections.values())
         n_tcp = max(len(impl.connections) - len(conns), 0)
-        if not conns or self.writer is None:
+        if not conns or self.dds is None:
             return n_tcp
-        matched = set(self.writer.matched_reader_guids())
+        matched = self.dds.matched_peers()
         return n_tcp + sum(1 for c in conns if c.peer_guid in matched)
 
+    # -- data ----------------------------------------------------------------
     def publish(self, msg: Any) -> None:
+        """Refuse a bad message before anything is sent on any transport, then send it on each."""
         impl = self.impl
         if impl is None or impl.closed:
             raise rospy.ROSException(f"publish() to a closed topic {self.topic}")
         impl.acquire()
         try:
-            writer = self.writer
-            if writer is not None and (writer.matched_count or self.latch):
+            dds = self.dds
+            prepared = dds.prepare(msg) if dds is not None and (dds.matched_count or self.latch) else None
+            if self.latch or len(impl.connections) > len(self.connections):
+                impl.publish(msg)  # TCPROS: serializes (and may raise) before it writes anything
+            if prepared is not None:
+                assert dds is not None
+                t0 = time.monotonic()
                 try:
-                    writer.write(msg)
-                except (TypeError, ValueError, AttributeError, OverflowError, UnicodeError) as exc:
-                    raise rospy.ROSSerializationException(
-                        f"topic {self.topic}: cannot serialize {type(msg).__name__}: {exc}") from exc
-                except Exception as exc:  # DDS write failure: keep TCPROS peers served
-                    _log.warning("micros_rt: topic %s: DDS write failed: %s", self.topic, exc)
-            if len(impl.connections) > len(self.connections):  # some are TCPROS links
-                try:
-                    impl.publish(msg)
-                except genpy.SerializationError as exc:
-                    raise rospy.ROSSerializationException(str(exc)) from exc
-            elif self.latch:
-                impl.latch = msg  # a later TCPROS subscriber still gets the latched message
+                    dds.send(prepared)
+                finally:
+                    waited = time.monotonic() - t0
+                    if waited > 0.001:
+                        self.blocked_seconds += waited
+            self.published += 1
+        except (genpy.SerializationError, struct.error, TypeError, ValueError, AttributeError, OverflowError,
+                UnicodeError) as exc:
+            raise rospy.ROSSerializationException(
+                f"topic {self.topic}: cannot serialize {type(msg).__name__}: {exc}") from exc
         finally:
             impl.release()
 
+    def statistics(self) -> PublisherStatistics:
+        return PublisherStatistics(published=self.published, dropped=0, blocked_seconds=self.blocked_seconds)
+
     def close(self) -> None:
-        compat.register_publication(self.topic, None)
-        with _node.lock:
-            if _node.publications.get(self.topic) is self:
-                del _node.publications[self.topic]
-        for conn in list(self.connections.values()):
+        """Release the DDS links and writer and unregister from rospy (the registry calls this once)."""
+        with self.lock:
+            conns = list(self.connections.values())
+        for conn in conns:
             conn.close()
-        if self.writer is not None:
-            if not rospy.is_shutdown():
-                announce_to_ros2(remove=self.writer.guid)
-            self.writer.close()
-            self.writer = None
-        try:
-            self.rospy_pub.unregister()
-        except Exception:
-            pass
+        dds, self.dds = self.dds, None
+        if dds is not None:
+            dds.close()
+        if self.rospy_pub is not None:
+            try:
+                self.rospy_pub.unregister()
+            except Exception as exc:  # rospy at shutdown; the rest is released already
+                _log.warning("micros_rt: topic %s: rospy could not unregister the publisher: %s", self.topic, exc)
 
 
 class Publisher:
     """Returned by :meth:`NodeHandle.advertise`; rospy's Publisher API."""
 
-    def __init__(self, pub: _Publication) -> None:
+    def __init__(self, pub: _Publication, registry: EndpointRegistry[_Publication]) -> None:
         self._pub: Optional[_Publication] = pub
+        self._registry = registry
         self.resolved_name = pub.topic
         self.name = pub.topic
         self.data_class = pub.data_class
@@ -219,7 +237,12 @@ class Publisher:
         return self._pub.options
 
     def publish(self, *args: Any, **kwds: Any) -> None:
-        """Publish a message (or its fields), to DDS readers and TCPROS peers alike."""
+        """Publish a message (or its fields), to DDS readers and TCPROS peers alike.
+
+        Raises ``rospy.ROSSerializationException`` for a bad field value (nothing is sent then), and
+        :class:`micros_rt.PublishTimeoutError` when a lossless topic (``queue_size=None``) stays blocked
+        on a subscriber that does not keep up.
+        """
         pub = self._pub
         if pub is None:
             raise rospy.ROSException("publish() to an unregistered() handle")
@@ -235,16 +258,17 @@ class Publisher:
     def get_dds_connections(self) -> int:
         return 0 if self._pub is None else len(self._pub.connections)
 
+    def statistics(self) -> PublisherStatistics:
+        """Counters of this topic's publication (shared by the Publishers of the topic in this node)."""
+        if self._pub is None:
+            raise rospy.ROSException("publisher is unregistered")
+        return self._pub.statistics()
+
     def unregister(self) -> None:
-        """Stop publishing; the topic's writer goes when its last Publisher does."""
+        """Stop publishing; the topic's writer goes when its last Publisher does. Harmless twice."""
         pub, self._pub = self._pub, None
-        if pub is None:
-            return
-        with _node.lock:
-            pub.refcount -= 1
-            last = pub.refcount <= 0
-        if last:
-            pub.close()
+        if pub is not None:
+            self._registry.release(pub)
 
     def __enter__(self) -> "Publisher":
         return self

@@ -31,6 +31,8 @@ import rospy.impl.masterslave as masterslave
 import rospy.names
 import rospy.topics
 import rosgraph
+from .negotiation import DDS, TCPROS, DDSAnswer, DDSOffer, MalformedNegotiationError, RateLimitedLog, Verdict
+from .negotiation import choose_protocol
 from rospy.impl.registration import (
     RegManager,
     Registration,
@@ -41,56 +43,52 @@ from rospy.impl.registration import (
 
 __all__ = [
     "DDSConnection",
+    "MasterWatch",
     "PublicationHook",
     "SubscriptionHook",
     "install",
     "caller_id",
     "add_pseudo_connection",
     "remove_pseudo_connection",
+    "short",
+    "transport_socket",
 ]
 
 _log = logging.getLogger("rosout.micros_rt.negotiation")
 
-DDS = "DDS"
-TCPROS = "TCPROS"
 _ids = itertools.count(100000)
 
 
 class PublicationHook(Protocol):
-    """What the publisher side of the negotiation asks micros_rt."""
+    """What the publisher side of the negotiation asks a micros_rt publication."""
 
-    def judge_dds(self, topic: str, subscriber: str, params: Any) -> Tuple[bool, Any]:
-        """(True, reply params) to accept DDS, or (False, reason) to decline."""
+    def judge(self, offer: DDSOffer, subscriber: str) -> Tuple[Verdict, Optional[DDSAnswer]]:
+        """Accept the DDS offer (with the answer to send) or decline it with a reason."""
+
+    def on_tcpros_connection(self, conn: Any, sock: Any) -> None:
+        """A TCPROS subscriber connected (mark its socket)."""
 
 
 class SubscriptionHook(Protocol):
-    """What the subscriber side of the negotiation asks micros_rt."""
+    """What the subscriber side of the negotiation asks a micros_rt subscription."""
 
-    def protocols(self, topic: str) -> List[List[Any]]:
+    def offered_protocols(self) -> List[List[Any]]:
         """Protocol entries to offer, in preference order, e.g. [['DDS', {...}], ['TCPROS']]."""
 
-    def connect_dds(self, topic: str, pub_uri: str, params: Any) -> Tuple[int, str, int]:
+    def connect_dds(self, pub_uri: str, answer: DDSAnswer) -> Tuple[int, str, int]:
         """Create the DDS pseudo-connection after the publisher accepted DDS."""
 
 
-_publications: dict[str, PublicationHook] = {}
-_subscriptions: dict[str, SubscriptionHook] = {}
+_find_publication: Callable[[str], Optional[PublicationHook]] = lambda topic: None
+_find_subscription: Callable[[str], Optional[SubscriptionHook]] = lambda topic: None
 _install_lock = threading.Lock()
 _installed = False
+_declines = RateLimitedLog(_log)
 
 
-def register_publication(topic: str, hook: Optional[PublicationHook]) -> None:
-    if hook is None:
-        _publications.pop(topic, None)
-    else:
-        _publications[topic] = hook
-
-
-def register_subscription(topic: str, hook: Optional[SubscriptionHook]) -> None:
-    if hook is None:
-        _subscriptions.pop(topic, None)
-    else:
-        _subscriptions[topic] = hook
+def short(text: str, limit: int = 80) -> str:
+    """A remote-supplied string cut for a log line (a caller id can be a megabyte long)."""
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def caller_id() -> str:
@@ -203,7 +201,7 @@ def _request_topic(pub_uri: str, topic: str, protocols: List[List[Any]]) -> Tupl
 
 def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
     def _connect_topic(self: Any, topic: str, pub_uri: str) -> Any:
-        hook = _subscriptions.get(topic)
+        hook = _find_subscription(topic)
         if hook is None:
             return original(self, topic, pub_uri)
         sub = get_topic_manager().get_subscriber_impl(topic)
@@ -211,7 +209,7 @@ def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
             return -1, f"No subscriber for topic [{topic}]", 0
         if sub.has_connection(pub_uri):
             return 1, f"_connect_topic[{topic}]: subscriber already connected to publisher [{pub_uri}]", 0
-        protocols = hook.protocols(topic)
+        protocols = hook.offered_protocols()
         if not protocols:
             return 0, "ERROR: no protocol allowed by the TransportHints", 0
         code, msg, result = _request_topic(pub_uri, topic, protocols)
@@ -221,20 +219,27 @@ def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
                 _log.warning(
                     "micros_rt: topic %s: publisher %s cannot use %s (%s); it is probably a stock ROS node. "
                     "Nothing is received from it: add .tcp() to the TransportHints to accept TCPROS.",
-                    topic, pub_uri, "/".join(offered), msg)
+                    topic, pub_uri, "/".join(offered), short(msg, 200))
             else:
-                _log.warning("micros_rt: topic %s: publisher %s refused the connection: %s", topic, pub_uri, msg)
+                _log.warning("micros_rt: topic %s: publisher %s refused the connection: %s", topic, pub_uri,
+                             short(msg, 200))
             return code, msg, 0
         if not isinstance(result, list) or not result or not isinstance(result[0], str):
-            _log.warning("micros_rt: publisher %s answered requestTopic for %s with %r; ignoring it",
-                         pub_uri, topic, result)
-            return 0, f"ERROR: publisher returned invalid protocol choice: {result!r}", 0
+            _log.warning("micros_rt: publisher %s answered requestTopic for %s with %s; ignoring it",
+                         pub_uri, topic, short(repr(result)))
+            return 0, "ERROR: publisher returned invalid protocol choice", 0
         if result[0] == DDS:
-            return hook.connect_dds(topic, pub_uri, result[1] if len(result) > 1 else None)
+            try:
+                answer = DDSAnswer.from_xmlrpc(result[1] if len(result) > 1 else None, source=f"publisher {pub_uri}")
+            except MalformedNegotiationError as exc:
+                _log.warning("micros_rt: topic %s: publisher %s accepted DDS with a malformed answer (%s); "
+                             "not connected to it", topic, pub_uri, exc)
+                return 0, "malformed DDS answer", 0
+            return hook.connect_dds(pub_uri, answer)
         for h in self.protocol_handlers:
             if h.supports(result[0]):
                 return h.create_transport(topic, pub_uri, result)
-        return 0, f"ERROR: publisher returned unsupported protocol choice: {result!r}", 0
+        return 0, f"ERROR: publisher returned unsupported protocol choice: {short(repr(result))}", 0
 
     return _connect_topic
 
@@ -245,22 +250,17 @@ def _wrapped_request_topic(original: Callable[..., Any]) -> Callable[..., Any]:
             return original(self, caller_id, topic, protocols)
         # resolve like rospy's _remap_table does for 'topic' before we look it up
         resolved = rospy.names.resolve_name(topic, caller_id)
-        hook = _publications.get(resolved)
-        # honour the subscriber's order: the first entry we can serve wins
-        for entry in protocols:
-            if isinstance(entry, list) and entry and entry[0] == DDS:
-                if hook is None:
-                    continue
-                try:
-                    ok, answer = hook.judge_dds(resolved, caller_id, entry[1] if len(entry) > 1 else None)
-                except Exception as exc:  # malformed parameters must not kill the XML-RPC thread
-                    ok, answer = False, f"malformed DDS parameters from {caller_id}: {exc}"
-                if ok:
-                    return 1, "ready on DDS", [DDS, answer]
-                _log.warning("micros_rt: %s", answer)
-                continue
-            if isinstance(entry, list) and entry and any(h.supports(entry[0]) for h in self.protocol_handlers):
-                return original(self, caller_id, topic, [entry])
+        hook = _find_publication(resolved)
+        judge = None if hook is None else (lambda offer: hook.judge(offer, caller_id))
+        choice = choose_protocol(protocols, judge_dds=judge, subscriber=short(caller_id),
+                                 supports=lambda name: any(h.supports(name) for h in self.protocol_handlers),
+                                 topic=short(resolved))
+        for verdict in choice.declined:
+            _declines.warning((short(caller_id, 256), verdict.kind), verdict.reason)
+        if choice.dds is not None:
+            return 1, "ready on DDS", choice.dds.to_xmlrpc()
+        if choice.entry is not None:
+            return original(self, caller_id, topic, [choice.entry])
         return 0, "no supported protocol implementations", []
 
     requestTopic.__doc__ = original.__doc__
@@ -283,11 +283,10 @@ def _wrapped_publisher_add_connection(original: Callable[..., Any]) -> Callable[
     # Publisher side: every accepted TCPROS subscriber link passes here (before rospy wraps it in a
     # QueuedConnection); micros_rt publications mark the socket with their transport priority.
     def add_connection(self: Any, c: Any) -> Any:
-        hook = _publications.get(getattr(self, "resolved_name", ""))
-        on_tcp = getattr(hook, "on_tcpros_connection", None)
-        if on_tcp is not None and getattr(c, "transport_type", "TCPROS") != DDS:
+        hook = _find_publication(getattr(self, "resolved_name", ""))
+        if hook is not None and getattr(c, "transport_type", "TCPROS") != DDS:
             try:
-                on_tcp(c, transport_socket(c))
+                hook.on_tcpros_connection(c, transport_socket(c))
             except Exception:
                 _log.warning("micros_rt: topic %s: could not mark a TCPROS connection", self.resolved_name,
                              exc_info=True)
@@ -369,10 +368,13 @@ def reregister_all() -> Tuple[int, int, int]:
     return len(pubs), len(subs), len(srvs)
 
 
-def install() -> None:
-    """Wrap rospy's negotiation once per process (idempotent)."""
-    global _installed
+def install(find_publication: Callable[[str], Optional[PublicationHook]],
+            find_subscription: Callable[[str], Optional[SubscriptionHook]]) -> None:
+    """Wrap rospy's negotiation once per process (idempotent); hooks are looked up by resolved topic
+    name through the two functions (the endpoint registry owns the endpoints)."""
+    global _installed, _find_publication, _find_subscription
     with _install_lock:
+        _find_publication, _find_subscription = find_publication, find_subscription
         if _installed:
             return
         handler_cls = masterslave.ROSHandler

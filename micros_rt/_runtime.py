@@ -1,4 +1,5 @@
-"""Process-wide state of the micros_rt node (one per process, as in rospy)."""
+"""Process-wide state of the micros_rt node (one per process, as in rospy): the endpoint registries,
+the DDS back end, the graph id and the YAML profile."""
 
 from __future__ import annotations
 
@@ -6,17 +7,19 @@ import logging
 import os
 import threading
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Dict, Optional
+from typing import TYPE_CHECKING, Optional
 
 import rospy
 
-from .dds.participant import DDSParticipant, get_participant
+from ._registry import EndpointRegistry
+from .dds.participant import get_participant
 from .exceptions import NodeNotInitializedError
 from .qos import QoSProfile
 
 if TYPE_CHECKING:
     from ._publication import _Publication
     from ._subscription import _Subscription
+    from .dds.backend import DDSBackend
 
 _log = logging.getLogger("rosout.micros_rt")  # rospy prints it and sends it to /rosout
 
@@ -26,10 +29,11 @@ class _NodeState:
     initialized: bool = False
     graph: str = ""
     profile: Optional[QoSProfile] = None
-    publications: Dict[str, "_Publication"] = field(default_factory=dict)
-    subscriptions: Dict[str, "_Subscription"] = field(default_factory=dict)
+    publications: "EndpointRegistry[_Publication]" = field(default_factory=lambda: EndpointRegistry("publication"))
+    subscriptions: "EndpointRegistry[_Subscription]" = field(
+        default_factory=lambda: EndpointRegistry("subscription"))
     lock: threading.RLock = field(default_factory=threading.RLock)
-    ros2_graph: Any = None  # Ros2GraphAnnouncer, created with the first DDS endpoint
+    dds: "Optional[DDSBackend]" = None
 
 
 _node = _NodeState()
@@ -40,10 +44,10 @@ def _graph_id() -> str:
     # even when a run_id is reused. Readers drop micros_rt writers of other graphs.
     try:
         run_id = str(rospy.get_param("/run_id"))
-    except Exception:
+    except (KeyError, OSError, rospy.ROSException):
         run_id = "norunid"
     uri = os.environ.get("ROS_MASTER_URI", "")
-    return f"{run_id}@{uri}".replace(";", "_").replace("=", "_")
+    return f"{run_id}@{uri}".replace(";", "_").replace("=", "_")[:200]
 
 
 def _require_node() -> None:
@@ -51,30 +55,14 @@ def _require_node() -> None:
         raise NodeNotInitializedError("call micros_rt.init_node(name) before advertising or subscribing")
 
 
-def _dds_participant() -> Optional[DDSParticipant]:
-    return get_participant()
-
-
-def _depth(queue_size: Optional[int]) -> int:
-    return queue_size if queue_size and queue_size > 0 else 1000
-
-
-def announce_to_ros2(*, add_reader: str = "", add_writer: str = "", remove: str = "") -> None:
-    """Keep ROS 2's graph (``ros_discovery_info``) told which endpoints this node has.
-
-    A courtesy to ROS 2 tools: failures are logged at debug level and change nothing else.
-    """
+def dds_backend() -> "Optional[DDSBackend]":
+    """The DDS back end of this process (created with the participant), or None without DDS."""
     participant = get_participant()
-    if participant is None or not _node.initialized:
-        return
+    if participant is None:
+        return None
     with _node.lock:
-        if _node.ros2_graph is None or _node.ros2_graph.participant is not participant:
-            from .dds.ros2_graph import Ros2GraphAnnouncer
+        if _node.dds is None or _node.dds.participant is not participant:
+            from .dds.backend import DDSBackend
 
-            try:
-                _node.ros2_graph = Ros2GraphAnnouncer(participant, str(rospy.get_caller_id()))
-            except Exception as exc:
-                _log.debug("micros_rt: no ROS 2 graph announcement: %s", exc)
-                return
-        announcer = _node.ros2_graph
-    announcer.update(add_reader=add_reader, add_writer=add_writer, remove=remove)
+            _node.dds = DDSBackend(participant, str(rospy.get_caller_id()))
+        return _node.dds

@@ -20,6 +20,8 @@ __all__ = [
     "DDSUnavailableError",
     "TypeMappingError",
     "NodeNotInitializedError",
+    "PublishTimeoutError",
+    "TransportError",
 ]
 
 
@@ -53,3 +55,12 @@ class TypeMappingError(MicrosRtError):
 
 class NodeNotInitializedError(MicrosRtError):
     """A NodeHandle was used before :func:`micros_rt.init_node`."""
+
+
+class PublishTimeoutError(MicrosRtError):
+    """``publish()`` on a lossless topic (``queue_size=None``) stayed blocked longer than its bound
+    because a subscriber does not keep up; the message names the topic and the subscribers."""
+
+
+class TransportError(MicrosRtError):
+    """A back end (DDS, ...) failed to send or receive; the message says which topic and why."""

@@ -13,14 +13,14 @@ from __future__ import annotations
 import os
 import threading
 import time
-from typing import Any, Callable, List, Optional, Type, Union
+from typing import Any, Callable, Dict, List, Optional, Type, Union
 
 import genpy
 import rospy
 
 from . import _rospy_compat as compat
 from ._publication import Publisher, _Publication
-from ._runtime import _graph_id, _log, _node, _require_node
+from ._runtime import _graph_id, _log, _node, _require_node, dds_backend
 from ._subscription import DeadlineMissed, Subscriber, _Subscription
 from .dds.participant import close_participant
 from .exceptions import QoSTypeError
@@ -57,7 +57,7 @@ def init_node(name: str, argv: Optional[List[str]] = None, anonymous: bool = Fal
 
     >>> micros_rt.init_node("talker", anonymous=True)   # doctest: +SKIP
     """
-    compat.install()
+    compat.install(_node.publications.get, _node.subscriptions.get)
     path = qos_profile or os.environ.get("MICROS_RT_QOS_PROFILE") or None
     profile = QoSProfile.load(path) if path else None
     rospy.init_node(name, argv=argv, anonymous=anonymous, **kwargs)
@@ -77,14 +77,13 @@ def _housekeeping_loop() -> None:
         try:
             watch.check()
         except Exception:
-            _log.debug("master check failed", exc_info=True)
-        with _node.lock:
-            pubs = list(_node.publications.values())
-        for p in pubs:
+            _log.exception("micros_rt: checking the ROS master failed (will retry)")
+        now = time.monotonic()
+        for p in _node.publications.all():
             try:
-                p.housekeeping()
+                p.housekeeping(now)
             except Exception:
-                _log.debug("housekeeping of %s failed", p.topic, exc_info=True)
+                _log.exception("micros_rt: topic %s: publisher housekeeping failed (will retry)", p.topic)
         time.sleep(0.5)
 
 
@@ -109,13 +108,10 @@ def shutdown(reason: str = "micros_rt.shutdown() called") -> None:
 
 
 def _close_all() -> None:
+    _node.publications.close_all()
+    _node.subscriptions.close_all()
     with _node.lock:
-        pubs = list(_node.publications.values())
-        subs = list(_node.subscriptions.values())
-    for p in pubs:
-        p.close()
-    for s in subs:
-        s.close()
+        _node.dds = None
     close_participant()
 
 
@@ -181,20 +177,19 @@ class NodeHandle:
         resolved = self.resolve_name(topic)
         profile = _node.profile.advertise_options(resolved) if _node.profile else None
         effective = merge_advertise(options, profile)
-        with _node.lock:
-            pub = _node.publications.get(resolved)
-            if pub is None:
-                pub = _Publication(resolved, data_class, queue_size, latch, effective)
-                _node.publications[resolved] = pub
-            else:
-                if pub.data_class is not data_class:
-                    raise rospy.ROSException(
-                        f"topic {resolved} is already advertised in this node with type {pub.data_class._type}")
-                if pub.options != effective or pub.latch != latch:
-                    _log.warning("micros_rt: topic %s is already advertised in this node with %s (latch=%s); "
-                                 "the new Publisher shares it", resolved, pub.options, pub.latch)
-            pub.refcount += 1
-        return Publisher(pub)
+
+        def reuse(pub: _Publication) -> None:
+            if pub.data_class is not data_class:
+                raise rospy.ROSException(
+                    f"topic {resolved} is already advertised in this node with type {pub.data_class._type}")
+            if pub.options != effective or pub.latch != latch:
+                _log.warning("micros_rt: topic %s is already advertised in this node with %s (latch=%s); "
+                             "the new Publisher shares it", resolved, pub.options, pub.latch)
+
+        pub = _node.publications.acquire(
+            resolved, lambda: _Publication(resolved, data_class, queue_size, latch, effective, dds=dds_backend(),
+                                           tag=_tag()), reuse)
+        return Publisher(pub, _node.publications)
 
     # subscribers ----------------------------------------------------------
     def subscribe(self, topic: str, data_class: Type[genpy.Message], callback: Callable[..., None],
@@ -224,23 +219,34 @@ class NodeHandle:
         resolved = self.resolve_name(topic)
         profile = _node.profile.subscribe_options(resolved) if _node.profile else None
         effective = merge_subscribe(options, profile) if (options or profile) else None
-        with _node.lock:
-            sub = _node.subscriptions.get(resolved)
-            if sub is None:
-                sub = _Subscription(resolved, data_class, queue_size, effective, hints)
-                _node.subscriptions[resolved] = sub
-            else:
-                if sub.data_class is not data_class:
-                    raise rospy.ROSException(
-                        f"topic {resolved} is already subscribed in this node with type {sub.data_class._type}")
-                if sub.options != effective or sub.hints != hints:
-                    _log.warning("micros_rt: topic %s is already subscribed in this node with %s, %r; "
-                                 "the new Subscriber shares them", resolved, sub.options, sub.hints)
-            sub.refcount += 1
-            entry = (callback, callback_args)
+
+        def reuse(sub: _Subscription) -> None:
+            if sub.data_class is not data_class:
+                raise rospy.ROSException(
+                    f"topic {resolved} is already subscribed in this node with type {sub.data_class._type}")
+            if sub.options != effective or sub.hints != hints:
+                _log.warning("micros_rt: topic %s is already subscribed in this node with %s, %r; "
+                             "the new Subscriber shares them", resolved, sub.options, sub.hints)
+
+        created: List[_Subscription] = []
+
+        def create() -> _Subscription:
+            new = _Subscription(resolved, data_class, queue_size, effective, hints, dds=dds_backend(), tag=_tag(),
+                                graph=_node.graph)
+            new.callbacks = ((callback, callback_args),)  # before start(): a latched message may come at once
+            created.append(new)
+            return new
+
+        sub = _node.subscriptions.acquire(resolved, create, reuse)
+        if not created:
             with sub.lock:
-                sub.callbacks = sub.callbacks + (entry,)
-        return Subscriber(sub, callback, callback_args)
+                sub.callbacks = sub.callbacks + ((callback, callback_args),)
+        return Subscriber(sub, _node.subscriptions, callback, callback_args)
+
+
+def _tag() -> Dict[str, str]:
+    """What micros_rt endpoints tell peers about themselves (DDS USER_DATA): the graph and the node."""
+    return {"graph": _node.graph, "node": compat.caller_id()}
 
 
 def _check_data_class(data_class: Any) -> None:

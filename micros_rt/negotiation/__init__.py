@@ -1,0 +1,37 @@
+"""Protocol negotiation: TransportHints, the typed DDS offer/answer, the publisher's decision and the
+protocol-order loop. Pure: nothing here touches rospy or creates DDS entities
+(:mod:`micros_rt._rospy_compat` adapts it to rospy's ``requestTopic``)."""
+
+from .choose import Choice, choose_protocol
+from .decide import PublicationFacts, Verdict, decide
+from .hints import TransportHints
+from .messages import DDSAnswer, DDSOffer, MalformedNegotiationError, is_guid
+from .protocol import (
+    DDS,
+    DEFAULT_PROTOCOLS,
+    MAX_FIELD_CHARS,
+    MAX_PENDING_DDS_OFFERS,
+    TCPROS,
+    UNMATCHED_READER_TIMEOUT,
+)
+from .ratelimit import RateLimitedLog
+
+__all__ = [
+    "DDS",
+    "DEFAULT_PROTOCOLS",
+    "MAX_FIELD_CHARS",
+    "MAX_PENDING_DDS_OFFERS",
+    "TCPROS",
+    "UNMATCHED_READER_TIMEOUT",
+    "Choice",
+    "DDSAnswer",
+    "DDSOffer",
+    "MalformedNegotiationError",
+    "PublicationFacts",
+    "RateLimitedLog",
+    "TransportHints",
+    "Verdict",
+    "choose_protocol",
+    "decide",
+    "is_guid",
+]

@@ -8,11 +8,9 @@ from __future__ import annotations
 
 from typing import Tuple
 
-__all__ = ["TransportHints", "DDS", "TCPROS", "DEFAULT_PROTOCOLS"]
+from .protocol import DDS, DEFAULT_PROTOCOLS, TCPROS
 
-DDS = "DDS"
-TCPROS = "TCPROS"
-DEFAULT_PROTOCOLS: Tuple[str, ...] = (DDS, TCPROS)
+__all__ = ["TransportHints", "DDS", "TCPROS", "DEFAULT_PROTOCOLS"]
 
 
 class TransportHints:

@@ -9,11 +9,21 @@ from micros_rt.qos.compatibility import (
     check_compatibility,
     describe_incompatible_policy,
 )
+from micros_rt.qos.enforcement import (
+    CLOCK_SKEW_WARN_SECONDS,
+    ClockSkewCheck,
+    DeadlineMissed,
+    DeadlineMonitor,
+    TimeFilter,
+    is_expired,
+)
 from micros_rt.qos.mapping import (
+    PUBLISH_BLOCK_TIMEOUT,
     RELIABLE_MAX_BLOCKING_TIME,
     UNBOUNDED_QUEUE_DEPTH,
     duration_ns,
     history_depth,
+    is_lossless,
     plain_reader_qos,
     plain_writer_qos,
     reader_qos,
@@ -34,6 +44,14 @@ from micros_rt.qos.options import (
 from micros_rt.qos.profiles import QoSProfile, merge_advertise, merge_subscribe
 
 __all__ = [
+    "CLOCK_SKEW_WARN_SECONDS",
+    "PUBLISH_BLOCK_TIMEOUT",
+    "ClockSkewCheck",
+    "DeadlineMissed",
+    "DeadlineMonitor",
+    "TimeFilter",
+    "is_expired",
+    "is_lossless",
     "DURATION_MAX",
     "DURATION_MIN",
     "POLICY_NAMES",

@@ -5,8 +5,10 @@ Pure functions: no entity is created here. The table (see DESIGN.md):
 ============================== =====================================================================
 option                         DDS policy
 ============================== =====================================================================
-queue_size                     History KEEP_LAST(queue_size); 0/None (rospy "unbounded") ->
-                               KEEP_LAST(:data:`UNBOUNDED_QUEUE_DEPTH`)
+queue_size                     writer History KEEP_LAST(queue_size); 0/None (rospy's synchronous,
+                               lossless publishing) -> KEEP_ALL, reliable writes block up to
+                               :data:`PUBLISH_BLOCK_TIMEOUT` (back-pressure). Readers keep all:
+                               the subscriber keeps the newest queue_size itself and counts drops
 latch / transient_local        Durability TRANSIENT_LOCAL (depth >= 1), else VOLATILE
 transport_priority             TransportPriority(level 0..6)
 latency_budget                 LatencyBudget on the writer; readers request infinite (see below)
@@ -37,9 +39,11 @@ from micros_rt.exceptions import QoSTypeError, QoSValueError
 from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions
 
 __all__ = [
+    "PUBLISH_BLOCK_TIMEOUT",
     "RELIABLE_MAX_BLOCKING_TIME",
     "UNBOUNDED_QUEUE_DEPTH",
     "duration_ns",
+    "is_lossless",
     "history_depth",
     "plain_reader_qos",
     "plain_writer_qos",
@@ -55,6 +59,15 @@ UNBOUNDED_QUEUE_DEPTH: int = 1000
 #: Seconds a reliable writer may block in ``write()`` when its history is full of unacknowledged
 #: samples (KEEP_LAST only blocks on resource limits, so this is a safety net, not the normal path).
 RELIABLE_MAX_BLOCKING_TIME: float = 1.0
+
+#: Seconds ``publish()`` on a lossless topic (``queue_size=None``/0) may block while a reliable
+#: subscriber is behind before it raises :class:`micros_rt.PublishTimeoutError` naming the topic.
+PUBLISH_BLOCK_TIMEOUT: float = 5.0
+
+
+def is_lossless(queue_size: int | None) -> bool:
+    """rospy's ``queue_size=None`` (or 0): synchronous publishing, nothing dropped."""
+    return queue_size is None or queue_size == 0
 
 
 def duration_ns(seconds: float) -> int:
@@ -83,10 +96,10 @@ def history_depth(queue_size: int | None) -> int:
     return queue_size if queue_size > 0 else UNBOUNDED_QUEUE_DEPTH
 
 
-def _reliability(best_effort: bool) -> object:
+def _reliability(best_effort: bool, blocking: float = RELIABLE_MAX_BLOCKING_TIME) -> object:
     if best_effort:
         return Policy.Reliability.BestEffort
-    return Policy.Reliability.Reliable(max_blocking_time=duration_ns(RELIABLE_MAX_BLOCKING_TIME))
+    return Policy.Reliability.Reliable(max_blocking_time=duration_ns(blocking))
 
 
 def _user_data(user_data: bytes) -> list[object]:
@@ -102,8 +115,10 @@ def writer_qos(
 ) -> Qos:
     """DataWriter Qos for a publisher advertised with ``options``, ``queue_size`` and ``latch``.
 
-    - Reliability RELIABLE (max_blocking_time 1 s) or BEST_EFFORT per ``using_best_effort_protocol``.
-    - History KEEP_LAST(:func:`history_depth`) - always >= 1, which a latched writer needs.
+    - Reliability RELIABLE (max_blocking_time 1 s; :data:`PUBLISH_BLOCK_TIMEOUT` when lossless) or
+      BEST_EFFORT per ``using_best_effort_protocol``.
+    - History KEEP_LAST(queue_size) (always >= 1, which a latched writer needs), or KEEP_ALL when
+      ``queue_size`` is None/0 (:func:`is_lossless`): nothing dropped, ``publish()`` blocks instead.
     - Durability TRANSIENT_LOCAL if ``latch`` (late joiners get the last message) else VOLATILE.
     - Lifespan(msg_valid_period) only when finite.
     - LatencyBudget(latency_budget) and TransportPriority(level) always.
@@ -118,9 +133,12 @@ def writer_qos(
         raise QoSTypeError(f"options={options!r} is invalid: expected AdvertiseQoSOptions")
     if not isinstance(latch, bool):
         raise QoSTypeError(f"latch={latch!r} is invalid: expected True or False")
+    history_depth(queue_size)  # validates
+    lossless = is_lossless(queue_size)
     policies: list[object] = [
-        _reliability(options.using_best_effort_protocol),
-        Policy.History.KeepLast(depth=history_depth(queue_size)),
+        _reliability(options.using_best_effort_protocol,
+                     PUBLISH_BLOCK_TIMEOUT if lossless else RELIABLE_MAX_BLOCKING_TIME),
+        Policy.History.KeepAll if lossless else Policy.History.KeepLast(depth=history_depth(queue_size)),
         Policy.Durability.TransientLocal if latch else Policy.Durability.Volatile,
         Policy.LatencyBudget(budget=duration_ns(options.latency_budget)),
         Policy.TransportPriority(priority=int(options.transport_priority)),
@@ -143,7 +161,9 @@ def reader_qos(
 
     - Reliability RELIABLE or BEST_EFFORT per ``using_best_effort_protocol`` (a best-effort reader
       matches writers of both kinds).
-    - History KEEP_LAST(:func:`history_depth`).
+    - History KEEP_ALL: the subscriber takes samples as they come and keeps the newest ``queue_size``
+      itself, so every drop is counted (Cyclone does not report KEEP_LAST overwrites).
+      ``queue_size`` is still validated.
     - Durability TRANSIENT_LOCAL if ``transient_local`` (to receive a latched publisher's last message;
       such a reader only matches latched writers) else VOLATILE.
     - DestinationOrder BY_SOURCE_TIMESTAMP if ``ordered_by_sending_timestamp`` else BY_RECEPTION.
@@ -160,9 +180,10 @@ def reader_qos(
         raise QoSTypeError(f"options={options!r} is invalid: expected SubscribeQoSOptions")
     if not isinstance(transient_local, bool):
         raise QoSTypeError(f"transient_local={transient_local!r} is invalid: expected True or False")
+    history_depth(queue_size)  # validates
     policies: list[object] = [
         _reliability(options.using_best_effort_protocol),
-        Policy.History.KeepLast(depth=history_depth(queue_size)),
+        Policy.History.KeepAll,
         Policy.Durability.TransientLocal if transient_local else Policy.Durability.Volatile,
         Policy.LatencyBudget(budget=duration_ns(math.inf)),
         (

@@ -18,7 +18,7 @@ def test_all_is_honest() -> None:
     for name in micros_rt.__all__:
         assert hasattr(micros_rt, name), name
     public = {n for n in dir(micros_rt) if not n.startswith("_")} - {
-        "exceptions", "negotiation", "node", "qos", "dds"}
+        "exceptions", "negotiation", "node", "qos", "dds", "backends"}
     assert public == set(micros_rt.__all__)
 
 

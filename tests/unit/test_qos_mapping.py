@@ -21,6 +21,7 @@ from micros_rt.qos.compatibility import (
     describe_incompatible_policy,
 )
 from micros_rt.qos.mapping import (
+    PUBLISH_BLOCK_TIMEOUT,
     UNBOUNDED_QUEUE_DEPTH,
     duration_ns,
     history_depth,
@@ -97,12 +98,25 @@ def test_writer_best_effort() -> None:
     assert w(AdvertiseQoSOptions(using_best_effort_protocol=False))[Policy.Reliability] == RELIABLE
 
 
-@pytest.mark.parametrize("queue_size, depth", [(1, 1), (7, 7), (0, 1000), (None, 1000)])
+@pytest.mark.parametrize("queue_size, depth", [(1, 1), (7, 7)])
 @pytest.mark.parametrize("latch", [False, True])
 def test_writer_history_keeps_last_queue_size(queue_size: int | None, depth: int, latch: bool) -> None:
     qos = w(queue_size=queue_size, latch=latch)
     assert qos[Policy.History] == Policy.History.KeepLast(depth=depth)
-    assert Policy.History.KeepAll not in qos
+    assert qos[Policy.Reliability] == RELIABLE
+
+
+@pytest.mark.parametrize("queue_size", [0, None])
+@pytest.mark.parametrize("latch", [False, True])
+def test_writer_lossless_queue_keeps_all_and_blocks(queue_size: int | None, latch: bool) -> None:
+    # rospy's queue_size=None is synchronous publishing: nothing dropped, publish() waits instead
+    qos = w(queue_size=queue_size, latch=latch)
+    assert qos[Policy.History] == Policy.History.KeepAll
+    assert qos[Policy.Reliability] == Policy.Reliability.Reliable(
+        max_blocking_time=int(PUBLISH_BLOCK_TIMEOUT * 1e9))
+    best_effort = w(AdvertiseQoSOptions(using_best_effort_protocol=True), queue_size=queue_size, latch=latch)
+    assert best_effort[Policy.History] == Policy.History.KeepAll
+    assert best_effort[Policy.Reliability] == Policy.Reliability.BestEffort
 
 
 def test_writer_latch_is_transient_local() -> None:
@@ -177,7 +191,7 @@ def test_writer_full_options() -> None:
 def test_reader_defaults_exactly() -> None:
     assert r() == Qos(
         RELIABLE,
-        Policy.History.KeepLast(depth=10),
+        Policy.History.KeepAll,
         Policy.Durability.Volatile,
         Policy.LatencyBudget(budget=INFINITE_NS),
         Policy.DestinationOrder.BySourceTimestamp,
@@ -192,9 +206,10 @@ def test_reader_best_effort() -> None:
     )
 
 
-@pytest.mark.parametrize("queue_size, depth", [(1, 1), (100, 100), (0, 1000), (None, 1000)])
-def test_reader_history(queue_size: int | None, depth: int) -> None:
-    assert r(queue_size=queue_size)[Policy.History] == Policy.History.KeepLast(depth=depth)
+@pytest.mark.parametrize("queue_size", [1, 100, 0, None])
+def test_reader_history_keeps_all(queue_size: int | None) -> None:
+    # the subscription keeps the newest queue_size itself, so that every drop is counted
+    assert r(queue_size=queue_size)[Policy.History] == Policy.History.KeepAll
 
 
 def test_reader_transient_local() -> None:
@@ -250,7 +265,7 @@ def test_plain_reader_orders_by_reception() -> None:
     assert qos[Policy.DestinationOrder] == Policy.DestinationOrder.ByReceptionTimestamp
     assert qos == Qos(
         RELIABLE,
-        Policy.History.KeepLast(depth=5),
+        Policy.History.KeepAll,
         Policy.Durability.Volatile,
         Policy.LatencyBudget(budget=INFINITE_NS),
         Policy.DestinationOrder.ByReceptionTimestamp,

@@ -1,0 +1,169 @@
+"""DDS as a micros_rt back end (:class:`micros_rt.backends.Backend`): Cyclone writers and readers on the
+process participant, the ROS 2 graph announcement, and DDS errors translated at this boundary."""
+
+from __future__ import annotations
+
+import logging
+import threading
+from typing import Any, Callable, List, Optional, Sequence, Set, TypeVar
+
+from cyclonedds._clayer import ddspy_write
+from cyclonedds.core import DDSException, Listener
+
+from ..backends import EndpointSpec, RemoteWriter, Sample
+from ..exceptions import MicrosRtError, PublishTimeoutError, TransportError
+from ..qos import (
+    PUBLISH_BLOCK_TIMEOUT,
+    AdvertiseQoSOptions,
+    SubscribeQoSOptions,
+    is_lossless,
+    plain_reader_qos,
+    priority_socket_priority,
+    priority_tos,
+    reader_qos,
+    writer_qos,
+)
+from .endpoints import DDSReader, DDSWriter, make_user_data
+from .participant import DDSParticipant
+from .types import DDSType, dds_topic_name, dds_type_for
+
+__all__ = ["DDSBackend", "DDSTopicWriter", "DDSTopicReader"]
+
+_log = logging.getLogger("rosout.micros_rt.dds")
+
+_DDS_RETCODE_TIMEOUT = -10
+
+
+class DDSTopicWriter:
+    """A publication's DDS writer: ``prepare`` encodes CDR, ``send`` writes it (blocking when lossless)."""
+
+    protocol = "DDS"
+
+    def __init__(self, backend: "DDSBackend", spec: EndpointSpec, options: AdvertiseQoSOptions) -> None:
+        self._backend = backend
+        self.topic = spec.topic
+        self.dds_type: DDSType = dds_type_for(spec.data_class)
+        self.dds_topic = dds_topic_name(spec.topic)
+        self.lossless = is_lossless(spec.queue_size) and not options.using_best_effort_protocol
+        qos = writer_qos(options, queue_size=spec.queue_size, latch=spec.latch, user_data=make_user_data(**spec.tag))
+        self._writer = DDSWriter(backend.participant, self.dds_topic, self.dds_type, qos)
+        self._ref = self._writer._ref
+        self.guid = self._writer.guid
+        self.prepare = self.dds_type.encode  # raises genpy.SerializationError on a bad field value
+        backend.announce(add_writer=self.guid)
+        prio = options.transport_priority
+        backend.participant.mark_priority(int(prio), priority_tos(prio), priority_socket_priority(prio))
+
+    @property
+    def matched_count(self) -> int:
+        return self._writer.matched_count
+
+    def send(self, prepared: bytes) -> None:
+        ret = ddspy_write(self._ref, prepared)
+        if ret < 0:
+            if ret == _DDS_RETCODE_TIMEOUT:
+                raise PublishTimeoutError(
+                    f"topic {self.topic}: publish() stayed blocked for "
+                    f"{PUBLISH_BLOCK_TIMEOUT if self.lossless else 1.0:.1f} s because a reliable DDS subscriber "
+                    f"does not keep up (queue_size=None never drops). The subscribers: "
+                    f"{', '.join(sorted(self.matched_peers())) or 'none matched'}")
+            raise TransportError(f"topic {self.topic}: DDS write failed (Cyclone return code {ret})")
+
+    def matched_peers(self) -> Set[str]:
+        return set(self._writer.matched_reader_guids())
+
+    def close(self) -> None:
+        self._backend.announce(remove=self.guid)
+        self._writer.close()
+
+
+class DDSTopicReader:
+    """A subscription's DDS reader; its ``condition`` wakes the delivery thread's wait set."""
+
+    protocol = "DDS"
+
+    def __init__(self, backend: "DDSBackend", spec: EndpointSpec, options: Optional[SubscribeQoSOptions],
+                 wake: Callable[[], None], on_incompatible: Callable[[int], None]) -> None:
+        self.dds_type = dds_type_for(spec.data_class)
+        self.dds_topic = dds_topic_name(spec.topic)
+        user_data = make_user_data(**spec.tag)
+        depth = 1 if spec.latch else spec.queue_size
+        if options is None:
+            qos = plain_reader_qos(queue_size=depth, transient_local=spec.latch, user_data=user_data)
+        else:
+            qos = reader_qos(options, queue_size=depth, transient_local=spec.latch, user_data=user_data)
+        listener = Listener(  # type: ignore[no-untyped-call]
+            on_requested_incompatible_qos=lambda _r, status: on_incompatible(int(status.last_policy_id)),
+            on_subscription_matched=lambda *_: wake())
+        self._reader = DDSReader(backend.participant, self.dds_topic, self.dds_type, qos, listener)
+        self._backend = backend
+        self.condition = self._reader.condition
+        self.guid = self._reader.guid
+        self.take: Callable[[int], Sequence[Sample]] = self._reader.take_raw
+        self.decode: Callable[[bytes], Any] = self.dds_type.decode
+
+    def writer(self, handle: Any) -> Optional[RemoteWriter]:
+        info = self._reader.writer_info(handle)
+        return None if info is None else RemoteWriter(info.guid, info.tag)
+
+    def matched_writers(self) -> Set[str]:
+        return set(self._reader.matched_writer_guids())
+
+    def close(self) -> None:
+        self._backend.announce(remove=self.guid)
+        self._reader.close()
+
+
+class DDSBackend:
+    """The process's DDS back end: one participant, writers and readers on it."""
+
+    protocol = "DDS"
+
+    def __init__(self, participant: DDSParticipant, node_name: str) -> None:
+        self.participant = participant
+        self.node_name = node_name
+        self._announcer: Any = None
+        self._lock = threading.Lock()
+
+    @property
+    def domain_id(self) -> int:
+        return self.participant.domain_id
+
+    def open_writer(self, spec: EndpointSpec, options: AdvertiseQoSOptions) -> DDSTopicWriter:
+        return _translated(lambda: DDSTopicWriter(self, spec, options), spec.topic, "writer")
+
+    def open_reader(self, spec: EndpointSpec, options: Optional[SubscribeQoSOptions], wake: Callable[[], None],
+                    on_incompatible: Callable[[int], None]) -> DDSTopicReader:
+        return _translated(lambda: DDSTopicReader(self, spec, options, wake, on_incompatible), spec.topic, "reader")
+
+    def describe(self) -> List[str]:
+        return [f"DDS domain {self.participant.domain_id}, participant {self.participant.guid}"]
+
+    def announce(self, *, add_reader: str = "", add_writer: str = "", remove: str = "") -> None:
+        """Keep ROS 2's graph (``ros_discovery_info``) told which endpoints this node has.
+
+        A courtesy to ROS 2 tools: a failure is logged once as a warning and changes nothing else."""
+        with self._lock:
+            if self._announcer is None:
+                from .ros2_graph import Ros2GraphAnnouncer
+
+                try:
+                    self._announcer = Ros2GraphAnnouncer(self.participant, self.node_name)
+                except (MicrosRtError, DDSException) as exc:
+                    _log.warning("micros_rt: ROS 2 tools will not name this node (ros_discovery_info: %s)", exc)
+                    self._announcer = False
+            announcer = self._announcer
+        if announcer:
+            announcer.update(add_reader=add_reader, add_writer=add_writer, remove=remove)
+
+
+T = TypeVar("T")
+
+
+def _translated(make: Callable[[], T], topic: str, what: str) -> T:
+    try:
+        return make()
+    except MicrosRtError:
+        raise
+    except DDSException as exc:
+        raise TransportError(f"topic {topic}: cannot create the DDS {what}: {exc}") from exc

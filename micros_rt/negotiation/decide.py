@@ -1,0 +1,84 @@
+"""The publisher's decision on a subscriber's DDS offer: a pure function with a verdict and a reason.
+
+Like :func:`micros_rt.qos.check_compatibility` (which it uses), :func:`decide` creates nothing and
+touches no network: the publication gathers :class:`PublicationFacts`, the negotiation adapter
+logs the reason of a declined offer and moves on to the subscriber's next protocol.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+from ..qos import AdvertiseQoSOptions, check_compatibility
+from .messages import DDSOffer
+from .protocol import MAX_PENDING_DDS_OFFERS
+
+__all__ = ["PublicationFacts", "Verdict", "decide"]
+
+
+@dataclass(frozen=True)
+class PublicationFacts:
+    """What a publication knows when an offer arrives."""
+
+    topic: str               # resolved ROS name, e.g. /chatter
+    dds_topic: str           # rt/chatter
+    domain: Optional[int]    # None: DDS is unavailable in this process (or for this topic)
+    type_name: str
+    md5: str
+    options: AdvertiseQoSOptions
+    latch: bool
+    pending: int = 0         # accepted offers whose reader discovery has not matched yet
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """``accepted`` or not; ``kind`` is a short stable key (for counting repeats), ``reason`` words."""
+
+    accepted: bool
+    kind: str
+    reason: str
+
+    def __bool__(self) -> bool:
+        return self.accepted
+
+
+def decide(offer: DDSOffer, facts: PublicationFacts, *, subscriber: str) -> Verdict:
+    """Accept ``offer`` for DDS, or say why not (the subscriber then gets its next protocol).
+
+    >>> facts = PublicationFacts("/chatter", "rt/chatter", 0, "std_msgs::msg::dds_::String_", "992c",
+    ...                          AdvertiseQoSOptions(), latch=False)
+    >>> decide(offer, facts, subscriber="/listener").kind                       # doctest: +SKIP
+    'accepted'
+    """
+    topic = facts.topic
+    if facts.domain is None:
+        return Verdict(False, "dds-unavailable",
+                       f"topic {topic}: subscriber {subscriber} asked for DDS but DDS is unavailable in this "
+                       f"publisher process; using TCPROS")
+    if offer.domain != facts.domain:
+        return Verdict(False, "domain",
+                       f"topic {topic}: subscriber {subscriber} is on DDS domain {offer.domain}, this publisher "
+                       f"on {facts.domain}; set the same ROS_DOMAIN_ID on both to use DDS. Using TCPROS")
+    if offer.md5 not in ("*", facts.md5):
+        return Verdict(False, "md5",
+                       f"topic {topic}: message type mismatch with {subscriber} (md5 {offer.md5} vs "
+                       f"{facts.md5}); not using DDS")
+    if offer.type_name != facts.type_name:
+        return Verdict(False, "type",
+                       f"topic {topic}: subscriber {subscriber} expects DDS type {offer.type_name}, this "
+                       f"publisher writes {facts.type_name}; not using DDS")
+    if offer.topic != facts.dds_topic:
+        return Verdict(False, "topic",
+                       f"topic {topic}: subscriber {subscriber} offered DDS topic {offer.topic}, this publisher "
+                       f"writes {facts.dds_topic}; not using DDS")
+    verdict = check_compatibility(facts.options, offer.qos, topic=topic, offered_latch=facts.latch,
+                                  requested_transient_local=offer.transient_local)
+    if not verdict.compatible:
+        return Verdict(False, f"qos:{verdict.option}",
+                       f"DDS QoS mismatch with subscriber {subscriber}, falling back to TCPROS: {verdict.reason}")
+    if facts.pending >= MAX_PENDING_DDS_OFFERS:
+        return Verdict(False, "pending-limit",
+                       f"topic {topic}: {facts.pending} DDS subscribers accepted but not yet discovered (limit "
+                       f"{MAX_PENDING_DDS_OFFERS}); serving {subscriber} over TCPROS")
+    return Verdict(True, "accepted", f"topic {topic}: DDS accepted for subscriber {subscriber}")

@@ -1,0 +1,148 @@
+"""Typed DDS offer (subscriber -> publisher) and answer (publisher -> subscriber) of ``requestTopic``.
+
+Both sides build and read these values only through :meth:`to_xmlrpc` / :meth:`from_xmlrpc`, so the
+keys one side writes are the keys the other reads. ``from_xmlrpc`` validates everything a remote node
+sends (types, lengths, GUID format) and raises :class:`MalformedNegotiationError` naming the field;
+nothing from the wire is trusted or kept unvalidated.
+
+>>> offer = DDSOffer(domain=0, topic="rt/chatter", type_name="std_msgs::msg::dds_::String_",
+...                  md5="992ce8a1687cec8c8bd883ec73ca41d1", qos=SubscribeQoSOptions(),
+...                  reader="01106fda-d45a-29f3-b1ee-b181000001c1",
+...                  participant="01106fda-d45a-29f3-b1ee-b181000001c1", graph="run@uri")
+>>> DDSOffer.from_xmlrpc(offer.to_xmlrpc()[1]) == offer
+True
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Any, Dict, List, Mapping
+
+from ..exceptions import MicrosRtError, QoSTypeError, QoSValueError
+from ..qos import AdvertiseQoSOptions, SubscribeQoSOptions
+from .protocol import DDS, MAX_FIELD_CHARS
+
+__all__ = ["DDSOffer", "DDSAnswer", "MalformedNegotiationError", "is_guid"]
+
+_GUID = re.compile(r"^[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}$")
+_INT32 = (-(2 ** 31), 2 ** 31 - 1)
+
+
+class MalformedNegotiationError(MicrosRtError, ValueError):
+    """A DDS offer or answer from another node is not what micros_rt sends; ``field`` names the key."""
+
+    def __init__(self, field: str, problem: str) -> None:
+        super().__init__(f"{field}: {problem}")
+        self.field = field
+        self.problem = problem
+
+
+def is_guid(value: object) -> bool:
+    """True for Cyclone's textual GUID form (``01106fda-d45a-29f3-b1ee-b181000001c1``)."""
+    return isinstance(value, str) and bool(_GUID.match(value))
+
+
+def _short(value: object) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _mapping(params: object, what: str) -> Mapping[str, Any]:
+    if not isinstance(params, dict):
+        raise MalformedNegotiationError(what, f"expected a struct, got {type(params).__name__}")
+    return params
+
+
+def _str(d: Mapping[str, Any], key: str, *, required: bool = True, guid: bool = False) -> str:
+    value = d.get(key)
+    if value is None and not required:
+        return ""
+    if not isinstance(value, str):
+        raise MalformedNegotiationError(key, f"expected a string, got {_short(value)}")
+    if len(value) > MAX_FIELD_CHARS:
+        raise MalformedNegotiationError(key, f"{len(value)} characters, at most {MAX_FIELD_CHARS} allowed")
+    if guid and not is_guid(value):
+        raise MalformedNegotiationError(key, f"{_short(value)} is not a DDS GUID")
+    return value
+
+
+def _bool(d: Mapping[str, Any], key: str) -> bool:
+    value = d.get(key, False)
+    if not isinstance(value, bool):
+        raise MalformedNegotiationError(key, f"expected a boolean, got {_short(value)}")
+    return value
+
+
+def _qos_dict(d: Mapping[str, Any]) -> Mapping[str, Any]:
+    qos = d.get("qos", {})
+    if not isinstance(qos, dict) or len(qos) > 16:
+        raise MalformedNegotiationError("qos", f"expected a struct of QoS options, got {_short(qos)}")
+    return qos
+
+
+@dataclass(frozen=True)
+class DDSOffer:
+    """What a micros_rt subscriber offers in its ``['DDS', {...}]`` protocol entry."""
+
+    domain: int
+    topic: str
+    type_name: str
+    md5: str
+    qos: SubscribeQoSOptions
+    reader: str
+    participant: str
+    graph: str
+    #: The subscriber wants the latched message (a transient-local reader).
+    transient_local: bool = False
+
+    def to_xmlrpc(self) -> List[Any]:
+        """The protocol entry, ``['DDS', {...}]`` (roscpp needs every entry to be a list)."""
+        return [DDS, {
+            "domain": self.domain, "topic": self.topic, "type": self.type_name, "md5": self.md5,
+            "qos": self.qos.to_dict(), "reader": self.reader, "participant": self.participant,
+            "graph": self.graph, "transient_local": self.transient_local,
+        }]
+
+    @classmethod
+    def from_xmlrpc(cls, params: object, *, source: str = "a subscriber") -> "DDSOffer":
+        d = _mapping(params, "DDS offer")
+        domain = d.get("domain")
+        if isinstance(domain, bool) or not isinstance(domain, int) or not _INT32[0] <= domain <= _INT32[1]:
+            raise MalformedNegotiationError("domain", f"expected an integer DDS domain id, got {_short(domain)}")
+        try:
+            qos = SubscribeQoSOptions.from_dict(_qos_dict(d), source=source)
+        except (QoSValueError, QoSTypeError) as exc:
+            raise MalformedNegotiationError("qos", str(exc)[:300]) from exc
+        return cls(domain=domain, topic=_str(d, "topic"), type_name=_str(d, "type"), md5=_str(d, "md5"),
+                   qos=qos, reader=_str(d, "reader", guid=True),
+                   participant=_str(d, "participant", guid=True), graph=_str(d, "graph"),
+                   transient_local=_bool(d, "transient_local"))
+
+
+@dataclass(frozen=True)
+class DDSAnswer:
+    """What a micros_rt publisher answers when it accepts DDS: ``['DDS', {...}]``."""
+
+    writer: str
+    participant: str
+    latch: bool
+    qos: AdvertiseQoSOptions
+    node: str = ""
+
+    def to_xmlrpc(self) -> List[Any]:
+        return [DDS, self.params()]
+
+    def params(self) -> Dict[str, Any]:
+        return {"writer": self.writer, "participant": self.participant, "latch": self.latch,
+                "qos": self.qos.to_dict(), "node": self.node}
+
+    @classmethod
+    def from_xmlrpc(cls, params: object, *, source: str = "a publisher") -> "DDSAnswer":
+        d = _mapping(params, "DDS answer")
+        try:
+            qos = AdvertiseQoSOptions.from_dict(_qos_dict(d), source=source)
+        except (QoSValueError, QoSTypeError) as exc:
+            raise MalformedNegotiationError("qos", str(exc)[:300]) from exc
+        return cls(writer=_str(d, "writer", guid=True), participant=_str(d, "participant", guid=True),
+                   latch=_bool(d, "latch"), qos=qos, node=_str(d, "node", required=False))
