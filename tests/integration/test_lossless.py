@@ -1,0 +1,68 @@
+"""Delivery semantics under load (issue 8): queue_size=None loses nothing, queue_size=N keeps the newest N
+and counts every drop. Real processes, counted by sequence number."""
+
+from __future__ import annotations
+
+import time
+from typing import Any, Dict, List
+
+import pytest
+
+import harness
+
+SEQ_PEER = str(harness.PEERS_DIR / "mrt_seq.py")
+
+
+def seq(*args: str) -> List[str]:
+    return [harness.MICROS_RT_PYTHON, SEQ_PEER, *args]
+
+
+def stream(spawn: harness.Spawner, topic: str, count: int, size: int, *, recv_args: tuple[str, ...] = (),
+           send_args: tuple[str, ...] = (), timeout: float = 120.0) -> Dict[str, Any]:
+    listener = spawn(seq("recv", "--topic", topic, "--count", str(count), "--timeout", str(timeout), *recv_args))
+    listener.wait_for("ready", 30)
+    talker = spawn(seq("send", "--topic", topic, "--count", str(count), "--size", str(size), *send_args))
+    summary = listener.wait_for("summary", timeout + 30)
+    sent = talker.wait_for("sent", 30)
+    print(f"\n{topic}: {count} x {size} B: sent in {sent['seconds']:.2f} s (publish blocked "
+          f"{sent['blocked_seconds']:.2f} s), received {summary['received']} distinct {summary['distinct']} "
+          f"missing {summary['missing']} dup {summary['duplicates']} out-of-order {summary['out_of_order']} "
+          f"via {summary['transports']}; subscriber statistics {summary['stats']}")
+    return summary
+
+
+def assert_lossless(summary: Dict[str, Any], count: int) -> None:
+    assert summary["missing"] == 0, summary
+    assert summary["duplicates"] == 0 and summary["out_of_order"] == 0, summary
+    assert summary["stats"]["dropped_queue_full"] == 0, summary
+
+
+@pytest.mark.parametrize("count,size", [(100_000, 64), (2_000, 1 << 20)])
+def test_queue_size_none_loses_nothing_over_dds(ros_master: harness.RosMaster, spawn: harness.Spawner,
+                                                 count: int, size: int) -> None:
+    summary = stream(spawn, f"/lossless_{size}", count, size)
+    assert summary["transports"] == ["DDS"]
+    assert_lossless(summary, count)
+
+
+def test_queue_size_none_loses_nothing_over_tcpros_fallback(ros_master: harness.RosMaster,
+                                                            spawn: harness.Spawner) -> None:
+    # a micros_rt subscriber that prefers TCPROS: its own inbox must not drop what rospy delivers
+    summary = stream(spawn, "/lossless_tcp", 50_000, 64, recv_args=("--hints", "tcp"))
+    assert summary["transports"] == ["TCPROS"]
+    assert_lossless(summary, 50_000)
+
+
+def test_slow_subscriber_with_bounded_queue_counts_every_drop(ros_master: harness.RosMaster,
+                                                              spawn: harness.Spawner) -> None:
+    # 2,000 messages at full speed into a 5 ms callback with queue_size=10: most are dropped, as ROS
+    # drops them, and every one of them is counted
+    count = 2_000
+    summary = stream(spawn, "/bounded", count, 64, recv_args=("--queue-size", "10", "--slow", "0.005",
+                                                              "--idle", "3"))
+    stats = summary["stats"]
+    assert summary["duplicates"] == 0 and summary["out_of_order"] == 0, summary
+    assert stats["dropped_queue_full"] > 0, summary
+    assert stats["delivered"] == summary["received"], summary
+    assert stats["received"] == stats["delivered"] + stats["dropped_queue_full"], summary
+    assert stats["received"] == count, f"{count - stats['received']} messages vanished uncounted: {summary}"

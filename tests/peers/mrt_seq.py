@@ -1,0 +1,110 @@
+"""A micros_rt sequence-number stream for loss tests: one JSON summary line per stdout line.
+
+    mrt_seq.py send --topic /s --count 100000 --size 64 [--queue-size N]
+    mrt_seq.py recv --topic /s --count 100000 --timeout 60 [--queue-size N] [--hints tcp] [--slow 0.01]
+
+Payloads are std_msgs/UInt8MultiArray whose first 8 bytes are the sequence number (little endian).
+``recv`` prints {"event": "ready"} once subscribed, then {"event": "summary", ...} with received, distinct,
+duplicates, out_of_order, missing and the subscriber's statistics().
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import struct
+import sys
+import time
+from typing import Any, List, Optional
+
+import micros_rt
+from std_msgs.msg import UInt8MultiArray
+
+
+def emit(event: str, **fields: Any) -> None:
+    fields["event"] = event
+    sys.stdout.write(json.dumps(fields, default=str) + "\n")
+    sys.stdout.flush()
+
+
+def queue_size(text: str) -> Optional[int]:
+    return None if text == "none" else int(text)
+
+
+def send(a: argparse.Namespace, nh: micros_rt.NodeHandle) -> int:
+    pub = nh.advertise(a.topic, UInt8MultiArray, a.queue_size)
+    deadline = time.monotonic() + 30.0
+    while pub.get_num_connections() < a.subscribers and time.monotonic() < deadline:
+        time.sleep(0.01)
+    emit("ready", connections=pub.get_num_connections())
+    time.sleep(0.3)
+    pad = bytes(max(a.size - 8, 0))
+    msg = UInt8MultiArray()
+    start = time.monotonic()
+    for i in range(a.count):
+        msg.data = struct.pack("<Q", i) + pad
+        pub.publish(msg)
+    elapsed = time.monotonic() - start
+    stats = pub.statistics()
+    emit("sent", count=a.count, seconds=elapsed, blocked_seconds=stats.blocked_seconds, published=stats.published)
+    time.sleep(a.linger)
+    return 0
+
+
+def recv(a: argparse.Namespace, nh: micros_rt.NodeHandle) -> int:
+    seen: List[int] = []
+
+    def cb(msg: Any) -> None:
+        seen.append(struct.unpack_from("<Q", msg.data)[0])
+        if a.slow:
+            time.sleep(a.slow)
+
+    hints = micros_rt.TransportHints()
+    for p in a.hints.split(","):
+        hints = hints.tcp() if p == "tcp" else hints.dds() if p == "dds" else hints
+    sub = nh.subscribe(a.topic, UInt8MultiArray, cb, a.queue_size, hints)
+    emit("ready")
+    deadline = time.monotonic() + a.timeout
+    first: Optional[float] = None
+    last_n, last_change = 0, time.monotonic()
+    while time.monotonic() < deadline and len(seen) < a.count:
+        time.sleep(0.05)
+        if seen and first is None:
+            first = time.monotonic()
+        if len(seen) != last_n:
+            last_n, last_change = len(seen), time.monotonic()
+        elif first is not None and time.monotonic() - last_change > a.idle:
+            break
+    got = list(seen)
+    distinct = set(got)
+    out_of_order = sum(1 for x, y in zip(got, got[1:]) if y < x)
+    s = sub.statistics()
+    emit("summary", received=len(got), distinct=len(distinct), duplicates=len(got) - len(distinct),
+         out_of_order=out_of_order, missing=a.count - len(distinct),
+         transports=sorted(set(sub.connection_transports().values())),
+         stats={k: getattr(s, k) for k in s.__dataclass_fields__},
+         seconds=(last_change - first) if first is not None else None)
+    return 0
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("mode", choices=["send", "recv"])
+    ap.add_argument("--topic", default="/seq")
+    ap.add_argument("--count", type=int, default=1000)
+    ap.add_argument("--size", type=int, default=64)
+    ap.add_argument("--queue-size", type=queue_size, default=None)
+    ap.add_argument("--subscribers", type=int, default=1)
+    ap.add_argument("--hints", default="")
+    ap.add_argument("--slow", type=float, default=0.0)
+    ap.add_argument("--timeout", type=float, default=60.0)
+    ap.add_argument("--idle", type=float, default=5.0, help="stop after this long without a new message")
+    ap.add_argument("--linger", type=float, default=3.0)
+    a = ap.parse_args()
+    micros_rt.init_node(f"mrt_seq_{a.mode}", anonymous=True, disable_signals=False)
+    nh = micros_rt.NodeHandle()
+    return send(a, nh) if a.mode == "send" else recv(a, nh)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
