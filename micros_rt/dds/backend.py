@@ -7,7 +7,6 @@ import logging
 import threading
 from typing import Any, Callable, List, Optional, Sequence, Set, TypeVar
 
-from cyclonedds._clayer import ddspy_write
 from cyclonedds.core import DDSException, Listener
 
 from ..backends import EndpointSpec, RemoteWriter, Sample
@@ -48,6 +47,7 @@ class DDSTopicWriter:
         qos = writer_qos(options, queue_size=spec.queue_size, latch=spec.latch, user_data=make_user_data(**spec.tag))
         self._writer = DDSWriter(backend.participant, self.dds_topic, self.dds_type, qos)
         self._ref = self._writer._ref
+        self._write = self._writer.write_serialized
         self.guid = self._writer.guid
         self.prepare = self.dds_type.encode  # raises genpy.SerializationError on a bad field value
         backend.announce(add_writer=self.guid)
@@ -59,7 +59,7 @@ class DDSTopicWriter:
         return self._writer.matched_count
 
     def send(self, prepared: bytes) -> None:
-        ret = ddspy_write(self._ref, prepared)
+        ret = self._write(prepared)
         if ret < 0:
             if ret == _DDS_RETCODE_TIMEOUT:
                 raise PublishTimeoutError(

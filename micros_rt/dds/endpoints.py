@@ -11,9 +11,8 @@ import logging
 import threading
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
-import time
 
-from cyclonedds._clayer import ddspy_take, ddspy_write, ddspy_write_ts
+from cyclonedds._clayer import ddspy_take, ddspy_write
 from cyclonedds.core import DDSException, InstanceState, Listener, ReadCondition, SampleState, ViewState
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
@@ -54,7 +53,6 @@ class DDSWriter:
                  on_matched: Optional[Callable[[int], None]] = None) -> None:
         self.topic_name = topic_name
         self.dds_type = dds_type
-        self._encode = dds_type.encode
         self._matched = 0
         self._on_matched = on_matched
         topic = participant.topic(topic_name, dds_type.idl_class)
@@ -66,9 +64,6 @@ class DDSWriter:
         self._ref = self._writer._ref
         self.guid = str(self._writer.guid)
         self.closed = False
-        #: Added to every source timestamp (ns). 0 normally; tests and simulations set it to play
-        #: a publisher whose clock is off (a lagging host) without touching the system clock.
-        self.clock_offset_ns = 0
 
     def _matched_changed(self, _writer: Any, status: Any) -> None:
         self._matched = status.current_count
@@ -88,15 +83,10 @@ class DDSWriter:
                 out.append(str(data.key))
         return out
 
-    def write(self, msg: Any) -> None:
-        """Serialize and write one message; raises on bad field values."""
-        data = self._encode(msg)
-        if self.clock_offset_ns:
-            ret = ddspy_write_ts(self._ref, data, time.time_ns() + self.clock_offset_ns)
-        else:
-            ret = ddspy_write(self._ref, data)
-        if ret < 0:
-            raise DDSException(ret, f"writing to DDS topic {self.topic_name}")
+    def write_serialized(self, data: bytes) -> int:
+        """Write one serialized sample (from the type's codec); Cyclone's return code (< 0: failed,
+        -10: timed out on back-pressure after the Reliability max_blocking_time)."""
+        return int(ddspy_write(self._ref, data))
 
     def close(self) -> None:
         if self.closed:
@@ -167,10 +157,15 @@ class DDSReader:
 
     def matched_writer_guids(self) -> List[str]:
         out = []
-        for handle in self._reader.get_matched_publications():
+        handles = self._reader.get_matched_publications()
+        for handle in handles:
             info = self.writer_info(handle)
             if info is not None:
                 out.append(info.guid)
+        if len(self._writers) > len(handles):  # forget writers that went (a publisher restarting)
+            with self._lock:
+                for gone in set(self._writers) - set(handles):
+                    del self._writers[gone]
         return out
 
     def close(self) -> None:

@@ -51,6 +51,17 @@ def fill(msg: Any, text: str, i: int, stamp: bool) -> Any:
     return msg
 
 
+def play_clock_offset(pub: Any, offset: float) -> None:
+    """Play a publisher whose clock is ``offset`` seconds off (a lagging host) without touching the
+    system clock: this peer's DDS writes carry shifted source timestamps. Test-only, so it lives here."""
+    from cyclonedds._clayer import ddspy_write_ts
+
+    writer = pub._pub.dds
+    ref, shift = writer._ref, int(offset * 1e9)
+
+    writer._write = lambda data: ddspy_write_ts(ref, data, time.time_ns() + shift)
+
+
 def pattern_bytes(n: int, seed: int) -> bytes:
     """Deterministic test payload; the same function lives in ros2_peer.py and the interop tests."""
     base = bytes((seed + 7 * k) & 0xFF for k in range(256))
@@ -166,16 +177,14 @@ def main() -> int:
         else:
             pub = nh.advertise(args.topic, data_class, args.queue_size, latch=args.latch)
         if args.clock_offset:
-            writer = getattr(getattr(pub, "_pub", None), "writer", None)
-            if writer is not None:
-                writer.clock_offset_ns = int(args.clock_offset * 1e9)
+            play_clock_offset(pub, args.clock_offset)
         emit("ready", topic=pub.resolved_name)
         deadline = time.monotonic() + 30.0
         while pub.get_num_connections() < args.wait_subscribers and time.monotonic() < deadline:
             time.sleep(0.02)
 
         def dds_readers() -> int:
-            writer = getattr(getattr(pub, "_pub", None), "writer", None)
+            writer = getattr(getattr(pub, "_pub", None), "dds", None)
             return int(writer.matched_count) if writer is not None else 0
 
         while dds_readers() < args.wait_dds_readers and time.monotonic() < deadline:
