@@ -99,6 +99,7 @@ class DDSTopicReader:
         self._backend = backend
         self.condition = self._reader.condition
         self.guid = self._reader.guid
+        backend.announce(add_reader=self.guid)
         self.take: Callable[[int], Sequence[Sample]] = self._reader.take_raw
         self.decode: Callable[[bytes], Any] = self.dds_type.decode
 
