@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import errno
 import itertools
+import socket
+import urllib.parse
 import logging
 import threading
 import time
@@ -302,14 +304,29 @@ class MasterWatch:
     rospy registers once; after a master restart the node is invisible (no new connections,
     ``rosnode list`` misses it). Data already flowing keeps flowing meanwhile: DDS needs no
     master at all, and TCPROS links stay up.
+
+    Cheap on the master: every ``period`` a TCP connect to its port (no XML-RPC work for it); the
+    master's pid (``getPid``) only every ``pid_period`` and when it answers again after being away.
+    On a graph of 30 nodes a getPid per node per second cost the master 3.5% of a core.
     """
 
-    def __init__(self, uri: Optional[str] = None, period: float = 1.0) -> None:
+    def __init__(self, uri: Optional[str] = None, period: float = 1.0, pid_period: float = 10.0) -> None:
         self.uri = uri or str(rosgraph.get_master_uri())
         self.period = period
+        self.pid_period = pid_period
         self._next = 0.0
+        self._next_pid = 0.0
         self._pid: Optional[int] = None
         self._down_since: Optional[float] = None
+        parsed = urllib.parse.urlparse(self.uri)
+        self._address = (parsed.hostname or "localhost", parsed.port or 11311)
+
+    def _reachable(self) -> bool:
+        try:
+            with socket.create_connection(self._address, timeout=1.0):
+                return True
+        except OSError:
+            return False
 
     def _master_pid(self) -> Optional[int]:
         proxy = xmlrpc.client.ServerProxy(self.uri, transport=_TimeoutTransport(2.0))
@@ -325,7 +342,11 @@ class MasterWatch:
         if now < self._next:
             return
         self._next = now + self.period
-        pid = self._master_pid()
+        reachable = self._reachable()
+        if reachable and self._down_since is None and now < self._next_pid:
+            return  # up, as it was: the pid is checked every pid_period only
+        self._next_pid = now + self.pid_period
+        pid = self._master_pid() if reachable else None
         if pid is None:
             if self._down_since is None:
                 self._down_since = now
