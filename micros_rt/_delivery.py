@@ -5,9 +5,11 @@ thread that they could block."""
 from __future__ import annotations
 
 import threading
-from typing import Any, Optional
+from typing import TYPE_CHECKING, Any, Optional
 
-from .dds.participant import DDSParticipant, delete_entity
+if TYPE_CHECKING:
+    from .dds.participant import DDSParticipant
+
 
 __all__ = ["Inbox"]
 
@@ -59,6 +61,8 @@ class Inbox:
 
     def close(self) -> None:
         """Delete the wait set and guard (after the delivery thread stopped waiting on them)."""
+        from .dds.participant import delete_entity
+
         for entity in (self.waitset, self.guard):
             if entity is not None:
                 delete_entity(entity)

@@ -8,7 +8,7 @@ import socket
 import struct
 import threading
 import time
-from typing import Any, Dict, Optional, Tuple, Type
+from typing import TYPE_CHECKING, Any, Dict, Optional, Tuple, Type
 
 import genpy
 import rospy
@@ -19,7 +19,6 @@ from ._registry import EndpointRegistry
 from ._rospy_compat import short
 from ._stats import PublisherStatistics
 from .backends import EndpointSpec
-from .dds.backend import DDSBackend, DDSTopicWriter
 from .exceptions import MicrosRtError
 from .negotiation import (
     UNMATCHED_READER_TIMEOUT,
@@ -32,6 +31,9 @@ from .negotiation import (
 )
 from .qos import AdvertiseQoSOptions, TransportPriority, priority_socket_priority, priority_tos
 
+if TYPE_CHECKING:
+    from .dds.backend import DDSBackend, DDSTopicWriter
+
 __all__ = ["Publisher"]
 
 _log = logging.getLogger("rosout.micros_rt")
@@ -42,7 +44,7 @@ class _Publication:
     """Per topic and process: the rospy publisher and the DDS writer. Owned by the registry."""
 
     def __init__(self, topic: str, data_class: Type[genpy.Message], queue_size: Optional[int], latch: bool,
-                 options: AdvertiseQoSOptions, *, dds: Optional[DDSBackend], tag: Dict[str, str]) -> None:
+                 options: AdvertiseQoSOptions, *, dds: "Optional[DDSBackend]", tag: Dict[str, str]) -> None:
         self.topic = topic
         self.data_class = data_class
         self.latch = latch
@@ -54,7 +56,7 @@ class _Publication:
         self.blocked_seconds = 0.0
         self.rospy_pub: Any = None
         self.impl: Any = None
-        self.dds: Optional[DDSTopicWriter] = None
+        self.dds: "Optional[DDSTopicWriter]" = None
         self._dds_backend = dds
         if dds is not None:
             try:

@@ -13,7 +13,7 @@ import logging
 import math
 import threading
 import time
-from typing import Any, Callable, Deque, Dict, List, Optional, Set, Tuple, Type
+from typing import TYPE_CHECKING, Any, Callable, Deque, Dict, List, Optional, Set, Tuple, Type
 
 import genpy
 import rospy
@@ -24,7 +24,6 @@ from ._registry import EndpointRegistry
 from ._stats import LatencyStats, SubscriberStatistics
 from ._writers import DELIVER, HOLD, Accepted, WriterState, WriterTable
 from .backends import EndpointSpec
-from .dds.backend import DDSBackend, DDSTopicReader
 from .exceptions import MicrosRtError
 from .negotiation import DDS, TCPROS, DDSAnswer, DDSOffer, TransportHints
 from .qos import (
@@ -37,6 +36,9 @@ from .qos import (
     is_expired,
     is_lossless,
 )
+
+if TYPE_CHECKING:
+    from .dds.backend import DDSBackend, DDSTopicReader
 
 __all__ = ["Subscriber", "DeadlineMissed", "LatencyStats"]
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from typing import Any, Callable, List, Optional, Sequence, Set, TypeVar
+from typing import Any, Callable, List, Optional, Sequence, Set, Tuple, TypeVar
 
 from cyclonedds.core import DDSException, Listener
 
@@ -123,7 +123,8 @@ class DDSBackend:
     def __init__(self, participant: DDSParticipant, node_name: str) -> None:
         self.participant = participant
         self.node_name = node_name
-        self._announcer: Any = None
+        self._announcer: Any = None  # None: not started, True: starting, False: failed
+        self._pending: List[Tuple[str, str, str]] = []
         self._lock = threading.Lock()
 
     @property
@@ -143,19 +144,35 @@ class DDSBackend:
     def announce(self, *, add_reader: str = "", add_writer: str = "", remove: str = "") -> None:
         """Keep ROS 2's graph (``ros_discovery_info``) told which endpoints this node has.
 
-        A courtesy to ROS 2 tools: a failure is logged once as a warning and changes nothing else."""
+        A courtesy to ROS 2 tools, kept off the caller's path: the announcer (its Topic costs ~25 ms of
+        Cyclone type-object building) starts on a background thread with the first endpoint, and updates
+        queue up until it runs. A failure is logged once as a warning and changes nothing else."""
         with self._lock:
+            self._pending.append((add_reader, add_writer, remove))
             if self._announcer is None:
-                from .ros2_graph import Ros2GraphAnnouncer
+                self._announcer = True  # starting
+                threading.Thread(target=self._start_announcer, name="micros_rt ROS 2 graph", daemon=True).start()
+                return
+            if self._announcer is True or self._announcer is False:
+                return
+            announcer, pending, self._pending = self._announcer, self._pending, []
+        for r, w, gone in pending:
+            announcer.update(add_reader=r, add_writer=w, remove=gone)
 
-                try:
-                    self._announcer = Ros2GraphAnnouncer(self.participant, self.node_name)
-                except (MicrosRtError, DDSException) as exc:
-                    _log.warning("micros_rt: ROS 2 tools will not name this node (ros_discovery_info: %s)", exc)
-                    self._announcer = False
-            announcer = self._announcer
+    def _start_announcer(self) -> None:
+        from .ros2_graph import Ros2GraphAnnouncer
+
+        try:
+            announcer: Any = Ros2GraphAnnouncer(self.participant, self.node_name)
+        except (MicrosRtError, DDSException) as exc:
+            _log.warning("micros_rt: ROS 2 tools will not name this node (ros_discovery_info: %s)", exc)
+            announcer = False
+        with self._lock:
+            self._announcer = announcer
+            pending, self._pending = self._pending, []
         if announcer:
-            announcer.update(add_reader=add_reader, add_writer=add_writer, remove=remove)
+            for r, w, gone in pending:
+                announcer.update(add_reader=r, add_writer=w, remove=gone)
 
 
 T = TypeVar("T")

@@ -32,8 +32,16 @@ from __future__ import annotations
 
 import math
 
-from cyclonedds.qos import Policy, Qos
-from cyclonedds.util import duration
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from cyclonedds.qos import Qos
+
+# cyclonedds is imported inside the functions: ``import micros_rt`` stays light, and micros_rt.init_node
+# loads Cyclone in the background while rospy starts (spawn-to-first-message time).
+
+#: DDS_INFINITY: the largest duration, "forever".
+_DDS_INFINITY = 0x7FFFFFFFFFFFFFFF
 
 from micros_rt.exceptions import QoSTypeError, QoSValueError
 from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions
@@ -73,7 +81,7 @@ def is_lossless(queue_size: int | None) -> bool:
 def duration_ns(seconds: float) -> int:
     """Float seconds (``math.inf`` = forever) -> DDS nanoseconds (``DDS_INFINITY`` for forever)."""
     if math.isinf(seconds):
-        return int(duration(infinite=True))
+        return _DDS_INFINITY
     # round(): 0.005 * 1e9 is 5000000.000000001 in binary floating point.
     return int(round(seconds * 1e9))
 
@@ -97,12 +105,16 @@ def history_depth(queue_size: int | None) -> int:
 
 
 def _reliability(best_effort: bool, blocking: float = RELIABLE_MAX_BLOCKING_TIME) -> object:
+    from cyclonedds.qos import Policy
+
     if best_effort:
         return Policy.Reliability.BestEffort
     return Policy.Reliability.Reliable(max_blocking_time=duration_ns(blocking))
 
 
 def _user_data(user_data: bytes) -> list[object]:
+    from cyclonedds.qos import Policy
+
     if not isinstance(user_data, (bytes, bytearray, memoryview)):
         raise QoSTypeError(f"user_data={user_data!r} is invalid: expected bytes")
     data = bytes(user_data)
@@ -129,6 +141,8 @@ def writer_qos(
     >>> writer_qos(AdvertiseQoSOptions(), queue_size=10, latch=False)[Policy.History]
     Policy.History.KeepLast(depth=10)
     """
+    from cyclonedds.qos import Policy, Qos
+
     if not isinstance(options, AdvertiseQoSOptions):
         raise QoSTypeError(f"options={options!r} is invalid: expected AdvertiseQoSOptions")
     if not isinstance(latch, bool):
@@ -176,6 +190,8 @@ def reader_qos(
       enforces ``deadline``/``deadline_cb`` itself with a timer, on DDS and TCPROS links alike.
     - Userdata(user_data) when non-empty.
     """
+    from cyclonedds.qos import Policy, Qos
+
     if not isinstance(options, SubscribeQoSOptions):
         raise QoSTypeError(f"options={options!r} is invalid: expected SubscribeQoSOptions")
     if not isinstance(transient_local, bool):
