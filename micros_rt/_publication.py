@@ -54,8 +54,7 @@ class _Publication:
         self.connections: Dict[str, compat.DDSConnection] = {}  # subscriber caller id -> DDS link
         self.published = 0
         self.blocked_seconds = 0.0
-        self.rospy_pub: Any = None
-        self.impl: Any = None
+        self.tcpros: Optional[compat.TcprosWriter] = None
         self.dds: "Optional[DDSTopicWriter]" = None
         self._dds_backend = dds
         if dds is not None:
@@ -65,8 +64,7 @@ class _Publication:
                 _log.warning("micros_rt: topic %s will use TCPROS only: %s", topic, exc)
 
     def start(self) -> None:
-        self.rospy_pub = rospy.Publisher(self.topic, self.data_class, queue_size=self.queue_size, latch=self.latch)
-        self.impl = self.rospy_pub.impl
+        self.tcpros = compat.TcprosWriter(self.topic, self.data_class, self.queue_size, self.latch)
 
     # -- negotiation (XML-RPC threads) -------------------------------------
     def facts(self) -> PublicationFacts:
@@ -82,7 +80,7 @@ class _Publication:
     def judge(self, offer: DDSOffer, subscriber: str) -> Tuple[Verdict, Optional[DDSAnswer]]:
         verdict = decide(offer, self.facts(), subscriber=short(subscriber))
         dds = self.dds
-        if not verdict.accepted or dds is None or self.impl is None:
+        if not verdict.accepted or dds is None or self.tcpros is None:
             return verdict, None
         info = (f"DDS connection on topic {dds.dds_topic} to reader {offer.reader} (writer {dds.guid}, "
                 f"{'best effort' if self.options.using_best_effort_protocol else 'reliable'}, "
@@ -160,12 +158,12 @@ class _Publication:
         reader the writer has matched (negotiation precedes DDS discovery by a few milliseconds;
         counting those early would let a "wait for a subscriber, then publish" loop lose its first
         messages)."""
-        impl = self.impl
-        if impl is None:
+        tcpros = self.tcpros
+        if tcpros is None:
             return 0
         with self.lock:
             conns = list(self.connections.values())
-        n_tcp = max(len(impl.connections) - len(conns), 0)
+        n_tcp = max(tcpros.links() - len(conns), 0)
         if not conns or self.dds is None:
             return n_tcp
         matched = self.dds.matched_peers()
@@ -174,31 +172,28 @@ class _Publication:
     # -- data ----------------------------------------------------------------
     def publish(self, msg: Any) -> None:
         """Refuse a bad message before anything is sent on any transport, then send it on each."""
-        impl = self.impl
-        if impl is None or impl.closed:
+        tcpros = self.tcpros
+        if tcpros is None or tcpros.closed:
             raise rospy.ROSException(f"publish() to a closed topic {self.topic}")
-        impl.acquire()
-        try:
-            dds = self.dds
-            prepared = dds.prepare(msg) if dds is not None and (dds.matched_count or self.latch) else None
-            if self.latch or len(impl.connections) > len(self.connections):
-                impl.publish(msg)  # TCPROS: serializes (and may raise) before it writes anything
-            if prepared is not None:
-                assert dds is not None
-                t0 = time.monotonic()
-                try:
-                    dds.send(prepared)
-                finally:
-                    waited = time.monotonic() - t0
-                    if waited > 0.001:
-                        self.blocked_seconds += waited
-            self.published += 1
-        except (genpy.SerializationError, struct.error, TypeError, ValueError, AttributeError, OverflowError,
-                UnicodeError) as exc:
-            raise rospy.ROSSerializationException(
-                f"topic {self.topic}: cannot serialize {type(msg).__name__}: {exc}") from exc
-        finally:
-            impl.release()
+        with tcpros.lock():
+            try:
+                dds = self.dds
+                prepared = dds.prepare(msg) if dds is not None and (dds.matched_count or self.latch) else None
+                tcpros.send(msg, len(self.connections))  # serializes (and may raise) before it writes anything
+                if prepared is not None:
+                    assert dds is not None
+                    t0 = time.monotonic()
+                    try:
+                        dds.send(prepared)
+                    finally:
+                        waited = time.monotonic() - t0
+                        if waited > 0.001:
+                            self.blocked_seconds += waited
+                self.published += 1
+            except (genpy.SerializationError, struct.error, TypeError, ValueError, AttributeError, OverflowError,
+                    UnicodeError) as exc:
+                raise rospy.ROSSerializationException(
+                    f"topic {self.topic}: cannot serialize {type(msg).__name__}: {exc}") from exc
 
     def statistics(self) -> PublisherStatistics:
         return PublisherStatistics(published=self.published, dropped=0, blocked_seconds=self.blocked_seconds)
@@ -212,9 +207,9 @@ class _Publication:
         dds, self.dds = self.dds, None
         if dds is not None:
             dds.close()
-        if self.rospy_pub is not None:
+        if self.tcpros is not None:
             try:
-                self.rospy_pub.unregister()
+                self.tcpros.close()
             except Exception as exc:  # rospy at shutdown; the rest is released already
                 _log.warning("micros_rt: topic %s: rospy could not unregister the publisher: %s", self.topic, exc)
 

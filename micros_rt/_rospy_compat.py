@@ -54,6 +54,8 @@ __all__ = [
     "remove_pseudo_connection",
     "short",
     "transport_socket",
+    "TcprosReader",
+    "TcprosWriter",
 ]
 
 _log = logging.getLogger("rosout.micros_rt.negotiation")
@@ -404,3 +406,60 @@ def install(find_publication: Callable[[str], Optional[PublicationHook]],
         pub_cls = rospy.topics._PublisherImpl
         pub_cls.add_connection = _wrapped_publisher_add_connection(pub_cls.add_connection)
         _installed = True
+
+
+class TcprosWriter:
+    """TCPROS, rospy's own transport, for one publication: the rospy Publisher (master registration too)
+    behind the back-end writer methods. TCPROS serializes in :meth:`send` and raises
+    ``genpy.SerializationError`` before writing anything, so a publication sends TCPROS first."""
+
+    protocol = TCPROS
+
+    def __init__(self, topic: str, data_class: Any, queue_size: Optional[int], latch: bool) -> None:
+        self.latch = latch
+        self._pub = rospy.Publisher(topic, data_class, queue_size=queue_size, latch=latch)
+        self._impl = self._pub.impl
+        self.guid = topic
+
+    @property
+    def closed(self) -> bool:
+        return self._impl is None or bool(self._impl.closed)
+
+    def links(self) -> int:
+        """Connections in rospy's list: TCPROS links and micros_rt's DDS pseudo-connections."""
+        return 0 if self._impl is None else len(self._impl.connections)
+
+    def lock(self) -> Any:
+        """rospy's publish lock (ordering of publish() calls across threads)."""
+        return self._impl.publock
+
+    def prepare(self, msg: Any) -> Any:
+        return msg
+
+    def send(self, msg: Any, dds_links: int = 0) -> None:
+        """Publish to the TCPROS links (rospy keeps the latched message even when there are none)."""
+        if self.latch or len(self._impl.connections) > dds_links:
+            self._impl.publish(msg)
+
+    def close(self) -> None:
+        self._pub.unregister()
+
+
+class TcprosReader:
+    """TCPROS for one subscription: the rospy Subscriber (registration, negotiation, receive threads)."""
+
+    protocol = TCPROS
+
+    def __init__(self, topic: str, data_class: Any, callback: Callable[[Any], None],
+                 queue_size: Optional[int]) -> None:
+        self._sub = rospy.Subscriber(topic, data_class, callback, queue_size=queue_size)
+
+    def transports(self) -> dict[str, str]:
+        """Publisher URI -> 'DDS' or 'TCPROS' for every current connection."""
+        impl = self._sub.impl
+        if impl is None:
+            return {}
+        return {c.endpoint_id: getattr(c, "transport_type", TCPROS) for c in impl.connections}
+
+    def close(self) -> None:
+        self._sub.unregister()

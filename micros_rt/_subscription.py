@@ -92,12 +92,12 @@ class _Subscription:
             _log.warning("micros_rt: topic %s: TransportHints allow only DDS, but DDS is unavailable; "
                          "nothing will be received", topic)
         self.thread = threading.Thread(target=self._run, name=f"micros_rt delivery {topic}", daemon=True)
-        self.rospy_sub: Any = None
+        self.tcpros: Optional[compat.TcprosReader] = None
 
     def start(self) -> None:
         """Start delivering and register with rospy (which triggers the negotiation: the reader exists)."""
         self.thread.start()
-        self.rospy_sub = rospy.Subscriber(self.topic, self.data_class, self._on_tcpros, queue_size=self.queue_size)
+        self.tcpros = compat.TcprosReader(self.topic, self.data_class, self._on_tcpros, self.queue_size)
 
     def _open_reader(self, *, latched: bool) -> DDSTopicReader:
         assert self._dds is not None
@@ -385,9 +385,9 @@ class _Subscription:
         if self.closed:
             return
         self.closed = True
-        if self.rospy_sub is not None:
+        if self.tcpros is not None:
             try:
-                self.rospy_sub.unregister()
+                self.tcpros.close()
             except Exception as exc:  # rospy at shutdown; the rest is released regardless
                 _log.warning("micros_rt: topic %s: rospy could not unregister the subscriber: %s", self.topic, exc)
         with self._tcp_space:
@@ -433,17 +433,12 @@ class Subscriber:
 
     def get_num_connections(self) -> int:
         """Publishers connected, over DDS and TCPROS."""
-        sub = self._sub
-        impl = None if sub is None or sub.rospy_sub is None else sub.rospy_sub.impl
-        return 0 if impl is None else len(impl.connections)
+        return len(self.connection_transports())
 
     def connection_transports(self) -> Dict[str, str]:
         """Publisher URI -> 'DDS' or 'TCPROS' for every current connection."""
         sub = self._sub
-        impl = None if sub is None or sub.rospy_sub is None else sub.rospy_sub.impl
-        if impl is None:
-            return {}
-        return {c.endpoint_id: getattr(c, "transport_type", "TCPROS") for c in impl.connections}
+        return {} if sub is None or sub.tcpros is None else sub.tcpros.transports()
 
     @property
     def latency(self) -> LatencyStats:
