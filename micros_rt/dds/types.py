@@ -28,9 +28,14 @@ from typing import Any, Callable, Dict, List, Tuple, Type
 import genpy
 import roslib.message
 
-from ..exceptions import TypeMappingError
+from ..exceptions import MicrosRtError, TypeMappingError
 
-__all__ = ["DDSType", "dds_type_for", "dds_topic_name", "dds_type_name"]
+__all__ = ["DDSType", "MalformedSampleError", "dds_type_for", "dds_topic_name", "dds_type_name"]
+
+
+class MalformedSampleError(MicrosRtError, ValueError):
+    """A received DDS sample is not a valid CDR encoding of the expected type (truncated, lengths that
+    do not fit, invalid UTF-8, ...). The message names the type and what is wrong."""
 
 # ROS 1 primitive -> (struct code, size, ROS 2 idl type name)
 _PRIMS: Dict[str, Tuple[str, int, str]] = {
@@ -257,7 +262,7 @@ class _CodecBuilder:
             if kind == "string":
                 v = s.var()
                 s.emit(f"{v} = {p}")
-                s.emit(f"{v} = {v}.encode() if {v}.__class__ is str else bytes({v})")
+                s.emit(f"{v} = {v}.encode() if {v}.__class__ is str else _str_bytes({v})")
                 s.emit("b += _Z[:(4 - len(b)) & 3]")
                 s.emit(f"b += _U32.pack(len({v}) + 1)")
                 s.emit(f"b += {v}")
@@ -283,7 +288,7 @@ class _CodecBuilder:
                 s.emit(f"{v} = {p}")
                 self._emit_count(v, p, length)
                 s.emit(f"for {x} in {v}:")
-                s.emit(f"    {x} = {x}.encode() if {x}.__class__ is str else bytes({x})")
+                s.emit(f"    {x} = {x}.encode() if {x}.__class__ is str else _str_bytes({x})")
                 s.emit("    b += _Z[:(4 - len(b)) & 3]")
                 s.emit(f"    b += _U32.pack(len({x}) + 1)")
                 s.emit(f"    b += {x}")
@@ -352,6 +357,7 @@ class _CodecBuilder:
                     n = s.var("n")
                     s.emit("p += (4 - p) & 3")
                     s.emit(f"{n}, = _U32.unpack_from(buf, p)")
+                    s.emit(f"if {n} > len(buf) - p - 4: raise _bad_count({n}, len(buf) - p - 4, p)")
                     s.emit(f"{p} = buf[p + 4:p + 3 + {n}].decode()")
                     s.emit(f"p += 4 + {n}")
                 else:
@@ -366,6 +372,8 @@ class _CodecBuilder:
                 s.emit("p += (4 - p) & 3")
                 s.emit(f"{n}, = _U32.unpack_from(buf, p)")
                 s.emit("p += 4")
+                # a length beyond the sample is malformed: refuse before looping or allocating
+                s.emit(f"if {n} > len(buf) - p: raise _bad_count({n}, len(buf) - p, p)")
             else:
                 s.emit(f"{n} = {length}")
             if base in _BYTES_TYPES:
@@ -388,6 +396,7 @@ class _CodecBuilder:
                 s.emit(f"for {i} in range({n}):")
                 s.emit("    p += (4 - p) & 3")
                 s.emit(f"    {m}, = _U32.unpack_from(buf, p)")
+                s.emit(f"    if {m} > len(buf) - p - 4: raise _bad_count({m}, len(buf) - p - 4, p)")
                 s.emit(f"    {lst}.append(buf[p + 4:p + 3 + {m}].decode())")
                 s.emit(f"    p += 4 + {m}")
                 s.emit(f"{p} = {lst}")
@@ -413,10 +422,23 @@ class _CodecBuilder:
 
 
 def _as_bytes(value: Any) -> bytes:
+    if isinstance(value, int):  # bytes(5) would be 5 NUL bytes
+        raise TypeError(f"expected bytes or a sequence of ints 0..255, got {type(value).__name__}")
     try:
         return bytes(value)
     except (TypeError, ValueError) as exc:
         raise TypeError(f"expected bytes or a sequence of ints 0..255, got {type(value).__name__}") from exc
+
+
+def _str_bytes(value: Any) -> bytes:
+    # a string field takes str (encoded UTF-8) or bytes, as genpy does; bytes(123) would be 123 NUL bytes
+    if isinstance(value, (bytes, bytearray)):
+        return bytes(value)
+    raise TypeError(f"expected str, got {type(value).__name__}")
+
+
+def _bad_count(n: int, left: int, offset: int) -> ValueError:
+    return ValueError(f"a sequence of {n} elements at offset {offset} does not fit in the {left} bytes left")
 
 
 def _bad_len(path: str, expected: int, got: int) -> ValueError:
@@ -429,6 +451,8 @@ _COMMON = {
     "_pack": struct.pack,
     "_unpack_from": struct.unpack_from,
     "_as_bytes": _as_bytes,
+    "_str_bytes": _str_bytes,
+    "_bad_count": _bad_count,
     "_bad_len": _bad_len,
 }
 
@@ -462,6 +486,97 @@ class DDSType:
     decode: Callable[[bytes], Any]
 
 
+_ENCODE_ERRORS = (struct.error, TypeError, ValueError, AttributeError, OverflowError, UnicodeError)
+_DECODE_ERRORS = (struct.error, IndexError, ValueError, TypeError, AttributeError, OverflowError, MemoryError,
+                  RecursionError)
+
+_INT_RANGES: Dict[str, Tuple[int, int]] = {
+    "int8": (-2 ** 7, 2 ** 7 - 1), "uint8": (0, 2 ** 8 - 1), "byte": (-2 ** 7, 2 ** 7 - 1), "char": (0, 255),
+    "int16": (-2 ** 15, 2 ** 15 - 1), "uint16": (0, 2 ** 16 - 1), "int32": (-2 ** 31, 2 ** 31 - 1),
+    "uint32": (0, 2 ** 32 - 1), "int64": (-2 ** 63, 2 ** 63 - 1), "uint64": (0, 2 ** 64 - 1),
+    "bool": (0, 255),
+}
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _bad_scalar(base: str, value: Any) -> str | None:
+    if base in _INT_RANGES:
+        lo, hi = _INT_RANGES[base]
+        if not isinstance(value, int):
+            return f"{_short(value)} is not an integer ({base}: {lo}..{hi})"
+        if not lo <= value <= hi:
+            return f"{_short(value)} is out of range ({base}: {lo}..{hi})"
+        return None
+    if base in ("float32", "float64"):
+        return None if isinstance(value, (int, float)) else f"{_short(value)} is not a number ({base})"
+    if base == "string":
+        if isinstance(value, (bytes, bytearray)):
+            return None
+        if not isinstance(value, str):
+            return f"{_short(value)} is not a string"
+        try:
+            value.encode()
+        except UnicodeError:
+            return f"{_short(value)} cannot be encoded as UTF-8"
+    return None
+
+
+def describe_bad_field(msg: Any, ros_type: str, path: str = "") -> str | None:
+    """The first field of ``msg`` whose value cannot be serialized, in words (``field header.stamp.secs:
+    8589934592 is out of range (int32: ...)``), or None when none is found. Slow; only for error messages."""
+    if ros_type in _TIME_TYPES:
+        fields = [("secs", "int32" if ros_type == "duration" else "uint32"), ("nsecs", "int32" if ros_type ==
+                                                                               "duration" else "uint32")]
+    else:
+        cls = _msg_class(ros_type)
+        if not isinstance(msg, cls) and not (ros_type in _TIME_TYPES):
+            return f"field {path or '(message)'}: {_short(msg)} is not a {ros_type}"
+        fields = list(zip(cls.__slots__, cls._slot_types))
+    for name, slot_type in fields:
+        where = f"{path}.{name}" if path else name
+        value = getattr(msg, name, None)
+        base, is_array, length = _parse_type(slot_type)
+        if base == "Header":
+            base = _HEADER
+        if is_array:
+            if base in _BYTES_TYPES and isinstance(value, (bytes, bytearray)):
+                items: List[Any] = []
+            elif not isinstance(value, (list, tuple)) and not (base in _BYTES_TYPES and isinstance(value, (bytes,
+                                                                                                      bytearray))):
+                return f"field {where}: {_short(value)} is not a list"
+            else:
+                items = list(value[:1000])
+            if length is not None and len(value) != length:
+                return f"field {where}: fixed-size array needs {length} elements, got {len(value)}"
+            for i, item in enumerate(items):
+                problem = _describe_value(item, base, f"{where}[{i}]")
+                if problem:
+                    return problem
+            continue
+        problem = _describe_value(value, base, where)
+        if problem:
+            return problem
+    return None
+
+
+def _describe_value(value: Any, base: str, where: str) -> str | None:
+    if base in _PRIMS or base == "string":
+        problem = _bad_scalar(base, value)
+        return f"field {where}: {problem}" if problem else None
+    if base in _TIME_TYPES:
+        if not isinstance(value, (genpy.Time, genpy.Duration)):
+            return f"field {where}: {_short(value)} is not a {base}"
+        return describe_bad_field(value, base, where)
+    sub = _msg_class(base)
+    if not isinstance(value, sub):
+        return f"field {where}: {_short(value)} is not a {sub._type}"
+    return describe_bad_field(value, sub._type, where)
+
+
 _cache: Dict[type, DDSType] = {}
 _cache_lock = threading.Lock()
 
@@ -483,11 +598,19 @@ def dds_type_for(data_class: Type[genpy.Message]) -> DDSType:
     try:
         enc_builder = _CodecBuilder("<")
         enc_builder.encode_body(ros_type, "msg")
-        encode = _compile(
+        encode_fields = _compile(
             "encode", enc_builder.enc,
             "def encode(msg):\n    b = bytearray(_HDR)", "    return bytes(b)\n",
             {"_HDR": _CDR_LE},
         )
+
+        def encode(msg: Any) -> bytes:
+            try:
+                return encode_fields(msg)  # type: ignore[no-any-return]
+            except _ENCODE_ERRORS as exc:
+                raise genpy.SerializationError(
+                    f"cannot serialize {ros_type}: {describe_bad_field(msg, ros_type) or exc}") from exc
+
         decoders = []
         for endian in "<>":
             b = _CodecBuilder(endian)
@@ -502,12 +625,15 @@ def dds_type_for(data_class: Type[genpy.Message]) -> DDSType:
 
         def decode(data: bytes) -> Any:
             kind = data[:2]
-            if kind == b"\x00\x01":
-                return decode_le(data)
-            if kind == b"\x00\x00":
-                return decode_be(data)
-            raise ValueError(
-                f"unsupported CDR encapsulation {data[:2].hex()} (micros_rt reads plain CDR, XCDR1, "
+            try:
+                if kind == b"\x00\x01":
+                    return decode_le(data)
+                if kind == b"\x00\x00":
+                    return decode_be(data)
+            except _DECODE_ERRORS as exc:
+                raise MalformedSampleError(f"malformed CDR sample for {ros_type} ({len(data)} bytes): {exc}") from exc
+            raise MalformedSampleError(
+                f"unsupported CDR encapsulation {data[:2].hex()} for {ros_type} (micros_rt reads plain CDR, XCDR1, "
                 "as ROS 2 writes it)")
 
         idl = _idl_class(ros_type)

@@ -149,7 +149,11 @@ deadline = time.monotonic() + 30
 while pub.get_num_connections() < 1 and time.monotonic() < deadline:
     time.sleep(0.05)
 raised = []
-for bad in (String(data=123), String(data=None), String(data=[1, 2])):
+def with_data(value):
+    m = String()
+    m.data = value  # set after construction (the constructor turns None into "")
+    return m
+for bad in (with_data(123), with_data(None), with_data([1, 2])):
     try:
         pub.publish(bad)
         raised.append(False)
