@@ -134,7 +134,8 @@ def test_bad_field_values_raise_before_anything_is_sent(ros_master: harness.RosM
     # Only a DDS subscriber listens: a bad value must raise as stock rospy raises, and reach nobody
     # (String(data=123) used to arrive as 123 NUL bytes; Int32(2**40) was dropped without an error).
     listener = spawn(mrt("listen", "--topic", "/badvalues", "--duration", "40", "--node-name", "bad_listener"))
-    others_listening = [spawn(mrt("listen", "--topic", topic, "--type", type_, "--duration", "40"))
+    others_listening = [spawn(mrt("listen", "--topic", topic, "--type", type_, "--duration", "40",
+                                  "--node-name", f"listener{topic.replace('/', '_')}"))
                         for topic, type_ in (("/bad_int", "std_msgs/Int32"), ("/bad_float", "std_msgs/Float64"),
                                              ("/bad_header", "std_msgs/Header"))]
     for peer in [listener, *others_listening]:
