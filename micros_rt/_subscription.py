@@ -78,6 +78,7 @@ class _Subscription:
         self.deadline = DeadlineMonitor(self.effective.deadline, start=time.monotonic())
         self.writers = WriterTable(graph, self.depth or UNBOUNDED_QUEUE_DEPTH)
         self.incompatible_reported: Set[int] = set()
+        self._housekeeping_due = False
         self._dds = dds if hints.allows_dds else None
         self.inbox = Inbox(self._dds.participant if self._dds is not None else None)
         self.readers: Tuple[DDSTopicReader, ...] = ()
@@ -102,10 +103,16 @@ class _Subscription:
     def _open_reader(self, *, latched: bool) -> DDSTopicReader:
         assert self._dds is not None
         spec = EndpointSpec(self.topic, self.data_class, self.queue_size, latched, self.tag)
-        reader = self._dds.open_reader(spec, self.options, self.inbox.wake, self._incompatible)
+        reader = self._dds.open_reader(spec, self.options, self._matches_changed, self._incompatible)
         self.inbox.attach(reader)
         self.readers = self.readers + (reader,)
         return reader
+
+    def _matches_changed(self) -> None:
+        # Cyclone thread: a writer matched or went (lease expired, deleted): look at once, not at the
+        # next housekeeping round, so a dead publisher leaves the connections within the lease
+        self._housekeeping_due = True
+        self.inbox.wake()
 
     def _incompatible(self, policy: int) -> None:
         # Cyclone thread: only log, never block. A ROS 2 (or foreign) writer whose QoS cannot match
@@ -171,7 +178,8 @@ class _Subscription:
                     self._release_held(now)
                 if self.deadline.enabled:
                     self._check_deadline(now)
-                if now >= next_housekeeping:
+                if now >= next_housekeeping or self._housekeeping_due:
+                    self._housekeeping_due = False
                     next_housekeeping = now + 0.5
                     self._housekeeping(now)
             except Exception:

@@ -55,11 +55,13 @@ class DDSWriter:
         self.dds_type = dds_type
         self._matched = 0
         self._on_matched = on_matched
+        self._participant = participant
         topic = participant.topic(topic_name, dds_type.idl_class)
         listener = Listener(on_publication_matched=self._matched_changed)  # type: ignore[no-untyped-call]
         try:
             self._writer = DataWriter(participant.dp, topic, qos, listener)
         except DDSException as exc:
+            participant.release_topic(topic_name)
             raise DDSUnavailableError(f"cannot create a DDS writer for {topic_name}: {exc}") from exc
         self._ref = self._writer._ref
         self.guid = str(self._writer.guid)
@@ -93,6 +95,7 @@ class DDSWriter:
             return
         self.closed = True
         delete_entity(self._writer)
+        self._participant.release_topic(self.topic_name)
 
 
 class WriterInfo:
@@ -113,10 +116,12 @@ class DDSReader:
                  listener: Optional[Listener] = None) -> None:
         self.topic_name = topic_name
         self.dds_type = dds_type
+        self._participant = participant
         topic = participant.topic(topic_name, dds_type.idl_class)
         try:
             self._reader = DataReader(participant.dp, topic, qos, listener)
         except DDSException as exc:
+            participant.release_topic(topic_name)
             raise DDSUnavailableError(f"cannot create a DDS reader for {topic_name}: {exc}") from exc
         self._ref = self._reader._ref
         self.condition = ReadCondition(self._reader, _ANY)
@@ -174,3 +179,4 @@ class DDSReader:
         self.closed = True
         delete_entity(self.condition)
         delete_entity(self._reader)
+        self._participant.release_topic(self.topic_name)

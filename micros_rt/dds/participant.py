@@ -15,14 +15,17 @@ import logging
 import os
 import socket
 import threading
-from typing import Any, Dict, Mapping, Optional
+from typing import Any, Dict, Mapping, Optional, Tuple
 
 from ..exceptions import DDSUnavailableError
 
 __all__ = [
     "LOOPBACK_CONFIG",
     "DDSParticipant",
+    "DEFAULT_LEASE_DURATION",
     "cyclone_config",
+    "lease_duration",
+    "micros_rt_defaults",
     "domain_id_from_env",
     "get_participant",
     "close_participant",
@@ -57,23 +60,58 @@ def _ros_address(env: Mapping[str, str]) -> str:
         return host
 
 
-def cyclone_config(env: Mapping[str, str] = os.environ) -> Optional[str]:
-    """The Cyclone configuration micros_rt uses, or None when ``CYCLONEDDS_URI`` is set.
+#: Seconds after which a peer that stopped without saying goodbye (killed, crashed, unplugged) is
+#: considered gone: its DDS connections are dropped. Cyclone's default is 10 s; TCPROS notices a dead
+#: peer at once. ``MICROS_RT_LEASE_DURATION`` overrides it.
+DEFAULT_LEASE_DURATION = 1.5
 
-    >>> cyclone_config({"ROS_IP": "127.0.0.1"}) == LOOPBACK_CONFIG
+
+def lease_duration(env: Mapping[str, str] = os.environ) -> float:
+    """The participant lease (seconds): ``MICROS_RT_LEASE_DURATION`` or :data:`DEFAULT_LEASE_DURATION`."""
+    raw = env.get("MICROS_RT_LEASE_DURATION", "").strip()
+    if not raw:
+        return DEFAULT_LEASE_DURATION
+    try:
+        value = float(raw)
+    except ValueError:
+        raise DDSUnavailableError(
+            f"MICROS_RT_LEASE_DURATION={raw!r} is not a number of seconds (expected 0.5..3600)") from None
+    if not 0.5 <= value <= 3600.0:
+        raise DDSUnavailableError(f"MICROS_RT_LEASE_DURATION={value:g} is out of range (expected 0.5..3600 seconds)")
+    return value
+
+
+def micros_rt_defaults(env: Mapping[str, str] = os.environ) -> str:
+    """Settings micros_rt applies under any configuration (a user's ``CYCLONEDDS_URI`` overrides them)."""
+    return ('<CycloneDDS><Domain id="any"><Discovery>'
+            f"<LeaseDuration>{lease_duration(env):g}s</LeaseDuration>"
+            "</Discovery></Domain></CycloneDDS>")
+
+
+def cyclone_config(env: Mapping[str, str] = os.environ) -> str:
+    """The Cyclone configuration micros_rt uses: its defaults, then the network configuration.
+
+    With ``CYCLONEDDS_URI`` set, that is the network configuration (Cyclone reads comma-separated
+    sources in order, later ones override earlier ones: the user's file wins wherever it speaks).
+    Otherwise micros_rt follows ROS 1's address: loopback -> :data:`LOOPBACK_CONFIG`, else the
+    interface that holds the address.
+
+    >>> LOOPBACK_CONFIG in cyclone_config({"ROS_IP": "127.0.0.1"})
     True
     """
-    if env.get("CYCLONEDDS_URI"):
-        return None
+    defaults = micros_rt_defaults(env)
+    user = env.get("CYCLONEDDS_URI", "").strip()
+    if user:
+        return f"{defaults},{user}"
     address = _ros_address(env)
     try:
         if ipaddress.ip_address(address).is_loopback:
-            return LOOPBACK_CONFIG
+            return f"{defaults},{LOOPBACK_CONFIG}"
     except ValueError:
         # not an IP: a name we could not resolve; stay on loopback rather than
         # multicasting on an interface nobody asked for.
-        return LOOPBACK_CONFIG
-    return _INTERFACE_CONFIG.format(address=address)
+        return f"{defaults},{LOOPBACK_CONFIG}"
+    return f"{defaults},{_INTERFACE_CONFIG.format(address=address)}"
 
 
 def domain_id_from_env(env: Mapping[str, str] = os.environ) -> int:
@@ -96,7 +134,7 @@ class DDSParticipant:
     Created through :func:`get_participant`; ``close()`` releases every entity.
     """
 
-    def __init__(self, domain_id: int, config: Optional[str]) -> None:
+    def __init__(self, domain_id: int, config: str) -> None:
         from cyclonedds.core import DDSException
         from cyclonedds.domain import Domain, DomainParticipant
 
@@ -107,7 +145,7 @@ class DDSParticipant:
         try:
             # A Domain with an explicit config keeps our settings out of the
             # process environment (CYCLONEDDS_URI stays the user's).
-            self._domain = Domain(domain_id, config) if config is not None else None
+            self._domain = Domain(domain_id, config)
             self.dp = DomainParticipant(domain_id)
         except DDSException as exc:
             raise DDSUnavailableError(
@@ -115,7 +153,7 @@ class DDSParticipant:
         self.guid = str(self.dp.guid)
         # the sockets Cyclone just opened: what transport priority marks (see marking.py)
         self._sockets = set(process_udp_sockets()) - before
-        self._topics: Dict[str, Any] = {}
+        self._topics: Dict[str, Tuple[Any, int]] = {}  # name -> (Topic, references)
         self._lock = threading.Lock()
         self._priority: Optional[int] = None
         self.closed = False
@@ -138,20 +176,41 @@ class DDSParticipant:
         _log.debug("micros_rt: DDS traffic of this process marked TOS 0x%02x on %d sockets", tos, n)
 
     def topic(self, name: str, idl_class: Any) -> Any:
-        """The Topic ``name`` with type ``idl_class``, created once per process."""
+        """The Topic ``name`` with type ``idl_class``, shared by the process's readers and writers of it:
+        each call takes a reference that :meth:`release_topic` gives back (the last one deletes it)."""
         from cyclonedds.topic import Topic
 
         with self._lock:
             found = self._topics.get(name)
             if found is not None:
-                if found.data_type is not idl_class:
+                topic, refs = found
+                if topic.data_type is not idl_class:
                     raise DDSUnavailableError(
                         f"DDS topic {name!r} is already used in this process with type "
-                        f"{found.data_type.__idl_typename__}, not {idl_class.__idl_typename__}")
-                return found
+                        f"{topic.data_type.__idl_typename__}, not {idl_class.__idl_typename__}")
+                self._topics[name] = (topic, refs + 1)
+                return topic
             topic = Topic(self.dp, name, idl_class)
-            self._topics[name] = topic
+            self._topics[name] = (topic, 1)
             return topic
+
+    def release_topic(self, name: str) -> None:
+        """Give back a reference taken by :meth:`topic`; the Topic entity goes with the last one."""
+        with self._lock:
+            found = self._topics.get(name)
+            if found is None:
+                return
+            topic, refs = found
+            if refs > 1:
+                self._topics[name] = (topic, refs - 1)
+                return
+            del self._topics[name]
+        delete_entity(topic)
+
+    def topic_count(self) -> int:
+        """Topics alive in this participant (for leak checks)."""
+        with self._lock:
+            return len(self._topics)
 
     def close(self) -> None:
         """Delete the participant and everything created on it; harmless twice."""
