@@ -600,7 +600,7 @@ def dds_type_for(data_class: Type[genpy.Message]) -> DDSType:
         enc_builder.encode_body(ros_type, "msg")
         encode_fields = _compile(
             "encode", enc_builder.enc,
-            "def encode(msg):\n    b = bytearray(_HDR)", "    return bytes(b)\n",
+            "def encode(msg):\n    b = bytearray(_HDR)", "    return b\n",  # bytes-like: Cyclone takes it without another copy
             {"_HDR": _CDR_LE},
         )
 
