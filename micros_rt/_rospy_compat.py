@@ -211,8 +211,12 @@ def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
         sub = get_topic_manager().get_subscriber_impl(topic)
         if not sub:
             return -1, f"No subscriber for topic [{topic}]", 0
-        if sub.has_connection(pub_uri):
-            return 1, f"_connect_topic[{topic}]: subscriber already connected to publisher [{pub_uri}]", 0
+        already = f"_connect_topic[{topic}]: subscriber already connected to publisher [{pub_uri}]"
+        existing = next((c for c in list(sub.connections) if c.endpoint_id == pub_uri), None)
+        if existing is not None and not isinstance(existing, DDSConnection):
+            return 1, already, 0
+        # An existing DDS link is asked again: the publisher may have unregistered and advertised the
+        # topic anew (same node, same URI, a new DDS writer) faster than its old writer was seen to go.
         protocols = hook.offered_protocols()
         if not protocols:
             return 0, "ERROR: no protocol allowed by the TransportHints", 0
@@ -239,7 +243,14 @@ def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
                 _log.warning("micros_rt: topic %s: publisher %s accepted DDS with a malformed answer (%s); "
                              "not connected to it", topic, pub_uri, exc)
                 return 0, "malformed DDS answer", 0
+            if existing is not None:
+                if existing.peer_guid == answer.writer:
+                    return 1, already, 0
+                remove_pseudo_connection(topic, existing, publisher=False)
+                existing.close()
             return hook.connect_dds(pub_uri, answer)
+        if existing is not None:
+            return 1, already, 0  # keep the DDS link; a TCPROS answer now would be a second link
         for h in self.protocol_handlers:
             if h.supports(result[0]):
                 return h.create_transport(topic, pub_uri, result)
@@ -260,7 +271,7 @@ def _wrapped_request_topic(original: Callable[..., Any]) -> Callable[..., Any]:
                                  supports=lambda name: any(h.supports(name) for h in self.protocol_handlers),
                                  topic=short(resolved))
         for verdict in choice.declined:
-            _declines.warning((short(caller_id, 256), verdict.kind), verdict.reason)
+            _declines.warning((short(caller_id, 256), verdict.kind), verdict.reason, group=verdict.kind.split(":")[0])
         if choice.dds is not None:
             return 1, "ready on DDS", choice.dds.to_xmlrpc()
         if choice.entry is not None:

@@ -231,6 +231,9 @@ class _Subscription:
                 if verdict == HOLD:
                     writers.hold(state, time.monotonic(), data, info)
                 continue
+            acc = state.accepted
+            if acc is not None and not acc.conn.seen:
+                acc.conn.seen = True  # it delivered data, so it was matched (housekeeping may not have seen it)
             if state.held:
                 self._release_held(time.monotonic())  # what it sent before the answer goes first
             if two_readers:
