@@ -30,13 +30,14 @@ from .negotiation import (
     decide,
 )
 from .qos import AdvertiseQoSOptions, TransportPriority, priority_socket_priority, priority_tos
+from ._logging import nonblocking_logger
 
 if TYPE_CHECKING:
     from .dds.backend import DDSBackend, DDSTopicWriter
 
 __all__ = ["Publisher"]
 
-_log = logging.getLogger("rosout.micros_rt")
+_log = nonblocking_logger("rosout.micros_rt")
 _housekeeping_log = RateLimitedLog(_log, interval=60.0)
 
 

@@ -12,10 +12,11 @@ from __future__ import annotations
 import logging
 import threading
 from typing import Callable, Dict, Generic, List, Optional, Protocol, TypeVar
+from ._logging import nonblocking_logger
 
 __all__ = ["Endpoint", "EndpointRegistry"]
 
-_log = logging.getLogger("rosout.micros_rt")
+_log = nonblocking_logger("rosout.micros_rt")
 
 
 class Endpoint(Protocol):

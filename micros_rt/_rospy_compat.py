@@ -42,6 +42,7 @@ from rospy.impl.registration import (
     get_service_manager,
     get_topic_manager,
 )
+from ._logging import nonblocking_logger
 
 __all__ = [
     "DDSConnection",
@@ -58,7 +59,7 @@ __all__ = [
     "TcprosWriter",
 ]
 
-_log = logging.getLogger("rosout.micros_rt.negotiation")
+_log = nonblocking_logger("rosout.micros_rt.negotiation")
 
 _ids = itertools.count(100000)
 

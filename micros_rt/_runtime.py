@@ -15,13 +15,14 @@ from ._registry import EndpointRegistry
 from .dds.participant import get_participant
 from .exceptions import NodeNotInitializedError
 from .qos import QoSProfile
+from ._logging import nonblocking_logger
 
 if TYPE_CHECKING:
     from ._publication import _Publication
     from ._subscription import _Subscription
     from .dds.backend import DDSBackend
 
-_log = logging.getLogger("rosout.micros_rt")  # rospy prints it and sends it to /rosout
+_log = nonblocking_logger("rosout.micros_rt")  # rospy prints it and sends it to /rosout
 
 
 @dataclass

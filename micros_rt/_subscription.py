@@ -36,13 +36,14 @@ from .qos import (
     is_expired,
     is_lossless,
 )
+from ._logging import nonblocking_logger
 
 if TYPE_CHECKING:
     from .dds.backend import DDSBackend, DDSTopicReader
 
 __all__ = ["Subscriber", "DeadlineMissed", "LatencyStats"]
 
-_log = logging.getLogger("rosout.micros_rt")
+_log = nonblocking_logger("rosout.micros_rt")
 _TAKE_BATCH = 256
 _RETAKE_SECONDS = 0.005  # with a bounded queue, take new samples at least this often between callbacks
 

@@ -22,6 +22,7 @@ from . import _rospy_compat as compat
 from ._publication import Publisher, _Publication
 from ._runtime import _graph_id, _log, _node, _require_node, dds_backend
 from ._subscription import DeadlineMissed, Subscriber, _Subscription
+from ._logging import flush as flush_logs
 from .dds.participant import close_participant
 from .exceptions import QoSTypeError
 from .negotiation.hints import TransportHints
@@ -113,6 +114,7 @@ def _close_all() -> None:
     with _node.lock:
         _node.dds = None
     close_participant()
+    flush_logs()
 
 
 # ---------------------------------------------------------------------------

@@ -25,10 +25,11 @@ from ..qos import (
 from .endpoints import DDSReader, DDSWriter, make_user_data
 from .participant import DDSParticipant
 from .types import DDSType, dds_topic_name, dds_type_for
+from .._logging import nonblocking_logger
 
 __all__ = ["DDSBackend", "DDSTopicWriter", "DDSTopicReader"]
 
-_log = logging.getLogger("rosout.micros_rt.dds")
+_log = nonblocking_logger("rosout.micros_rt.dds")
 
 _DDS_RETCODE_TIMEOUT = -10
 

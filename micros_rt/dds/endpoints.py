@@ -20,10 +20,11 @@ from cyclonedds.sub import DataReader
 from ..exceptions import DDSUnavailableError
 from .participant import DDSParticipant, delete_entity
 from .types import DDSType
+from .._logging import nonblocking_logger
 
 __all__ = ["DDSWriter", "DDSReader", "WriterInfo", "USER_DATA_PREFIX", "make_user_data", "parse_user_data"]
 
-_log = logging.getLogger("rosout.micros_rt.dds")
+_log = nonblocking_logger("rosout.micros_rt.dds")
 
 USER_DATA_PREFIX = b"micros_rt;"
 _ANY = SampleState.Any | ViewState.Any | InstanceState.Any

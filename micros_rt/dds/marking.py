@@ -19,10 +19,11 @@ import logging
 import os
 import socket
 from typing import Dict, Set, Tuple
+from .._logging import nonblocking_logger
 
 __all__ = ["process_udp_sockets", "mark_udp_sockets"]
 
-_log = logging.getLogger("rosout.micros_rt.dds")
+_log = nonblocking_logger("rosout.micros_rt.dds")
 
 
 def _udp_inodes() -> Dict[int, int]:

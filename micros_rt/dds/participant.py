@@ -18,11 +18,13 @@ import threading
 from typing import Any, Dict, Mapping, Optional, Tuple
 
 from ..exceptions import DDSUnavailableError
+from .._logging import nonblocking_logger
 
 __all__ = [
     "LOOPBACK_CONFIG",
     "DDSParticipant",
     "DEFAULT_LEASE_DURATION",
+    "DEFAULT_NETWORK_LEASE_DURATION",
     "cyclone_config",
     "lease_duration",
     "micros_rt_defaults",
@@ -32,7 +34,7 @@ __all__ = [
     "delete_entity",
 ]
 
-_log = logging.getLogger("rosout.micros_rt.dds")
+_log = nonblocking_logger("rosout.micros_rt.dds")
 
 LOOPBACK_CONFIG = (
     '<CycloneDDS><Domain id="any"><General>'
@@ -60,17 +62,31 @@ def _ros_address(env: Mapping[str, str]) -> str:
         return host
 
 
-#: Seconds after which a peer that stopped without saying goodbye (killed, crashed, unplugged) is
-#: considered gone: its DDS connections are dropped. Cyclone's default is 10 s; TCPROS notices a dead
-#: peer at once. ``MICROS_RT_LEASE_DURATION`` overrides it.
+#: Seconds after which a peer that stopped without saying goodbye (killed, crashed) is considered
+#: gone and its DDS connections dropped, when the node's address (ROS_IP/ROS_HOSTNAME) is loopback:
+#: every peer is on this host, where silence means death. Cyclone's default is 10 s; TCPROS notices a
+#: dead peer at once.
 DEFAULT_LEASE_DURATION = 1.5
+#: The same on a real network, where silence may be a cable or a radio link that comes back: a link
+#: down for less than this keeps its DDS match, and a reliable stream then resumes without losing
+#: what the writer's history holds (a new match would not get it: micros_rt writers are volatile).
+DEFAULT_NETWORK_LEASE_DURATION = 15.0
+
+
+def _is_loopback(env: Mapping[str, str]) -> bool:
+    address = _ros_address(env)
+    try:
+        return ipaddress.ip_address(address).is_loopback
+    except ValueError:
+        return True  # not an IP: a name we could not resolve; micros_rt stays on loopback then
 
 
 def lease_duration(env: Mapping[str, str] = os.environ) -> float:
-    """The participant lease (seconds): ``MICROS_RT_LEASE_DURATION`` or :data:`DEFAULT_LEASE_DURATION`."""
+    """The participant lease (seconds): ``MICROS_RT_LEASE_DURATION``, else :data:`DEFAULT_LEASE_DURATION`
+    for a loopback node and :data:`DEFAULT_NETWORK_LEASE_DURATION` for one on a network interface."""
     raw = env.get("MICROS_RT_LEASE_DURATION", "").strip()
     if not raw:
-        return DEFAULT_LEASE_DURATION
+        return DEFAULT_LEASE_DURATION if _is_loopback(env) else DEFAULT_NETWORK_LEASE_DURATION
     try:
         value = float(raw)
     except ValueError:
@@ -103,15 +119,9 @@ def cyclone_config(env: Mapping[str, str] = os.environ) -> str:
     user = env.get("CYCLONEDDS_URI", "").strip()
     if user:
         return f"{defaults},{user}"
-    address = _ros_address(env)
-    try:
-        if ipaddress.ip_address(address).is_loopback:
-            return f"{defaults},{LOOPBACK_CONFIG}"
-    except ValueError:
-        # not an IP: a name we could not resolve; stay on loopback rather than
-        # multicasting on an interface nobody asked for.
+    if _is_loopback(env):
         return f"{defaults},{LOOPBACK_CONFIG}"
-    return f"{defaults},{_INTERFACE_CONFIG.format(address=address)}"
+    return f"{defaults},{_INTERFACE_CONFIG.format(address=_ros_address(env))}"
 
 
 def domain_id_from_env(env: Mapping[str, str] = os.environ) -> int:

@@ -16,10 +16,11 @@ from typing import Any, Set, Tuple
 
 from cyclonedds.idl import make_idl_struct
 from cyclonedds.idl import types as _t
+from .._logging import nonblocking_logger
 
 __all__ = ["Ros2GraphAnnouncer", "split_node_name"]
 
-_log = logging.getLogger("rosout.micros_rt.dds")
+_log = nonblocking_logger("rosout.micros_rt.dds")
 
 TOPIC = "ros_discovery_info"
 

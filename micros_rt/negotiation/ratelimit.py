@@ -6,9 +6,13 @@ import collections
 import logging
 import threading
 import time
-from typing import Callable, Hashable, Tuple
+from typing import Any, Callable, Hashable, Protocol, Tuple
 
 __all__ = ["RateLimitedLog"]
+
+
+class _Warns(Protocol):
+    def warning(self, msg: str, *args: Any) -> None: ...
 
 
 class RateLimitedLog:
@@ -27,7 +31,7 @@ class RateLimitedLog:
     False
     """
 
-    def __init__(self, logger: logging.Logger, *, interval: float = 30.0, max_keys: int = 1024,
+    def __init__(self, logger: _Warns, *, interval: float = 30.0, max_keys: int = 1024,
                  per_group: int = 5, clock: Callable[[], float] = time.monotonic) -> None:
         self._logger = logger
         self._interval = interval

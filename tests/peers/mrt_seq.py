@@ -32,7 +32,11 @@ def queue_size(text: str) -> Optional[int]:
 
 
 def send(a: argparse.Namespace, nh: micros_rt.NodeHandle) -> int:
-    pub = nh.advertise(a.topic, UInt8MultiArray, a.queue_size)
+    if a.best_effort:
+        pub = nh.advertise_with_qos(a.topic, UInt8MultiArray, a.queue_size,
+                                    micros_rt.AdvertiseQoSOptions(using_best_effort_protocol=True))
+    else:
+        pub = nh.advertise(a.topic, UInt8MultiArray, a.queue_size)
     deadline = time.monotonic() + 30.0
     while pub.get_num_connections() < a.subscribers and time.monotonic() < deadline:
         time.sleep(0.01)
@@ -41,9 +45,16 @@ def send(a: argparse.Namespace, nh: micros_rt.NodeHandle) -> int:
     pad = bytes(max(a.size - 8, 0))
     msg = UInt8MultiArray()
     start = time.monotonic()
+    period = 1.0 / a.rate if a.rate > 0 else 0.0
     for i in range(a.count):
         msg.data = struct.pack("<Q", i) + pad
         pub.publish(msg)
+        if period:
+            delay = start + (i + 1) * period - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            if a.progress and i % a.progress == 0:
+                emit("progress", i=i)
     elapsed = time.monotonic() - start
     stats = pub.statistics()
     emit("sent", count=a.count, seconds=elapsed, blocked_seconds=stats.blocked_seconds, published=stats.published)
@@ -53,16 +64,25 @@ def send(a: argparse.Namespace, nh: micros_rt.NodeHandle) -> int:
 
 def recv(a: argparse.Namespace, nh: micros_rt.NodeHandle) -> int:
     seen: List[int] = []
+    arrivals: List[float] = []
 
     def cb(msg: Any) -> None:
         seen.append(struct.unpack_from("<Q", msg.data)[0])
+        arrivals.append(time.monotonic())
         if a.slow:
             time.sleep(a.slow)
 
     hints = micros_rt.TransportHints()
     for p in a.hints.split(","):
         hints = hints.tcp() if p == "tcp" else hints.dds() if p == "dds" else hints
-    sub = nh.subscribe(a.topic, UInt8MultiArray, cb, a.queue_size, hints)
+    if a.best_effort or a.deadline:
+        qos = micros_rt.SubscribeQoSOptions(
+            using_best_effort_protocol=a.best_effort, ordered_by_sending_timestamp=False,
+            deadline=a.deadline or float("inf"),
+            deadline_cb=(lambda miss: emit("deadline", silent_for=miss.silent_for)) if a.deadline else None)
+        sub = nh.subscribe_with_qos(a.topic, UInt8MultiArray, cb, a.queue_size, qos)
+    else:
+        sub = nh.subscribe(a.topic, UInt8MultiArray, cb, a.queue_size, hints)
     emit("ready")
     deadline = time.monotonic() + a.timeout
     first: Optional[float] = None
@@ -83,6 +103,7 @@ def recv(a: argparse.Namespace, nh: micros_rt.NodeHandle) -> int:
          out_of_order=out_of_order, missing=a.count - len(distinct),
          transports=sorted(set(sub.connection_transports().values())),
          stats={k: getattr(s, k) for k in s.__dataclass_fields__},
+         longest_gap=max((b - a for a, b in zip(arrivals, arrivals[1:])), default=0.0),
          seconds=(last_change - first) if first is not None else None)
     return 0
 
@@ -100,6 +121,10 @@ def main() -> int:
     ap.add_argument("--timeout", type=float, default=60.0)
     ap.add_argument("--idle", type=float, default=5.0, help="stop after this long without a new message")
     ap.add_argument("--linger", type=float, default=3.0)
+    ap.add_argument("--rate", type=float, default=0.0, help="send: messages per second (0: as fast as possible)")
+    ap.add_argument("--progress", type=int, default=0, help="send: a progress event every N messages")
+    ap.add_argument("--best-effort", action="store_true")
+    ap.add_argument("--deadline", type=float, default=0.0, help="recv: deadline (s), misses printed as events")
     a = ap.parse_args()
     micros_rt.init_node(f"mrt_seq_{a.mode}", anonymous=True, disable_signals=False)
     nh = micros_rt.NodeHandle()

@@ -7,6 +7,7 @@ import pytest
 
 from micros_rt.dds.participant import (
     DEFAULT_LEASE_DURATION,
+    DEFAULT_NETWORK_LEASE_DURATION,
     LOOPBACK_CONFIG,
     cyclone_config,
     lease_duration,
@@ -15,10 +16,18 @@ from micros_rt.dds.participant import (
 from micros_rt.exceptions import DDSUnavailableError
 
 
-def test_default_lease_notices_a_dead_peer_within_two_seconds() -> None:
+def test_default_lease_notices_a_dead_peer_within_two_seconds_on_loopback() -> None:
     assert DEFAULT_LEASE_DURATION <= 2.0
-    assert lease_duration({}) == DEFAULT_LEASE_DURATION
-    assert f"<LeaseDuration>{DEFAULT_LEASE_DURATION:g}s</LeaseDuration>" in micros_rt_defaults({})
+    for env in ({"ROS_IP": "127.0.0.1"}, {"ROS_HOSTNAME": "localhost"}, {"ROS_IP": "::1"}):
+        assert lease_duration(env) == DEFAULT_LEASE_DURATION
+        assert f"<LeaseDuration>{DEFAULT_LEASE_DURATION:g}s</LeaseDuration>" in micros_rt_defaults(env)
+
+
+def test_network_lease_outlasts_a_ten_second_link_outage() -> None:
+    # a match that survives the outage lets the reliable stream resume with the writer's history
+    assert DEFAULT_NETWORK_LEASE_DURATION > 10.0
+    assert lease_duration({"ROS_IP": "10.1.2.3"}) == DEFAULT_NETWORK_LEASE_DURATION
+    assert "<LeaseDuration>15s</LeaseDuration>" in cyclone_config({"ROS_IP": "10.1.2.3"})
 
 
 @pytest.mark.parametrize("raw,value", [("3", 3.0), ("0.5", 0.5), (" 10 ", 10.0), ("3600", 3600.0)])
@@ -37,14 +46,16 @@ def test_bad_lease_is_an_error_naming_the_variable(raw: str) -> None:
 def test_defaults_come_first_so_the_user_file_overrides_them() -> None:
     cfg = cyclone_config({"CYCLONEDDS_URI": "file:///etc/robot/cyclone.xml", "ROS_IP": "127.0.0.1"})
     first, rest = cfg.split(",", 1)
-    assert first == micros_rt_defaults({})
+    assert first == micros_rt_defaults({"ROS_IP": "127.0.0.1"})
     assert rest == "file:///etc/robot/cyclone.xml"
 
 
 def test_loopback_and_interface_configs_carry_the_lease() -> None:
-    assert cyclone_config({"ROS_IP": "127.0.0.1"}) == f"{micros_rt_defaults({})},{LOOPBACK_CONFIG}"
-    cfg = cyclone_config({"ROS_IP": "10.1.2.3"})
-    assert cfg.startswith(micros_rt_defaults({})) and 'address="10.1.2.3"' in cfg
+    loop = {"ROS_IP": "127.0.0.1"}
+    assert cyclone_config(loop) == f"{micros_rt_defaults(loop)},{LOOPBACK_CONFIG}"
+    net = {"ROS_IP": "10.1.2.3"}
+    cfg = cyclone_config(net)
+    assert cfg.startswith(micros_rt_defaults(net)) and 'address="10.1.2.3"' in cfg
 
 
 def test_cyclone_accepts_the_layered_configuration() -> None:
