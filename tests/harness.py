@@ -191,7 +191,8 @@ class RosMaster:
 
     def is_up(self) -> bool:
         try:
-            code, _, _ = self.proxy(timeout=1.0).getPid("/micros_rt_test")
+            answer: Any = self.proxy(timeout=1.0).getPid("/micros_rt_test")
+            code, _, _ = answer
             return bool(code == 1)
         except (OSError, xmlrpc.client.Error):
             return False

@@ -161,7 +161,7 @@ def test_cyclone_loopback_config_reaches_rclpy(ros_master: RosMaster, dds_domain
     assert os.environ["CYCLONEDDS_URI"].endswith("cyclonedds_loopback.xml")
 
     @dataclass
-    class RosString(IdlStruct, typename="std_msgs::msg::dds_::String_"):  # type: ignore[call-arg]
+    class RosString(IdlStruct, typename="std_msgs::msg::dds_::String_"):
         data: str
 
     listener = spawn(ros2_peer_argv("listen", "--topic", "/harness/cyclone", "--count", "1"), ros_master.env)

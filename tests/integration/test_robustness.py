@@ -283,8 +283,11 @@ def test_hundred_publisher_restarts_keep_the_subscriber_small(ros_master: harnes
         proc.wait(30)
     publisher = spawn(probe("restarts", "--topic", "/restarted", "--count", "100"))
     after10 = None
+    def restarted(i: int) -> Callable[[Dict[str, Any]], bool]:
+        return lambda e: e.get("event") == "restarted" and e.get("i") == i
+
     for i in range(100):
-        publisher.wait_for(lambda e, i=i: e.get("event") == "restarted" and e.get("i") == i, 30)
+        publisher.wait_for(restarted(i), 30)
         if i == 9:
             time.sleep(0.6)
             after10 = listener.events("status")[-1]

@@ -235,7 +235,7 @@ class Runner:
         self.executor.spin_once(timeout_sec=timeout)
 
     def time_left(self) -> bool:
-        return time.monotonic() < self.t_end
+        return bool(time.monotonic() < self.t_end)
 
     def talk(self) -> int:
         a = self.args

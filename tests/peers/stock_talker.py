@@ -149,7 +149,7 @@ def main() -> int:
         if n != last_n:
             last_n = n
             emit("connections", n=n)
-        return n
+        return int(n)
 
     if args.wait_subscribers > 0:
         deadline = min(time.monotonic() + args.wait_timeout, t_end)

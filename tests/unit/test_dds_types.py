@@ -108,4 +108,4 @@ def test_bad_input_is_a_clear_error() -> None:
     with pytest.raises(genpy.SerializationError, match="field data: 'x' is not an integer"):
         dds_type_for(Int32).encode(Int32(data="x"))
     with pytest.raises(TypeMappingError, match="not a genpy"):
-        dds_type_for(int)  # type: ignore[arg-type]
+        dds_type_for(int)
