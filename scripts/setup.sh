@@ -26,7 +26,7 @@ quiet() {
 APT_PACKAGES=(
     python3-rospy python3-rosmaster python3-rostopic python3-rosnode
     python3-std-msgs python3-geometry-msgs python3-sensor-msgs ros-core
-    python3-venv tcpdump nftables iproute2
+    python3-venv tcpdump nftables iproute2 python3-matplotlib
 )
 
 missing=()

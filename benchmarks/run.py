@@ -1,0 +1,867 @@
+#!/usr/bin/env python3
+"""micros_rt benchmark suite: every transport in the same run, separate processes, loopback only.
+
+    .venv/bin/python benchmarks/run.py            # full run: 3 rounds (transport order rotated per round)
+    .venv/bin/python benchmarks/run.py --quick    # 1 round, small counts: a smoke check
+    .venv/bin/python benchmarks/run.py --only micros_rt_dds,rospy_tcpros --figures lat64,thr64
+
+Transports (each endpoint its own process; see CONFIG for the configuration of each figure):
+  micros_rt_dds     micros_rt NodeHandle, DDS link (.venv/bin/python, micros_rt's own loopback Cyclone config)
+  micros_rt_tcpros  micros_rt, the subscriber asks TransportHints().tcp() (TCPROS fallback)
+  rospy_tcpros      stock rospy under /usr/bin/python3 (no micros_rt)
+  cyclonedds_python raw cyclonedds-python, struct {sequence<octet>}, pre-serialised ddspy_write / batched ddspy_take
+  rclpy_fastdds     ROS 2 Jazzy rclpy, Fast DDS, loopback UDP + SHM profile (.venv-ros2/bin/python)
+
+Writes benchmarks/results/latest.json, latest.md and PNG plots; prints a table with ratios vs rospy_tcpros
+and the issue's targets. The driver starts its own rosmaster on a free port and kills every child at exit
+(also on Ctrl-C). Per-phase logs go to a temporary directory (kept with --keep-logs).
+"""
+
+import argparse
+import json
+import os
+import platform
+import random
+import select
+import shutil
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import xmlrpc.client
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+PEER = str(HERE / "peer.py")
+RESULTS = HERE / "results"
+PY = {
+    "micros_rt_dds": str(REPO / ".venv/bin/python"),
+    "micros_rt_tcpros": str(REPO / ".venv/bin/python"),
+    "rospy_tcpros": "/usr/bin/python3",
+    "cyclonedds_python": str(REPO / ".venv/bin/python"),
+    "rclpy_fastdds": str(REPO / ".venv-ros2/bin/python"),
+}
+IMPL = {"micros_rt_dds": "mrt_dds", "micros_rt_tcpros": "mrt_tcpros", "rospy_tcpros": "rospy",
+        "cyclonedds_python": "cyclone", "rclpy_fastdds": "rclpy"}
+TRANSPORTS = tuple(PY)
+BASE = "rospy_tcpros"
+CYCLONE_XML = HERE / "cyclonedds_loopback.xml"
+FASTDDS_XML = REPO / "tests/peers/fastdds_loopback.xml"
+CONFIG = {
+    "micros_rt_dds": "advertise(queue_size=None) / subscribe(queue_size=None), default QoS (reliable); "
+                     "no CYCLONEDDS_URI, ROS_IP=127.0.0.1 (micros_rt's own loopback Cyclone config)",
+    "micros_rt_tcpros": "advertise(queue_size=None); subscribe(queue_size=None, TransportHints().tcp())",
+    "rospy_tcpros": "Publisher(queue_size=None) (synchronous), Subscriber(queue_size=None, tcp_nodelay=True)",
+    "cyclonedds_python": "reliable (max_blocking 10 s), KEEP_ALL; struct {sequence<octet> data} written "
+                         "pre-serialised with ddspy_write, taken 256 at a time with ddspy_take (bytes path); "
+                         "CYCLONEDDS_URI=benchmarks/cyclonedds_loopback.xml",
+    "rclpy_fastdds": "QoS reliable KEEP_ALL; Fast DDS default publish mode; tests/peers/fastdds_loopback.xml "
+                     "(UDP 127.0.0.1 + SHM), ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST; single-threaded spin_once",
+}
+REALISTIC = {  # kind: (label, size in bytes)
+    "image_vga": ("sensor_msgs/Image 640x480 rgb8", 640 * 480 * 3),
+    "image_hd": ("sensor_msgs/Image 1920x1080 rgb8", 1920 * 1080 * 3),
+    "cloud": ("sensor_msgs/PointCloud2 65,536 pts (1 MiB)", 65536 * 16),
+    "scan": ("sensor_msgs/LaserScan 1,081 ranges", 1081 * 8),
+}
+FIGURE_GROUPS = ("lat64", "lat64k", "thr64", "thr1m", "fanout4", "disc", "realistic", "scale")
+# (figure, target ratio vs rospy, "<=" or ">=", extra condition)
+TARGETS = {
+    "lat64_p50_us": (0.8, "<="), "lat64_p99_us": (1.0, "<="),
+    "lat64k_p50_us": (0.8, "<="), "lat64k_p99_us": (1.0, "<="),
+    "thr64_msgs_per_s": (1.2, ">="), "thr1m_MB_per_s": (1.2, ">="),
+    "fanout4_msgs_per_s": (1.5, ">="), "fanout4_pub_cpu_us_per_msg": (0.7, "<="),
+    "disc_ms": (1.0, "<="), "idle_rss_MB": (1.3, "<="),
+}
+for _k in REALISTIC:
+    TARGETS[f"{_k}_p50_us"] = (1.0, "<=")
+    TARGETS[f"{_k}_p99_us"] = (1.0, "<=")
+    TARGETS[f"{_k}_msgs_per_s"] = (1.0, ">=")
+LOWER_BETTER = lambda f: not (f.endswith("per_s"))  # noqa: E731
+
+PROFILES = {
+    "full": dict(rounds=3, lat_n=2000, lat_warm=200, latk_n=1000, thr64_n=60000, thr1m_n=600, thr_s=2.0, lat_s=2.5,
+                 fan_n=30000, real_lat_n=200, real_thr_n=300, real_s=1.0, scale_ns=(2, 10, 30), scale_steady=3.0, idle_s=2.0,
+                 rclpy_lat_n=1000),
+    "quick": dict(rounds=1, lat_n=500, lat_warm=50, latk_n=200, thr64_n=10000, thr1m_n=100, thr_s=1.5, lat_s=1.5,
+                  fan_n=5000, real_lat_n=50, real_thr_n=60, real_s=1.0, scale_ns=(10,), scale_steady=2.0, idle_s=1.0,
+                  rclpy_lat_n=300),
+}
+
+CHILDREN = []
+
+
+# =========================================================================== processes
+
+class Proc:
+    def __init__(self, transport, role, args, env, logdir, tag):
+        self.tag = tag
+        self.out_path = logdir / f"{tag}.out"
+        self.err = open(logdir / f"{tag}.err", "w")
+        self.t_spawn = time.time()
+        self.p = subprocess.Popen([PY[transport], PEER, IMPL[transport], role, *map(str, args)], env=env,
+                                  stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.err,
+                                  text=True, bufsize=1, start_new_session=True)
+        CHILDREN.append(self)
+        self.lines = []
+        self._buf = ""
+        self._out = open(self.out_path, "w")
+
+    def poll_lines(self, timeout):
+        """Read whatever stdout has (waiting up to ``timeout``)."""
+        fd = self.p.stdout.fileno()
+        r, _, _ = select.select([fd], [], [], timeout)
+        if r:
+            chunk = os.read(fd, 1 << 16).decode(errors="replace")
+            if not chunk:
+                return False
+            self._out.write(chunk)
+            self._buf += chunk
+            while "\n" in self._buf:
+                line, self._buf = self._buf.split("\n", 1)
+                try:
+                    self.lines.append(json.loads(line))
+                except ValueError:
+                    pass
+        return True
+
+    def wait_ev(self, ev, timeout):
+        deadline = time.monotonic() + timeout
+        while True:
+            for d in self.lines:
+                if d.get("ev") == ev:
+                    return d
+                if d.get("ev") == "error":
+                    raise PhaseError(f"{self.tag}: {d.get('error')}")
+            rem = deadline - time.monotonic()
+            if rem <= 0:
+                raise PhaseError(f"{self.tag}: no '{ev}' within {timeout:.0f} s")
+            if not self.poll_lines(min(rem, 0.2)) and self.p.poll() is not None:
+                for d in self.lines:
+                    if d.get("ev") == ev:
+                        return d
+                raise PhaseError(f"{self.tag}: exited ({self.p.returncode}) before '{ev}'; "
+                                 f"stderr: {self.stderr_tail()}")
+
+    def wait_ev_i(self, ev, i, timeout):
+        """The ``ev`` line whose "i" is ``i`` (multi-spec roles)."""
+        deadline = time.monotonic() + timeout
+        while True:
+            for d in self.lines:
+                if d.get("ev") == ev and d.get("i") == i:
+                    return d
+                if d.get("ev") == "error":
+                    raise PhaseError(f"{self.tag}: {d.get('error')}")
+            rem = deadline - time.monotonic()
+            if rem <= 0:
+                raise PhaseError(f"{self.tag}: no '{ev}' #{i} within {timeout:.0f} s")
+            if not self.poll_lines(min(rem, 0.2)) and self.p.poll() is not None:
+                raise PhaseError(f"{self.tag}: exited ({self.p.returncode}) before '{ev}' #{i}; "
+                                 f"stderr: {self.stderr_tail()}")
+
+    def send(self, line):
+        try:
+            self.p.stdin.write(line + "\n")
+            self.p.stdin.flush()
+        except (BrokenPipeError, OSError, ValueError):
+            pass
+
+    def stderr_tail(self):
+        try:
+            return " | ".join(Path(self.err.name).read_text().strip().splitlines()[-3:])
+        except OSError:
+            return ""
+
+    def stop(self, grace=2.0):
+        try:
+            self.p.stdin.close()
+        except (OSError, ValueError):
+            pass
+        for sig in (signal.SIGTERM, signal.SIGKILL):
+            if self.p.poll() is not None:
+                break
+            try:
+                os.killpg(self.p.pid, sig)
+            except (ProcessLookupError, PermissionError):
+                break
+            try:
+                self.p.wait(grace)
+            except subprocess.TimeoutExpired:
+                continue
+        while self.poll_lines(0):
+            if self.p.stdout.closed:
+                break
+            if not select.select([self.p.stdout.fileno()], [], [], 0)[0]:
+                break
+        self._out.close()
+        self.err.close()
+        if self in CHILDREN:
+            CHILDREN.remove(self)
+
+
+def _pct(s, p):
+    return s[min(len(s) - 1, int(round(p / 100 * (len(s) - 1))))]
+
+
+class PhaseError(Exception):
+    pass
+
+
+def kill_all():
+    for c in list(CHILDREN):
+        try:
+            c.stop(grace=1.0)
+        except Exception:
+            pass
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def start_master(logdir):
+    port = free_port()
+    env = dict(os.environ, ROS_IP="127.0.0.1", ROS_MASTER_URI=f"http://127.0.0.1:{port}")
+    err = open(logdir / "rosmaster.log", "w")
+    p = subprocess.Popen(["/usr/bin/rosmaster", "--core", "-p", str(port)], env=env, stdout=err, stderr=err,
+                         stdin=subprocess.DEVNULL, start_new_session=True)
+    uri = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline:
+        try:
+            xmlrpc.client.ServerProxy(uri).getSystemState("/bench")
+            return p, uri
+        except OSError:
+            time.sleep(0.1)
+    p.kill()
+    raise SystemExit("rosmaster did not come up within 20 s")
+
+
+def child_env(transport, master_uri, domain):
+    env = {k: v for k, v in os.environ.items()
+           if not k.startswith(("ROS_", "CYCLONEDDS", "FASTRTPS", "FASTDDS", "RMW_", "PYTHONPATH", "AMENT",
+                                "MICROS_RT"))}
+    env.update(ROS_MASTER_URI=master_uri, ROS_IP="127.0.0.1", ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED="1",
+               ROS_HOME=str(Path(tempfile.gettempdir()) / "micros_rt_bench_roshome"))
+    if transport == "cyclonedds_python":
+        env["CYCLONEDDS_URI"] = f"file://{CYCLONE_XML}"
+    if transport == "rclpy_fastdds":
+        env.update(ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", FASTRTPS_DEFAULT_PROFILES_FILE=str(FASTDDS_XML))
+    return env
+
+
+# =========================================================================== /proc helpers
+
+def cpu_ticks(pid):
+    try:
+        f = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return int(f[11]) + int(f[12])
+    except (OSError, IndexError):
+        return 0
+
+
+def rss_mb(pid):
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return None
+
+
+def pss_mb(pid):
+    try:
+        for line in Path(f"/proc/{pid}/smaps_rollup").read_text().splitlines():
+            if line.startswith("Pss:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return None
+
+
+# =========================================================================== phases
+
+class Bench:
+    def __init__(self, args, prof, logdir):
+        self.a, self.P, self.logdir = args, prof, logdir
+        self.master, self.master_uri = start_master(logdir)
+        self.domain = random.randrange(100, 200)
+        self.n = 0
+        self.samples = {}  # (transport, figure) -> list of latency samples (last round)
+        self.errors = []
+        self.t0 = time.monotonic()
+        self.prefix = ""
+
+    def progress(self, what):
+        el = time.monotonic() - self.t0
+        sys.stderr.write(f"\r\033[K{self.prefix} {what} ({el:.0f} s)")
+        sys.stderr.flush()
+
+    def env(self, t):
+        return child_env(t, self.master_uri, self.domain)
+
+    def spawn(self, t, role, args, tag):
+        self.n += 1
+        return Proc(t, role, args, self.env(t), self.logdir, f"{self.n:03d}_{t}_{role}_{tag}")
+
+    def topic(self, name):
+        return f"/bench_{name}_{random.randrange(1 << 30)}"
+
+    def lat(self, t, specs):
+        """specs: [(tag, kind, size, count, warmup)]: one echo and one ping process, one topic pair each."""
+        if t == "rclpy_fastdds":
+            specs = [(tag, k, sz, min(c, self.P["rclpy_lat_n"]), w) for tag, k, sz, c, w in specs]
+        topic = self.topic("lat")
+        sp = ",".join(f"{k}:{sz}:{c}:{w}" for _, k, sz, c, w in specs)
+        common = ["--topic", topic, "--specs", sp, "--seconds", self.P["lat_s"],
+                  "--timeout", 60 + len(specs) * (self.P["lat_s"] + 5)]
+        echo = self.spawn(t, "echo", common, "lat")
+        out = {}
+        try:
+            echo.wait_ev("ready", 30)
+            ping = self.spawn(t, "ping", common, "lat")
+            try:
+                for i, (tag, _, _, count, _) in enumerate(specs):
+                    self.progress(tag)
+                    r = ping.wait_ev_i("result", i, 40 + self.P["lat_s"] + 5)
+                    rt = sorted(r["rtts"])
+                    if not rt:
+                        raise PhaseError(f"{tag}: no round trips ({r['lost']} lost)")
+                    self.samples[(t, tag)] = rt
+                    out.update({f"{tag}_p50_us": statistics.median(rt), f"{tag}_p99_us": _pct(rt, 99),
+                                f"{tag}_rt_lost": r["lost"]})
+            finally:
+                ping.stop()
+        finally:
+            echo.stop()
+        return out
+
+    def thr(self, t, specs, subs=1, seconds=None):
+        """specs: [(tag, kind, size, count)]: one sender and ``subs`` receivers, one topic per spec, in turn."""
+        seconds = seconds or self.P["thr_s"]
+        topic = self.topic("thr")
+        sp = ",".join(f"{k}:{sz}:{c}:0:{seconds if k == 'bytes' else self.P['real_s']}" for _, k, sz, c in specs)
+        limit = 60 + len(specs) * (seconds + 10)
+        common = ["--topic", topic, "--specs", sp, "--timeout", limit]
+        recvs, send, out = [], None, {}
+        try:
+            for j in range(subs):
+                recvs.append(self.spawn(t, "recv", [*common, "--drain", 2.0], f"thr{j}"))
+            for r in recvs:
+                r.wait_ev("ready", 30)
+            send = self.spawn(t, "send", [*common, "--seconds", seconds, "--subs", subs], "thr")
+            for i, (tag, _, size, _) in enumerate(specs):
+                self.progress(tag)
+                s = send.wait_ev_i("sent", i, 40 + seconds)
+                for r in recvs:
+                    r.send(f"SENT {i} {s['sent']}")
+                res = [r.wait_ev_i("result", i, 30) for r in recvs]
+                send.send(f"NEXT {i}")
+                sent = s["sent"]
+                got = [r["received"] for r in res]
+                rates = [(g - 1) / r["span_s"] if r["span_s"] else 0.0 for g, r in zip(got, res)]
+                agg = sum(rates)
+                out.update({f"{tag}_msgs_per_s": agg, f"{tag}_MB_per_s": agg * size / 1e6,
+                            f"{tag}_lost": sum(sent - g for g in got), f"{tag}_sent": sent * subs})
+                if subs > 1:
+                    out[f"{tag}_pub_cpu_us_per_msg"] = s["cpu_s"] * 1e6 / max(1, sum(got))
+        finally:
+            if send is not None:
+                send.stop()
+            for r in recvs:
+                r.stop()
+        return out
+
+    def disc(self, t):
+        topic = self.topic("disc")
+        common = ["--topic", topic, "--kind", "bytes", "--size", 64, "--timeout", 60]
+        lis = self.spawn(t, "listener", common, "disc")
+        talk = None
+        try:
+            lis.wait_ev("ready", 30)
+            time.sleep(0.3)
+            talk = self.spawn(t, "talker", common, "disc")
+            f = lis.wait_ev("first", 40)
+            if f.get("t") is None:
+                raise PhaseError("listener never heard the talker")
+            disc_ms = (f["t"] - talk.t_spawn) * 1e3
+            talk.send("IDLE")
+            talk.wait_ev("idle", 10)
+            time.sleep(self.P["idle_s"])
+            rss = rss_mb(talk.p.pid)
+        finally:
+            if talk is not None:
+                talk.stop()
+            lis.stop()
+        return {"disc_ms": disc_ms, "idle_rss_MB": rss}
+
+    def scale(self, t, n):
+        topic = self.topic(f"g{n}")
+        procs = []
+        t0 = time.time()
+        try:
+            for i in range(n):
+                procs.append(self.spawn(t, "graph", ["--topic", topic, "--nodes", n, "--index", i,
+                                                     "--kind", "bytes", "--size", 64, "--timeout", 180], f"n{n}"))
+            last = 0.0
+            for p in procs:
+                last = max(last, p.wait_ev("connected", max(5.0, 120 - (time.time() - t0)))["t"])
+            connect_s = last - t0
+            pids = [p.p.pid for p in procs] + ([self.master.pid] if t.startswith(("micros", "rospy")) else [])
+            time.sleep(1.0)
+            c0, w0 = sum(cpu_ticks(x) for x in pids), time.monotonic()
+            time.sleep(self.P["scale_steady"])
+            c1, w1 = sum(cpu_ticks(x) for x in pids), time.monotonic()
+            cpu_pct = (c1 - c0) / os.sysconf("SC_CLK_TCK") / (w1 - w0) * 100
+            pss = [pss_mb(p.p.pid) for p in procs]
+            pss = statistics.fmean([x for x in pss if x is not None])
+        finally:
+            for p in procs:
+                p.stop(grace=1.0)
+        return {f"scale{n}_connect_s": connect_s, f"scale{n}_cpu_pct": cpu_pct, f"scale{n}_pss_MB": pss}
+
+    def stop(self):
+        kill_all()
+        try:
+            os.killpg(self.master.pid, signal.SIGTERM)
+            self.master.wait(3)
+        except (ProcessLookupError, subprocess.TimeoutExpired, PermissionError):
+            self.master.kill()
+
+
+def plan(args, P):
+    """[(round, transport, label, spec)]: per transport and round one latency phase (64 B, 64 KiB, realistic
+    types), one throughput phase (the same), fan-out, discovery; the scale graph in round 1 only."""
+    steps = []
+    ts = list(args.only)
+    g = set(args.figures)
+    for rnd in range(P["rounds"]):
+        order = ts[rnd % len(ts):] + ts[:rnd % len(ts)]
+        for t in order:
+            real = "realistic" in g and t != "cyclonedds_python"  # raw DDS: no ROS message types here
+            lat = [x for x in ("lat64", "lat64k") if x in g] + (list(REALISTIC) if real else [])
+            thr = [x for x in ("thr64", "thr1m") if x in g] + (list(REALISTIC) if real else [])
+            if lat:
+                steps.append((rnd, t, "latency", ("lat", lat)))
+            if thr:
+                steps.append((rnd, t, "throughput", ("thr", thr)))
+            if "fanout4" in g:
+                steps.append((rnd, t, "fanout4", ("fanout4",)))
+            if "disc" in g:
+                steps.append((rnd, t, "disc", ("disc",)))
+            if "scale" in g and rnd == 0:
+                for n in P["scale_ns"]:
+                    steps.append((rnd, t, f"scale N={n}", ("scale", n)))
+    return steps
+
+
+def run_step(b, P, t, spec):
+    kind = spec[0]
+    if kind == "lat":
+        specs = []
+        for tag in spec[1]:
+            if tag == "lat64":
+                specs.append(("lat64", "bytes", 64, P["lat_n"], P["lat_warm"]))
+            elif tag == "lat64k":
+                specs.append(("lat64k", "bytes", 65536, P["latk_n"], P["lat_warm"] // 2))
+            else:
+                specs.append((tag, tag, REALISTIC[tag][1], P["real_lat_n"], 10))
+        return b.lat(t, specs)
+    if kind == "thr":
+        specs = []
+        for tag in spec[1]:
+            if tag == "thr64":
+                specs.append(("thr64", "bytes", 64, P["thr64_n"]))
+            elif tag == "thr1m":
+                specs.append(("thr1m", "bytes", 1 << 20, P["thr1m_n"]))
+            else:
+                specs.append((tag, tag, REALISTIC[tag][1], P["real_thr_n"]))
+        return b.thr(t, specs)
+    if kind == "fanout4":
+        return b.thr(t, [("fanout4", "bytes", 64, P["fan_n"])], subs=4)
+    if kind == "disc":
+        return b.disc(t)
+    if kind == "scale":
+        return b.scale(t, spec[1])
+    raise ValueError(spec)
+
+
+# =========================================================================== reporting
+
+def machine():
+    cpu = "?"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    try:
+        cyc = subprocess.run([PY["micros_rt_dds"], "-c", "import importlib.metadata as m;"
+                              "print(m.version('cyclonedds'))"], capture_output=True, text=True,
+                             timeout=20).stdout.strip()
+    except Exception:
+        cyc = "?"
+    try:
+        rcl = subprocess.run([PY["rclpy_fastdds"], "-c", "import importlib.metadata as m;"
+                              "print(m.version('rclpy'))"], capture_output=True, text=True,
+                             timeout=20).stdout.strip() or "?"
+    except Exception:
+        rcl = "?"
+    return {"cpu": cpu, "cores": os.cpu_count(), "kernel": platform.release(), "os": _os_name(),
+            "python": platform.python_version(), "cyclonedds": cyc, "rclpy": rcl,
+            "mem_GB": round(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9, 1)}
+
+
+def _os_name():
+    try:
+        for line in Path("/etc/os-release").read_text().splitlines():
+            if line.startswith("PRETTY_NAME="):
+                return line.split("=", 1)[1].strip('"')
+    except OSError:
+        pass
+    return platform.system()
+
+
+def fmt(v):
+    if v is None:
+        return "—"
+    if isinstance(v, int) or (isinstance(v, float) and v.is_integer() and abs(v) < 1e6 and abs(v) >= 100):
+        return f"{int(v):,}"
+    if abs(v) >= 100:
+        return f"{v:,.0f}"
+    if abs(v) >= 10:
+        return f"{v:.1f}"
+    return f"{v:.2f}"
+
+
+def verdict(fig, figs, t):
+    """'ok'/'MISS' for micros_rt_dds vs rospy, '' otherwise."""
+    if t != "micros_rt_dds" or fig not in TARGETS:
+        return ""
+    v, b = figs.get(t, {}).get(fig), figs.get(BASE, {}).get(fig)
+    if v is None or not b:
+        return ""
+    lim, op = TARGETS[fig]
+    r = v / b
+    ok = r <= lim if op == "<=" else r >= lim
+    if fig.startswith(("thr", "fanout")) or fig.endswith("_msgs_per_s"):
+        pre = fig.rsplit("_", 3)[0] if not fig.startswith("fanout") else "fanout4"
+        if figs[t].get(f"{pre}_lost"):
+            ok = False
+    return "ok" if ok else "MISS"
+
+
+def table(figs, spread, transports, md=False):
+    names = sorted({f for t in transports for f, v in figs.get(t, {}).items()
+                    if not isinstance(v, dict) and not f.endswith("_sent")}, key=_fig_order)
+    short = {"micros_rt_dds": "mrt DDS", "micros_rt_tcpros": "mrt TCPROS", "rospy_tcpros": "rospy",
+             "cyclonedds_python": "cyclone-py", "rclpy_fastdds": "rclpy"}
+    cols = [t for t in transports]
+    head = ["figure"] + [short[t] for t in cols]
+    if BASE in cols:
+        head += ["mrt/rospy", "target", ""]
+    rows = []
+    for f in names:
+        row = [f]
+        for t in cols:
+            v = figs.get(t, {}).get(f)
+            s = spread.get(t, {}).get(f)
+            cell = fmt(v)
+            if s and v is not None and s[0] != s[1] and not md:
+                pass
+            row.append(cell)
+        if BASE in cols:
+            v, b = figs.get("micros_rt_dds", {}).get(f), figs.get(BASE, {}).get(f)
+            row.append(f"{v / b:.2f}x" if v is not None and b and not f.endswith("lost") else "")
+            tg = TARGETS.get(f)
+            row.append(f"{tg[1]} {tg[0]}x" if tg else "")
+            row.append(verdict(f, figs, "micros_rt_dds"))
+        rows.append(row)
+    if md:
+        out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        out += ["| " + " | ".join(r) + " |" for r in rows]
+        return "\n".join(out)
+    w = [max(len(str(r[i])) for r in [head] + rows) for i in range(len(head))]
+    lines = ["  ".join(str(c).rjust(w[i]) if i else str(c).ljust(w[i]) for i, c in enumerate(r))
+             for r in [head] + rows]
+    lines.insert(1, "-" * len(lines[0]))
+    return "\n".join(lines)
+
+
+def _fig_order(f):
+    order = ["lat64_", "lat64k_", "thr64_", "thr1m_", "fanout4_", "disc", "idle", "image_vga", "image_hd",
+             "cloud", "scan", "scale2_", "scale10_", "scale30_"]
+    for i, p in enumerate(order):
+        if f.startswith(p):
+            return (i, f)
+    return (99, f)
+
+
+def plots(figs, samples, transports, outdir):
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        import matplotlib.ticker
+    except ImportError:
+        return ["(matplotlib not installed: no plots; apt-get install python3-matplotlib)"]
+    colors = {"micros_rt_dds": "#1f77b4", "micros_rt_tcpros": "#aec7e8", "rospy_tcpros": "#d62728",
+              "cyclonedds_python": "#2ca02c", "rclpy_fastdds": "#9467bd"}
+    made = []
+    # latency distributions
+    for tag, title in (("lat64", "64 B"), ("lat64k", "64 KiB")):
+        ts = [t for t in transports if (t, tag) in samples]
+        if not ts:
+            continue
+        fig, ax = plt.subplots(figsize=(10, 1.2 + 0.75 * len(ts)))
+        data = [samples[(t, tag)] for t in ts]
+        parts = ax.violinplot(data, vert=False, showextrema=False, quantiles=[[0.5, 0.99]] * len(ts))
+        for body, t in zip(parts["bodies"], ts):
+            body.set_facecolor(colors[t])
+            body.set_alpha(0.65)
+        parts["cquantiles"].set_color("black")
+        lo = min(min(d) for d in data)
+        hi = max(max(d) for d in data)
+        ax.set_xlim(lo / 1.3, hi * 1.3)
+        from matplotlib.transforms import blended_transform_factory
+        tr = blended_transform_factory(ax.transAxes, ax.transData)
+        for i, (t, d) in enumerate(zip(ts, data)):
+            p50 = figs[t].get(f"{tag}_p50_us")
+            p99 = figs[t].get(f"{tag}_p99_us")
+            ax.text(1.01, i + 1, f"p50 {fmt(p50)} µs\np99 {fmt(p99)} µs", fontsize=8, ha="left", va="center",
+                    transform=tr)
+        ax.set_yticks(range(1, len(ts) + 1), ts)
+        ax.set_xscale("log")
+        from matplotlib.ticker import LogLocator, ScalarFormatter
+        ax.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        ax.xaxis.set_major_formatter(ScalarFormatter())
+        ax.xaxis.set_minor_formatter(plt.NullFormatter())
+        ax.set_xlabel("round trip (µs, log scale); black ticks: p50 and p99 of this round; text: median over rounds")
+        ax.set_title(f"Round-trip latency, {title} std_msgs/UInt8MultiArray, loopback, last round")
+        ax.grid(axis="x", which="both", alpha=0.3)
+        fig.tight_layout()
+        p = outdir / f"latency_{tag}.png"
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        made.append(p.name)
+    # throughput bars
+    groups = [("thr64_msgs_per_s", "64 B one-way\n(msg/s)", "thr64_lost"),
+              ("thr1m_MB_per_s", "1 MiB one-way\n(MB/s)", "thr1m_lost"),
+              ("fanout4_msgs_per_s", "fan-out 1→4, 64 B\n(aggregate msg/s)", "fanout4_lost")]
+    groups = [g for g in groups if any(g[0] in figs.get(t, {}) for t in transports)]
+    if groups:
+        fig, axes = plt.subplots(1, len(groups), figsize=(4.2 * len(groups), 4.2), squeeze=False)
+        for ax, (f, title, lostf) in zip(axes[0], groups):
+            ts = [t for t in transports if f in figs.get(t, {})]
+            vals = [figs[t][f] for t in ts]
+            bars = ax.bar(range(len(ts)), vals, color=[colors[t] for t in ts])
+            for bar, t in zip(bars, ts):
+                lost = figs[t].get(lostf)
+                ax.text(bar.get_x() + bar.get_width() / 2, bar.get_height(),
+                        f"{fmt(figs[t][f])}\nlost {fmt(lost)}", ha="center", va="bottom", fontsize=7,
+                        color="black" if not lost else "red")
+            ax.set_xticks(range(len(ts)), [t.replace("_", "\n", 1) for t in ts], fontsize=7)
+            ax.set_title(title, fontsize=10)
+            ax.set_ylim(0, max(vals + [1]) * 1.25)
+            ax.yaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:,.0f}"))
+            ax.grid(axis="y", alpha=0.3)
+        fig.suptitle("Throughput (median of rounds, measured at the receiver; lost = sent − received)")
+        fig.tight_layout()
+        p = outdir / "throughput.png"
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        made.append(p.name)
+    # realistic types
+    ks = [k for k in REALISTIC if any(f"{k}_p50_us" in figs.get(t, {}) for t in transports)]
+    if ks:
+        fig, axes = plt.subplots(2, len(ks), figsize=(3.6 * len(ks), 6.5), squeeze=False)
+        for j, k in enumerate(ks):
+            ts = [t for t in transports if f"{k}_p50_us" in figs.get(t, {})]
+            for i, (f, yl) in enumerate(((f"{k}_p50_us", "round trip p50 (µs)"),
+                                         (f"{k}_msgs_per_s", "one-way msg/s"))):
+                ax = axes[i][j]
+                vals = [figs[t].get(f) or 0 for t in ts]
+                bars = ax.bar(range(len(ts)), vals, color=[colors[t] for t in ts])
+                for bar, t, v in zip(bars, ts, vals):
+                    extra = ""
+                    if i == 1:
+                        lost = figs[t].get(f"{k}_lost")
+                        extra = f"\nlost {fmt(lost)}"
+                    ax.text(bar.get_x() + bar.get_width() / 2, bar.get_height(), fmt(v) + extra,
+                            ha="center", va="bottom", fontsize=7)
+                ax.set_xticks(range(len(ts)), [t.split("_")[0] + ("\n" + t.split("_", 1)[1] if "_" in t else "")
+                                               for t in ts], fontsize=6)
+                ax.set_ylim(0, max(vals + [1]) * 1.3)
+                ax.set_ylabel(yl, fontsize=8)
+                if i == 0:
+                    ax.set_title(REALISTIC[k][0], fontsize=9)
+                ax.grid(axis="y", alpha=0.3)
+        fig.suptitle("Realistic message types (lower latency / higher rate is better)")
+        fig.tight_layout()
+        p = outdir / "realistic.png"
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        made.append(p.name)
+    # scale curves
+    ns = sorted({int(f[5:].split("_")[0]) for t in transports for f in figs.get(t, {}) if f.startswith("scale")})
+    if ns:
+        fig, axes = plt.subplots(1, 3, figsize=(13, 4))
+        for ax, (suf, yl) in zip(axes, (("connect_s", "start → fully connected (s)"),
+                                        ("cpu_pct", "steady CPU, all nodes + master (% of a core)"),
+                                        ("pss_MB", "PSS per node (MB)"))):
+            for t in transports:
+                pts = [(n, figs.get(t, {}).get(f"scale{n}_{suf}")) for n in ns]
+                pts = [(n, v) for n, v in pts if v is not None]
+                if pts:
+                    ax.plot([n for n, _ in pts], [v for _, v in pts], "o-", color=colors[t], label=t)
+            ax.set_xlabel("nodes N (each: 1 topic at 10 Hz out, 3 in)")
+            ax.set_ylabel(yl, fontsize=9)
+            ax.set_xticks(ns)
+            ax.grid(alpha=0.3)
+        axes[0].legend(fontsize=8)
+        fig.suptitle("A graph of N nodes on one host")
+        fig.tight_layout()
+        p = outdir / "scale.png"
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        made.append(p.name)
+    return made
+
+
+# =========================================================================== main
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="1 round, small counts (< 3 min)")
+    ap.add_argument("--only", default=",".join(TRANSPORTS), help="comma-separated transports")
+    ap.add_argument("--figures", default=",".join(FIGURE_GROUPS), help="comma-separated: " + ",".join(FIGURE_GROUPS))
+    ap.add_argument("--rounds", type=int, help="override the number of rounds")
+    ap.add_argument("--out", default=str(RESULTS), help="results directory")
+    ap.add_argument("--keep-logs", action="store_true")
+    args = ap.parse_args()
+    args.only = [t.strip() for t in args.only.split(",") if t.strip()]
+    args.figures = [f.strip() for f in args.figures.split(",") if f.strip()]
+    for t in args.only:
+        if t not in TRANSPORTS:
+            ap.error(f"unknown transport {t}; known: {', '.join(TRANSPORTS)}")
+    for f in args.figures:
+        if f not in FIGURE_GROUPS:
+            ap.error(f"unknown figure group {f}; known: {', '.join(FIGURE_GROUPS)}")
+    P = dict(PROFILES["quick" if args.quick else "full"])
+    if args.rounds:
+        P["rounds"] = args.rounds
+    command = "benchmarks/run.py " + " ".join(sys.argv[1:]) if sys.argv[1:] else "benchmarks/run.py"
+    outdir = Path(args.out)
+    outdir.mkdir(parents=True, exist_ok=True)
+    logdir = Path(tempfile.mkdtemp(prefix="micros_rt_bench_"))
+
+    def on_signal(signum, _frame):
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, on_signal)
+    t_start = time.monotonic()
+    b = Bench(args, P, logdir)
+    per_round = {}  # (transport, figure) -> [values]
+    steps = plan(args, P)
+    interrupted = False
+    try:
+        for i, (rnd, t, label, spec) in enumerate(steps, 1):
+            b.prefix = f"[{i}/{len(steps)}] round {rnd + 1}/{P['rounds']} {t}"
+            b.progress(label)
+            try:
+                res = run_step(b, P, t, spec)
+            except PhaseError as exc:
+                msg = f"round {rnd + 1} {t} {label}: {exc}"
+                b.errors.append(msg)
+                sys.stderr.write(f"\r\033[K  ! {msg}\n")
+                kill_all()
+                continue
+            for f, v in res.items():
+                if v is not None:
+                    per_round.setdefault((t, f), []).append(v)
+    except KeyboardInterrupt:
+        interrupted = True
+        sys.stderr.write("\ninterrupted: stopping children, writing what was measured\n")
+    finally:
+        b.stop()
+    wall = time.monotonic() - t_start
+    sys.stderr.write(f"\r\033[Kdone in {wall:.0f} s\n")
+
+    figs, spread = {}, {}
+    for (t, f), vs in per_round.items():
+        figs.setdefault(t, {})[f] = statistics.median(vs)
+        spread.setdefault(t, {})[f] = [min(vs), max(vs), len(vs)]
+    for t in figs:  # loss is a count: report the worst round, never a median that hides it
+        for f in list(figs[t]):
+            if f.endswith("_lost"):
+                figs[t][f] = max(per_round[(t, f)])
+    transports = [t for t in TRANSPORTS if t in args.only]
+    for t in figs:  # one entry per realistic type (the flat keys stay for the table)
+        for k, (label, _) in REALISTIC.items():
+            e = {x: figs[t].get(f"{k}_{x}") for x in ("p50_us", "p99_us", "rt_lost", "msgs_per_s", "MB_per_s",
+                                                      "lost")}
+            if any(v is not None for v in e.values()):
+                e["max_rate_0_lost_msgs_per_s"] = e["msgs_per_s"] if e["lost"] == 0 else None
+                figs[t][label] = e
+    mach = machine()
+    data = {"machine": mach, "command": ".venv/bin/python " + command, "wall_s": round(wall, 1),
+            "rounds": P["rounds"], "interrupted": interrupted,
+            "figures": {t: figs.get(t, {}) for t in transports},
+            "spread": {t: spread.get(t, {}) for t in transports},
+            "config": {t: CONFIG[t] for t in transports},
+            "targets": {f: f"{op} {lim}x rospy_tcpros" for f, (lim, op) in TARGETS.items()},
+            "errors": b.errors,
+            "notes": "figures are medians over rounds (loss: worst round); spread is [min, max, rounds]; "
+                     "latency in µs (ping-pong, p50/p99), throughput measured at the receiver over first..last "
+                     "message; lost = sent − distinct sequence numbers received after a 2 s drain."}
+    (outdir / "latest.json").write_text(json.dumps(data, indent=1) + "\n")
+    made = plots(figs, b.samples, transports, outdir)
+
+    tbl = table(figs, spread, transports)
+    print(tbl)
+    print()
+    for t in transports:
+        print(f"  {t}: {CONFIG[t]}")
+    if b.errors:
+        print("\nerrors:")
+        for e in b.errors:
+            print("  " + e)
+    print(f"\nwall time {wall:.0f} s; results in {outdir}/latest.json, latest.md, {', '.join(made)}")
+
+    md = ["## Performance", "",
+          f"Measured with `{data['command']}` ({P['rounds']} round(s), {wall / 60:.1f} min) on "
+          f"{mach['cpu']}, {mach['cores']} cores, {mach['mem_GB']} GB, {mach['os']}, Linux {mach['kernel']}, "
+          f"Python {mach['python']}, cyclonedds {mach['cyclonedds']}, rclpy {mach['rclpy']}. "
+          "Every endpoint is its own process, loopback only; figures are medians over rounds (loss: the worst "
+          "round). Latency: ping-pong round trip in µs. Throughput: one-way, measured at the receiver; lost = "
+          "sent − received. The last three columns compare micros_rt DDS with stock rospy TCPROS measured in "
+          "the same run against the targets of issue 8.", "",
+          table(figs, spread, transports, md=True), "",
+          "Configurations:", ""]
+    md += [f"- **{t}**: {CONFIG[t]}" for t in transports]
+    if made:
+        md += ["", "Plots: " + ", ".join(f"[{m}](benchmarks/results/{m})" for m in made)]
+    if b.errors:
+        md += ["", "Phases that failed in this run:", ""] + [f"- {e}" for e in b.errors]
+    (outdir / "latest.md").write_text("\n".join(md) + "\n")
+    if args.keep_logs:
+        print(f"logs: {logdir}")
+    else:
+        shutil.rmtree(logdir, ignore_errors=True)
+    return 1 if interrupted else 0
+
+
+if __name__ == "__main__":
+    try:
+        sys.exit(main())
+    finally:
+        kill_all()
