@@ -40,7 +40,7 @@ class MalformedNegotiationError(MicrosRtError, ValueError):
 
 def is_guid(value: object) -> bool:
     """True for Cyclone's textual GUID form (``01106fda-d45a-29f3-b1ee-b181000001c1``)."""
-    return isinstance(value, str) and bool(_GUID.match(value))
+    return isinstance(value, str) and bool(_GUID.fullmatch(value))
 
 
 def _short(value: object) -> str:
@@ -78,6 +78,10 @@ def _qos_dict(d: Mapping[str, Any]) -> Mapping[str, Any]:
     qos = d.get("qos", {})
     if not isinstance(qos, dict) or len(qos) > 16:
         raise MalformedNegotiationError("qos", f"expected a struct of QoS options, got {_short(qos)}")
+    for key, value in qos.items():
+        if (isinstance(key, str) and len(key) > MAX_FIELD_CHARS) or (isinstance(value, str)
+                                                                     and len(value) > MAX_FIELD_CHARS):
+            raise MalformedNegotiationError("qos", f"option {_short(key)}: at most {MAX_FIELD_CHARS} characters")
     return qos
 
 
