@@ -3,6 +3,7 @@ stock peers and TCPROS-preferring subscribers) and a back-end writer (DDS) for m
 
 from __future__ import annotations
 
+import collections
 import logging
 import socket
 import struct
@@ -21,6 +22,7 @@ from ._stats import PublisherStatistics
 from .backends import EndpointSpec
 from .exceptions import MicrosRtError
 from .negotiation import (
+    MAX_PENDING_DDS_OFFERS,
     UNMATCHED_READER_TIMEOUT,
     DDSAnswer,
     DDSOffer,
@@ -53,6 +55,8 @@ class _Publication:
         self.queue_size = queue_size
         self.lock = threading.Lock()
         self.connections: Dict[str, compat.DDSConnection] = {}  # subscriber caller id -> DDS link
+        # links dropped because discovery had not matched their reader in time, by reader GUID (bounded)
+        self._expired: "collections.OrderedDict[str, compat.DDSConnection]" = collections.OrderedDict()
         self.published = 0
         self.blocked_seconds = 0.0
         self.tcpros: Optional[compat.TcprosWriter] = None
@@ -134,7 +138,7 @@ class _Publication:
         dds = self.dds
         with self.lock:
             conns = list(self.connections.values())
-        if dds is None or not conns:
+        if dds is None or (not conns and not self._expired):
             return
         matched = dds.matched_peers()
         for conn in conns:
@@ -149,10 +153,28 @@ class _Publication:
                     f"topic {self.topic}: DDS subscriber {short(conn.endpoint_id)} was accepted but its reader "
                     f"{conn.peer_guid} never appeared in DDS discovery within {UNMATCHED_READER_TIMEOUT:.0f} s; "
                     f"dropped the connection (check both nodes' ROS_IP/CYCLONEDDS_URI and ROS_DOMAIN_ID)")
+                self._expired[conn.peer_guid] = conn
+                while len(self._expired) > MAX_PENDING_DDS_OFFERS:
+                    self._expired.popitem(last=False)
             else:
                 continue
             compat.remove_pseudo_connection(self.topic, conn, publisher=True)
             conn.close()
+        # a real subscriber on a slow or lossy network can be discovered after the bound: take it back
+        for guid in [g for g in self._expired if g in matched]:
+            old = self._expired.pop(guid)
+            if old.endpoint_id in self.connections:
+                continue
+            late = compat.DDSConnection(self.topic, old.endpoint_id, "o", old.info, peer_guid=guid,
+                                        on_close=self._connection_closed)
+            late.seen = True
+            with self.lock:
+                self.connections[old.endpoint_id] = late
+            if compat.add_pseudo_connection(self.topic, late, publisher=True):
+                _log.warning("micros_rt: topic %s: DDS subscriber %s was discovered late; connected again",
+                             self.topic, short(old.endpoint_id))
+            else:
+                late.close()
 
     def ready_connections(self) -> int:
         """Subscribers a message published now reaches: TCPROS links, and DDS subscribers whose

@@ -55,7 +55,7 @@ def stream(hosts: Hosts, spawn: harness.Spawner, topic: str, count: int, rate: f
     listener.wait_for("ready", 30)
     talker = spawn(hosts.run(0, seq("send", "--topic", topic, "--count", count, "--size", 64, "--rate", rate,
                                     "--linger", 5, *extra)), env=hosts.env(0))
-    talker.wait_for("sent", timeout)
+    talker.wait_for("sent", timeout + 60)
     summary: Dict[str, Any] = listener.wait_for("summary", timeout + 30)
     return summary
 
