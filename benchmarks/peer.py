@@ -185,6 +185,7 @@ class Ros2:
         self.rclpy, self.msgs = rclpy, msgs
         rclpy.init()
         self.node = rclpy.create_node(name.replace("/", "_") + f"_{os.getpid()}")
+        self.retries = 0
         self.qos = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE, depth=1)
 
     def pub(self, topic, cls=None):
@@ -197,7 +198,18 @@ class Ros2:
         return p.get_subscription_count()
 
     def publish(self, p, m):
-        p.publish(m)
+        # Fast DDS refuses a write when a KEEP_ALL history is full ("cannot publish data") instead of
+        # blocking: wait for acknowledgements and retry (back-pressure, as the other transports block)
+        end = time.monotonic() + 10.0
+        while True:
+            try:
+                p.publish(m)
+                return
+            except Exception as exc:  # rclpy._rclpy_pybind11.RCLError
+                if "cannot publish" not in str(exc) or time.monotonic() > end or STOP.is_set():
+                    raise
+                self.retries += 1
+                self.rclpy.spin_once(self.node, timeout_sec=0.0005)
 
     def spin_once(self, t):
         self.rclpy.spin_once(self.node, timeout_sec=t)
@@ -417,7 +429,7 @@ def role_send(a, tr, _msgs):
                     tr.spin_once(0)
         t1 = time.perf_counter()
         cpu = time.process_time() - c0
-        emit("sent", i=i, sent=sent, seconds=t1 - t0, cpu_s=cpu)
+        emit("sent", i=i, sent=sent, seconds=t1 - t0, cpu_s=cpu, retries=getattr(tr, "retries", 0))
         # stay up (TCPROS/DDS may still be delivering) until the driver says go on
         while not STOP.is_set() and time.monotonic() < deadline:
             if any(c == f"NEXT {i}" for c in CMDS):
@@ -531,6 +543,8 @@ def role_graph(a, tr, msgs):
             told = True
             emit("connected", t=time.time())
         tr.spin_once(max(0.0, min(0.05, nxt - time.monotonic())))
+    if not told:
+        emit("not_connected", heard=sorted(heard), want=others)
     del subs
 
 

@@ -59,7 +59,7 @@ CONFIG = {
     "cyclonedds_python": "reliable (max_blocking 10 s), KEEP_ALL; struct {sequence<octet> data} written "
                          "pre-serialised with ddspy_write, taken 256 at a time with ddspy_take (bytes path); "
                          "CYCLONEDDS_URI=benchmarks/cyclonedds_loopback.xml",
-    "rclpy_fastdds": "QoS reliable KEEP_ALL; Fast DDS default publish mode; tests/peers/fastdds_loopback.xml "
+    "rclpy_fastdds": "QoS reliable KEEP_ALL; Fast DDS default publish mode (a publish refused on a full history is retried: back-pressure); tests/peers/fastdds_loopback.xml "
                      "(UDP 127.0.0.1 + SHM), ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST; single-threaded spin_once",
 }
 REALISTIC = {  # kind: (label, size in bytes)
@@ -217,6 +217,14 @@ def kill_all():
             c.stop(grace=1.0)
         except Exception:
             pass
+
+
+def eth0_tx():
+    """Packets sent on eth0 (the machine is shared: other users' traffic counts too; informational)."""
+    try:
+        return int(Path("/sys/class/net/eth0/statistics/tx_packets").read_text())
+    except (OSError, ValueError):
+        return None
 
 
 def free_port():
@@ -412,7 +420,7 @@ class Bench:
                                                      "--kind", "bytes", "--size", 64, "--timeout", 180], f"n{n}"))
             last = 0.0
             for p in procs:
-                last = max(last, p.wait_ev("connected", max(5.0, 120 - (time.time() - t0)))["t"])
+                last = max(last, p.wait_ev("connected", max(5.0, 60 - (time.time() - t0)))["t"])
             connect_s = last - t0
             pids = [p.p.pid for p in procs] + ([self.master.pid] if t.startswith(("micros", "rospy")) else [])
             time.sleep(1.0)
@@ -769,6 +777,7 @@ def main():
 
     signal.signal(signal.SIGTERM, on_signal)
     t_start = time.monotonic()
+    tx0 = eth0_tx()
     b = Bench(args, P, logdir)
     per_round = {}  # (transport, figure) -> [values]
     steps = plan(args, P)
@@ -794,6 +803,8 @@ def main():
     finally:
         b.stop()
     wall = time.monotonic() - t_start
+    tx1 = eth0_tx()
+    eth0 = (tx1 - tx0) if tx0 is not None and tx1 is not None else None
     sys.stderr.write(f"\r\033[Kdone in {wall:.0f} s\n")
 
     figs, spread = {}, {}
@@ -820,6 +831,7 @@ def main():
             "config": {t: CONFIG[t] for t in transports},
             "targets": {f: f"{op} {lim}x rospy_tcpros" for f, (lim, op) in TARGETS.items()},
             "errors": b.errors,
+            "eth0_tx_packets_during_run": eth0,
             "notes": "figures are medians over rounds (loss: worst round); spread is [min, max, rounds]; "
                      "latency in µs (ping-pong, p50/p99), throughput measured at the receiver over first..last "
                      "message; lost = sent − distinct sequence numbers received after a 2 s drain."}
@@ -835,6 +847,7 @@ def main():
         print("\nerrors:")
         for e in b.errors:
             print("  " + e)
+    print(f"\neth0 tx packets during the run (whole machine): {eth0}")
     print(f"\nwall time {wall:.0f} s; results in {outdir}/latest.json, latest.md, {', '.join(made)}")
 
     md = ["## Performance", "",
