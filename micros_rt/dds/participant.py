@@ -97,9 +97,16 @@ def lease_duration(env: Mapping[str, str] = os.environ) -> float:
     return value
 
 
+#: On loopback (64 KiB MTU) samples travel in 63 KB fragments instead of Cyclone's 1,344 B, which suits
+#: a 1,500 B Ethernet MTU: a 1920x1080 rgb8 Image (6.2 MB) round trip went from ~180 ms to ~20 ms.
+LOOPBACK_TRANSPORT = "<General><MaxMessageSize>65500B</MaxMessageSize><FragmentSize>63000B</FragmentSize></General>"
+
+
 def micros_rt_defaults(env: Mapping[str, str] = os.environ) -> str:
-    """Settings micros_rt applies under any configuration (a user's ``CYCLONEDDS_URI`` overrides them)."""
-    return ('<CycloneDDS><Domain id="any"><Discovery>'
+    """Settings micros_rt applies under any configuration (a user's ``CYCLONEDDS_URI`` overrides them):
+    the participant lease, and on a loopback node large fragments."""
+    transport = LOOPBACK_TRANSPORT if _is_loopback(env) else ""
+    return (f'<CycloneDDS><Domain id="any">{transport}<Discovery>'
             f"<LeaseDuration>{lease_duration(env):g}s</LeaseDuration>"
             "</Discovery></Domain></CycloneDDS>")
 

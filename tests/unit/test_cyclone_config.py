@@ -66,3 +66,8 @@ def test_cyclone_accepts_the_layered_configuration() -> None:
     participant = DomainParticipant(229)
     assert str(participant.guid)
     del participant, domain
+
+
+def test_loopback_nodes_use_large_fragments_and_network_nodes_do_not() -> None:
+    assert "<FragmentSize>63000B</FragmentSize>" in micros_rt_defaults({"ROS_IP": "127.0.0.1"})
+    assert "FragmentSize" not in micros_rt_defaults({"ROS_IP": "10.1.2.3"})  # 1,500 B MTUs: Cyclone's default
