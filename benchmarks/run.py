@@ -58,7 +58,7 @@ CONFIG = {
     "rospy_tcpros": "Publisher(queue_size=None) (synchronous), Subscriber(queue_size=None, tcp_nodelay=True)",
     "cyclonedds_python": "reliable (max_blocking 10 s), KEEP_ALL; struct {sequence<octet> data} written "
                          "pre-serialised with ddspy_write, taken 256 at a time with ddspy_take (bytes path); "
-                         "CYCLONEDDS_URI=benchmarks/cyclonedds_loopback.xml",
+                         "CYCLONEDDS_URI=benchmarks/cyclonedds_loopback.xml (lo only, unicast discovery, 63 KB fragments)",
     "rclpy_fastdds": "QoS reliable KEEP_ALL; Fast DDS default publish mode (a publish refused on a full history is retried: back-pressure); tests/peers/fastdds_loopback.xml "
                      "(UDP 127.0.0.1 + SHM), ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST; single-threaded spin_once",
 }
