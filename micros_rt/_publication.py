@@ -85,8 +85,10 @@ class _Publication:
     def judge(self, offer: DDSOffer, subscriber: str) -> Tuple[Verdict, Optional[DDSAnswer]]:
         verdict = decide(offer, self.facts(), subscriber=short(subscriber))
         dds = self.dds
-        if not verdict.accepted or dds is None or self.tcpros is None:
+        if not verdict.accepted or dds is None:
             return verdict, None
+        # rospy's publisher may still be registering (a subscriber can ask the moment the master knows
+        # us): its topic impl already exists, which is all the pseudo-connection needs
         info = (f"DDS connection on topic {dds.dds_topic} to reader {offer.reader} (writer {dds.guid}, "
                 f"{'best effort' if self.options.using_best_effort_protocol else 'reliable'}, "
                 f"priority {self.options.transport_priority.name})")
@@ -100,7 +102,8 @@ class _Publication:
             old.close()
         if not compat.add_pseudo_connection(self.topic, conn, publisher=True):
             conn.close()
-            return Verdict(False, "closing", f"topic {self.topic} is being unregistered"), None
+            return Verdict(False, "closing", f"topic {self.topic}: no rospy publisher to attach the DDS link of "
+                                             f"{short(subscriber)} to (unregistered); using TCPROS"), None
         assert self._dds_backend is not None
         return verdict, DDSAnswer(writer=dds.guid, participant=self._dds_backend.participant.guid,
                                   latch=self.latch, qos=self.options, node=compat.caller_id())
