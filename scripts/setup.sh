@@ -27,6 +27,8 @@ APT_PACKAGES=(
     python3-rospy python3-rosmaster python3-rostopic python3-rosnode
     python3-std-msgs python3-geometry-msgs python3-sensor-msgs ros-core
     python3-venv tcpdump nftables iproute2 python3-matplotlib
+    python3-std-srvs python3-roslaunch python3-rosservice python3-dev gcc
+    mosquitto mosquitto-clients libmsgpack-dev graphviz openssl
 )
 
 missing=()
@@ -41,11 +43,12 @@ if ((${#missing[@]})); then
     quiet "apt-get update" apt-get update -qq
     quiet "apt-get install" apt-get install -y -qq --no-install-recommends "${missing[@]}"
 fi
-for exe in /usr/bin/python3 /usr/bin/rosmaster /usr/bin/rostopic /usr/bin/rosnode; do
+for exe in /usr/bin/python3 /usr/bin/rosmaster /usr/bin/rostopic /usr/bin/rosnode /usr/sbin/mosquitto \
+        /usr/bin/mosquitto_pub /usr/bin/dot /usr/bin/gcc /usr/bin/roslaunch; do
     [[ -x "$exe" ]] || die "$exe missing after package install"
 done
 quiet "stock rospy import check" env -u PYTHONPATH -u PYTHONHOME /usr/bin/python3 -c \
-    "import rospy, rosgraph, rostopic, std_msgs.msg, geometry_msgs.msg, sensor_msgs.msg"
+    "import rospy, rosgraph, rostopic, roslaunch, std_msgs.msg, std_srvs.srv, geometry_msgs.msg, sensor_msgs.msg"
 
 # ---------------------------------------------------------------- .venv (micros_rt, rospy visible)
 VENV=.venv
@@ -59,7 +62,7 @@ venv_ok() {
     [[ -f "$STAMP" && "$(cat "$STAMP")" == "$want_stamp" ]] || return 1
     env -u PYTHONPATH "$VENV/bin/python" - "$REPO_ROOT" <<'PY' >/dev/null 2>&1
 import os, sys
-import micros_rt, cyclonedds, yaml, pytest, mypy, rospy  # noqa: F401
+import micros_rt, cyclonedds, yaml, pytest, mypy, rospy, paho.mqtt, msgpack  # noqa: F401
 # editable install must point at this checkout (micros_rt may still be a namespace package)
 want = os.path.join(os.path.realpath(sys.argv[1]), "micros_rt")
 assert want in [os.path.realpath(p) for p in micros_rt.__path__], micros_rt.__path__
