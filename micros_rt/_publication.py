@@ -16,6 +16,7 @@ import rospy
 import rospy.topics
 
 from . import _rospy_compat as compat
+from ._introspection import remember_verdict
 from ._registry import EndpointRegistry
 from ._rospy_compat import short
 from ._stats import PublisherStatistics
@@ -57,6 +58,8 @@ class _Publication:
         self.connections: Dict[str, compat.DDSConnection] = {}  # subscriber caller id -> DDS link
         # links dropped because discovery had not matched their reader in time, by reader GUID (bounded)
         self._expired: "collections.OrderedDict[str, compat.DDSConnection]" = collections.OrderedDict()
+        # the last DDS verdict per subscriber caller id, for `micros-rt topic info` (bounded)
+        self.verdicts: "collections.OrderedDict[str, Verdict]" = collections.OrderedDict()
         self.published = 0
         self.blocked_seconds = 0.0
         self.tcpros: Optional[compat.TcprosWriter] = None
@@ -84,6 +87,8 @@ class _Publication:
 
     def judge(self, offer: DDSOffer, subscriber: str) -> Tuple[Verdict, Optional[DDSAnswer]]:
         verdict = decide(offer, self.facts(), subscriber=short(subscriber))
+        with self.lock:
+            remember_verdict(self.verdicts, short(subscriber, 256), verdict)
         dds = self.dds
         if not verdict.accepted or dds is None:
             return verdict, None

@@ -52,6 +52,8 @@ __all__ = [
     "install",
     "caller_id",
     "add_pseudo_connection",
+    "add_node_api_method",
+    "bus_info",
     "remove_pseudo_connection",
     "short",
     "transport_socket",
@@ -170,6 +172,23 @@ def remove_pseudo_connection(topic: str, conn: DDSConnection, *, publisher: bool
     impl = tm.get_publisher_impl(topic) if publisher else tm.get_subscriber_impl(topic)
     if impl is not None and conn in impl.connections:
         impl.remove_connection(conn)
+
+
+def bus_info(topic: str, *, publisher: bool) -> List[Tuple[str, str, str]]:
+    """(endpoint id, transport, info) of each connection of ``topic`` in rospy's lists, as ``getBusInfo``
+    sees them: the subscriber's caller id (publisher side) or the publisher's URI (subscriber side)."""
+    tm = get_topic_manager()
+    impl = tm.get_publisher_impl(topic) if publisher else tm.get_subscriber_impl(topic)
+    if impl is None:
+        return []
+    return [(str(c.endpoint_id), str(getattr(c, "transport_type", TCPROS)), str(c.get_transport_info()))
+            for c in list(impl.connections)]
+
+
+def add_node_api_method(name: str, method: Callable[[str], List[Any]]) -> None:
+    """Answer the XML-RPC method ``name(caller_id)`` on this node's API, beside ``getBusInfo``: rospy's
+    server dispatches a call to the ``ROSHandler`` attribute of that name (idempotent)."""
+    setattr(masterslave.ROSHandler, name, lambda self, caller_id, *_: method(caller_id))
 
 
 class _TimeoutTransport(xmlrpc.client.Transport):

@@ -20,6 +20,7 @@ from typing import Any, Callable, Dict, List, Optional, Type, Union
 import genpy
 import rospy
 
+from . import _introspection
 from . import _rospy_compat as compat
 from ._publication import Publisher, _Publication
 from ._runtime import _graph_id, _log, _node, _require_node, dds_backend
@@ -61,6 +62,7 @@ def init_node(name: str, argv: Optional[List[str]] = None, anonymous: bool = Fal
     >>> micros_rt.init_node("talker", anonymous=True)   # doctest: +SKIP
     """
     compat.install(_node.publications.get, _node.subscriptions.get)
+    _introspection.install()
     path = qos_profile or os.environ.get("MICROS_RT_QOS_PROFILE") or None
     profile = QoSProfile.load(path) if path else None
     _limit_malloc_arenas()
