@@ -57,6 +57,11 @@ __all__ = [
     "remove_pseudo_connection",
     "short",
     "transport_socket",
+    "ROSPY_PUBLISHER",
+    "ROSPY_SUBSCRIBER",
+    "dds_connections",
+    "set_publisher_tcp_nodelay",
+    "topic_impl",
     "TcprosReader",
     "TcprosWriter",
 ]
@@ -172,6 +177,32 @@ def remove_pseudo_connection(topic: str, conn: DDSConnection, *, publisher: bool
     impl = tm.get_publisher_impl(topic) if publisher else tm.get_subscriber_impl(topic)
     if impl is not None and conn in impl.connections:
         impl.remove_connection(conn)
+
+
+#: rospy's own endpoint classes, taken before anything can replace them: ``micros-rt run`` puts
+#: micros_rt's drop-in classes in ``rospy.Publisher``/``rospy.Subscriber``, and micros_rt's TCPROS
+#: side must not construct those (it would call itself).
+ROSPY_PUBLISHER: Any = rospy.topics.Publisher
+ROSPY_SUBSCRIBER: Any = rospy.topics.Subscriber
+
+
+def topic_impl(topic: str, *, publisher: bool) -> Any:
+    """rospy's per-topic implementation object (what a rospy Publisher/Subscriber calls ``impl``), or None."""
+    tm = get_topic_manager()
+    return tm.get_publisher_impl(topic) if publisher else tm.get_subscriber_impl(topic)
+
+
+def set_publisher_tcp_nodelay(topic: str) -> None:
+    """rospy.Publisher(tcp_nodelay=True): TCP_NODELAY on this topic's TCPROS subscriber sockets."""
+    from rospy.impl.tcpros import get_tcpros_handler
+
+    get_tcpros_handler().set_tcp_nodelay(topic, True)
+
+
+def dds_connections(topic: str, *, publisher: bool) -> List[DDSConnection]:
+    """The DDS pseudo-connections of ``topic`` in rospy's connection list."""
+    impl = topic_impl(topic, publisher=publisher)
+    return [] if impl is None else [c for c in list(impl.connections) if isinstance(c, DDSConnection)]
 
 
 def bus_info(topic: str, *, publisher: bool) -> List[Tuple[str, str, str]]:
@@ -448,7 +479,7 @@ class TcprosWriter:
 
     def __init__(self, topic: str, data_class: Any, queue_size: Optional[int], latch: bool) -> None:
         self.latch = latch
-        self._pub = rospy.Publisher(topic, data_class, queue_size=queue_size, latch=latch)
+        self._pub = ROSPY_PUBLISHER(topic, data_class, queue_size=queue_size, latch=latch)
         self._impl = self._pub.impl
         self.guid = topic
 
@@ -483,7 +514,7 @@ class TcprosReader:
 
     def __init__(self, topic: str, data_class: Any, callback: Callable[[Any], None],
                  queue_size: Optional[int]) -> None:
-        self._sub = rospy.Subscriber(topic, data_class, callback, queue_size=queue_size)
+        self._sub = ROSPY_SUBSCRIBER(topic, data_class, callback, queue_size=queue_size)
 
     def transports(self) -> dict[str, str]:
         """Publisher URI -> 'DDS' or 'TCPROS' for every current connection."""
