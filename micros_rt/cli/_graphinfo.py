@@ -1,0 +1,365 @@
+"""The live ROS graph as the ``micros-rt`` tools see it: the master's view, every node's ``getBusInfo``, and
+for micros_rt nodes their ``microsRtInfo`` (QoS, links, the negotiation's verdicts; see
+:mod:`micros_rt._introspection`). Stock nodes have no ``microsRtInfo``: their links are TCPROS.
+
+Collecting (:func:`snapshot`) does the network calls; joining the answers into links (:func:`build_links`)
+and describing QoS (:func:`describe_publisher_qos`, ...) are pure functions.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import json
+import math
+import os
+import time
+import xmlrpc.client
+from dataclasses import asdict, dataclass, field
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
+
+from . import CommandError
+
+__all__ = [
+    "CALLER_ID",
+    "GraphSnapshot",
+    "Link",
+    "Master",
+    "NodeReport",
+    "build_links",
+    "describe_publisher_qos",
+    "describe_subscriber_qos",
+    "master_uri",
+    "probe_node",
+    "resolve_topic",
+    "snapshot",
+]
+
+CALLER_ID = "/micros_rt_cli"
+INFO_METHOD = "microsRtInfo"  # micros_rt._introspection.INFO_METHOD, without importing rospy
+NODE_TIMEOUT = 3.0
+MICROS_RT = "micros_rt"
+STOCK = "stock"
+UNREACHABLE = "unreachable"
+
+
+def master_uri(env: Mapping[str, str] = os.environ) -> str:
+    """``ROS_MASTER_URI`` as ROS tools read it (default ``http://localhost:11311/``)."""
+    return env.get("ROS_MASTER_URI", "").strip() or "http://localhost:11311/"
+
+
+def resolve_topic(name: str, env: Mapping[str, str] = os.environ) -> str:
+    """A topic name as ``rostopic`` resolves a command-line name: relative names go under ``ROS_NAMESPACE``."""
+    if not name or any(c.isspace() for c in name):
+        raise CommandError(f"invalid topic name {name!r}")
+    if name.startswith("/"):
+        return name
+    ns = env.get("ROS_NAMESPACE", "/").strip() or "/"
+    return "/" + "/".join(p for p in (ns.strip("/"), name.lstrip("~")) if p)
+
+
+class _TimeoutTransport(xmlrpc.client.Transport):
+    def __init__(self, timeout: float) -> None:
+        super().__init__()
+        self._timeout = timeout
+
+    def make_connection(self, host: Any) -> Any:
+        conn = super().make_connection(host)
+        conn.timeout = self._timeout
+        return conn
+
+
+def _proxy(uri: str, timeout: float) -> xmlrpc.client.ServerProxy:
+    return xmlrpc.client.ServerProxy(uri, transport=_TimeoutTransport(timeout))
+
+
+def ros_call(uri: str, method: str, *args: Any, timeout: float = NODE_TIMEOUT) -> Any:
+    """Call a ROS XML-RPC API; the value of ``[code, status, value]``. Raises ``OSError``,
+    ``xmlrpc.client.Error`` or ``ValueError`` (code != 1, with the status)."""
+    code, status, value = getattr(_proxy(uri, timeout), method)(CALLER_ID, *args)
+    if code != 1:
+        raise ValueError(f"{method}: {status}")
+    return value
+
+
+class Master:
+    """The ROS master at ``uri``; an unreachable master is a :class:`CommandError` naming the fix."""
+
+    def __init__(self, uri: Optional[str] = None, *, timeout: float = 5.0) -> None:
+        self.uri = uri or master_uri()
+        self.timeout = timeout
+
+    def call(self, method: str, *args: Any) -> Any:
+        try:
+            return ros_call(self.uri, method, *args, timeout=self.timeout)
+        except (OSError, xmlrpc.client.ProtocolError) as exc:
+            reason = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+            raise CommandError(f"cannot reach the ROS master at {self.uri} ({reason}); start roscore, or "
+                               f"set ROS_MASTER_URI to the running master") from None
+        except (xmlrpc.client.Error, ValueError) as exc:
+            raise CommandError(f"the ROS master at {self.uri} answered {method} with an error: {exc}") from None
+
+    def system_state(self) -> Tuple[Dict[str, List[str]], Dict[str, List[str]]]:
+        """(publishers, subscribers): topic -> node names."""
+        pubs, subs, _srvs = self.call("getSystemState")
+        return {t: list(n) for t, n in pubs}, {t: list(n) for t, n in subs}
+
+    def topic_types(self) -> Dict[str, str]:
+        return {t: ty for t, ty in self.call("getTopicTypes")}
+
+    def lookup_node(self, name: str) -> Optional[str]:
+        try:
+            return str(ros_call(self.uri, "lookupNode", name, timeout=self.timeout))
+        except (OSError, xmlrpc.client.Error, ValueError):
+            return None
+
+
+@dataclass
+class NodeReport:
+    """One node as probed: ``kind`` is micros_rt, stock or unreachable."""
+
+    name: str
+    uri: Optional[str]
+    kind: str
+    bus: List[List[Any]] = field(default_factory=list)   # getBusInfo entries
+    info: Optional[Dict[str, Any]] = None                # microsRtInfo value (micros_rt nodes)
+    clock_offset: Optional[float] = None                  # its wall clock minus ours, seconds
+    clock_error: Optional[float] = None                   # +- half the call's round trip
+    error: str = ""
+
+    def publication(self, topic: str) -> Optional[Dict[str, Any]]:
+        return _find(self.info, "publications", topic)
+
+    def subscription(self, topic: str) -> Optional[Dict[str, Any]]:
+        return _find(self.info, "subscriptions", topic)
+
+
+def _find(info: Optional[Dict[str, Any]], section: str, topic: str) -> Optional[Dict[str, Any]]:
+    for item in (info or {}).get(section, []):
+        if item.get("topic") == topic:
+            return dict(item)
+    return None
+
+
+def probe_node(name: str, uri: Optional[str], *, timeout: float = NODE_TIMEOUT) -> NodeReport:
+    """Ask a node for ``microsRtInfo`` (micros_rt) and ``getBusInfo`` (every ROS node)."""
+    if uri is None:
+        return NodeReport(name, None, UNREACHABLE, error="the master does not know its URI")
+    report = NodeReport(name, uri, STOCK)
+    try:
+        report.bus = [list(e) for e in ros_call(uri, "getBusInfo", timeout=timeout)]
+    except (OSError, xmlrpc.client.Error, ValueError) as exc:
+        return NodeReport(name, uri, UNREACHABLE, error=f"getBusInfo failed: {exc}")
+    t0 = time.time()
+    try:
+        text = ros_call(uri, INFO_METHOD, timeout=timeout)
+    except (OSError, xmlrpc.client.Error, ValueError):
+        return report  # a fault: no such method, a stock node
+    t1 = time.time()
+    try:
+        info = json.loads(text)
+    except (TypeError, ValueError):
+        return report
+    if isinstance(info, dict):
+        report.kind, report.info = MICROS_RT, info
+        if isinstance(info.get("time"), (int, float)):
+            report.clock_offset = float(info["time"]) - (t0 + t1) / 2
+            report.clock_error = (t1 - t0) / 2
+    return report
+
+
+@dataclass
+class Link:
+    """One publisher-to-subscriber connection of a topic."""
+
+    topic: str
+    publisher: str
+    subscriber: str
+    protocol: str
+    publisher_kind: str
+    subscriber_kind: str
+    publisher_qos: Optional[Dict[str, Any]] = None
+    subscriber_qos: Optional[Dict[str, Any]] = None
+    transport_priority: Optional[str] = None
+    #: for a TCPROS link: why not DDS, in words (the publisher's own verdict between two micros_rt nodes)
+    reason: Optional[str] = None
+    #: the negotiation's verdict kind when the publisher judged a DDS offer of this subscriber
+    verdict: Optional[str] = None
+    matched: Optional[bool] = None  # DDS: has discovery matched the subscriber's reader yet
+
+    def to_dict(self) -> Dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass
+class GraphSnapshot:
+    master: str
+    types: Dict[str, str]
+    publishers: Dict[str, List[str]]
+    subscribers: Dict[str, List[str]]
+    nodes: Dict[str, NodeReport]
+    links: List[Link]
+
+    def endpoint(self, node: str, topic: str, *, publisher: bool) -> Dict[str, Any]:
+        """A publisher or subscriber of ``topic`` as the tools print it."""
+        report = self.nodes.get(node) or NodeReport(node, None, UNREACHABLE)
+        ep = report.publication(topic) if publisher else report.subscription(topic)
+        qos = _endpoint_qos(ep)
+        return {"node": node, "uri": report.uri, "kind": report.kind, "qos": qos,
+                "description": _describe(report.kind, qos, publisher=publisher)}
+
+
+def _endpoint_qos(ep: Optional[Dict[str, Any]]) -> Optional[Dict[str, Any]]:
+    if ep is None:
+        return None
+    qos = dict(ep.get("qos") or {})
+    qos["queue_size"] = ep.get("queue_size")
+    if "latch" in ep:
+        qos["latch"] = ep["latch"]
+    if "hints" in ep:
+        qos["hints"] = list(ep["hints"])
+    return qos
+
+
+def _describe(kind: str, qos: Optional[Dict[str, Any]], *, publisher: bool) -> str:
+    if kind == STOCK or (kind == MICROS_RT and qos is None):
+        return "stock ROS endpoint (TCPROS only, no micros_rt QoS)"
+    if kind == UNREACHABLE:
+        return "unreachable (its node does not answer)"
+    assert qos is not None
+    return describe_publisher_qos(qos) if publisher else describe_subscriber_qos(qos)
+
+
+def _secs(value: Any) -> float:
+    if isinstance(value, str):
+        return math.inf if value.strip().lower().lstrip("+") in ("inf", "infinity") else float(value)
+    return float(value) if value is not None else 0.0
+
+
+def _fmt_secs(value: float) -> str:
+    return f"{value * 1e3:g} ms" if value < 1.0 else f"{value:g} s"
+
+
+def _queue(qos: Mapping[str, Any]) -> str:
+    q = qos.get("queue_size")
+    return "lossless (queue_size None)" if not q else f"queue {q}"
+
+
+def describe_publisher_qos(qos: Mapping[str, Any]) -> str:
+    """``AdvertiseQoSOptions.to_dict()`` (+ queue_size, latch) in a few words.
+
+    >>> describe_publisher_qos({"transport_priority": "HIGH", "using_best_effort_protocol": True})
+    'best effort, priority HIGH, lossless (queue_size None)'
+    """
+    parts = ["best effort" if qos.get("using_best_effort_protocol") else "reliable",
+             f"priority {qos.get('transport_priority', 'NORMAL')}"]
+    budget = _secs(qos.get("latency_budget", 0.0))
+    if budget > 0:
+        parts.append(f"latency budget {_fmt_secs(budget)}")
+    lifespan = _secs(qos.get("msg_valid_period", "inf"))
+    if not math.isinf(lifespan):
+        parts.append(f"valid for {_fmt_secs(lifespan)}")
+    if qos.get("latch"):
+        parts.append("latched")
+    parts.append(_queue(qos))
+    return ", ".join(parts)
+
+
+def describe_subscriber_qos(qos: Mapping[str, Any]) -> str:
+    """``SubscribeQoSOptions.to_dict()`` (+ queue_size, hints) in a few words.
+
+    >>> describe_subscriber_qos({"deadline": 0.5, "ordered_by_sending_timestamp": False, "queue_size": 10})
+    'reliable, deadline 500 ms, by arrival, queue 10'
+    """
+    parts = ["best effort accepted" if qos.get("using_best_effort_protocol") else "reliable"]
+    deadline = _secs(qos.get("deadline", "inf"))
+    if not math.isinf(deadline):
+        parts.append(f"deadline {_fmt_secs(deadline)}")
+    tf = _secs(qos.get("time_filter_duration", 0.0))
+    if tf > 0:
+        parts.append(f"time filter {_fmt_secs(tf)}")
+    parts.append("by source time" if qos.get("ordered_by_sending_timestamp", True) else "by arrival")
+    parts.append(_queue(qos))
+    hints = qos.get("hints")
+    if hints and list(hints) != ["DDS", "TCPROS"]:
+        parts.append("hints " + ",".join(hints))
+    return ", ".join(parts)
+
+
+def _tcpros_reason(pub: NodeReport, sub: NodeReport, topic: str) -> Tuple[str, Optional[str]]:
+    """(why this link is TCPROS, verdict kind or None)."""
+    if pub.kind != MICROS_RT or pub.publication(topic) is None:
+        return "the publisher is a stock ROS node (TCPROS only)", None
+    if sub.kind != MICROS_RT or sub.subscription(topic) is None:
+        return "the subscriber is a stock ROS node (TCPROS only)", None
+    publication = pub.publication(topic) or {}
+    verdict = (publication.get("verdicts") or {}).get(sub.name)
+    if isinstance(verdict, dict) and not verdict.get("accepted"):
+        return str(verdict.get("reason", "DDS declined")), str(verdict.get("kind", ""))
+    subscription = sub.subscription(topic) or {}
+    hints = list(subscription.get("hints") or [])
+    if "DDS" not in hints:
+        return "the subscriber's TransportHints allow only TCPROS", None
+    if hints and hints[0] != "DDS":
+        return "the subscriber's TransportHints prefer TCPROS (.tcp() before .dds())", None
+    if not subscription.get("dds_reader"):
+        return "DDS is unavailable in the subscriber's process (see its log)", None
+    if publication.get("dds_topic") is None:
+        return "DDS is unavailable in the publisher's process (see its log)", None
+    if isinstance(verdict, dict):
+        return "DDS was accepted, but its DDS link was dropped (reader not discovered in time?)", "accepted"
+    return "no DDS offer from this subscriber reached the publisher", None
+
+
+def build_links(topic: str, publishers: Sequence[str], subscribers: Sequence[str],
+                nodes: Mapping[str, NodeReport]) -> List[Link]:
+    """Every publisher-to-subscriber link of ``topic`` from the nodes' ``getBusInfo`` (publisher side
+    first, the subscriber side for publishers that did not answer) joined with ``microsRtInfo``."""
+    by_uri = {r.uri.rstrip("/"): r.name for r in nodes.values() if r.uri}
+    pairs: Dict[Tuple[str, str], Tuple[str, bool]] = {}  # (pub, sub) -> (protocol, seen from publisher)
+    for p in publishers:
+        for entry in (nodes[p].bus if p in nodes else []):
+            if len(entry) >= 5 and entry[2] == "o" and entry[4] == topic:
+                pairs.setdefault((p, str(entry[1])), (str(entry[3]), True))
+    for s in subscribers:
+        for entry in (nodes[s].bus if s in nodes else []):
+            if len(entry) >= 5 and entry[2] == "i" and entry[4] == topic:
+                pub_name = by_uri.get(str(entry[1]).rstrip("/"), str(entry[1]))
+                pairs.setdefault((pub_name, s), (str(entry[3]), False))
+    links = []
+    for (p, s), (protocol, _) in sorted(pairs.items()):
+        pub = nodes.get(p) or NodeReport(p, None, UNREACHABLE)
+        sub = nodes.get(s) or NodeReport(s, None, UNREACHABLE)
+        pub_qos = _endpoint_qos(pub.publication(topic))
+        link = Link(topic, p, s, protocol, pub.kind, sub.kind, pub_qos, _endpoint_qos(sub.subscription(topic)),
+                    transport_priority=str(pub_qos.get("transport_priority")) if pub_qos else None)
+        if protocol == "DDS":
+            for item in (pub.publication(topic) or {}).get("links", []):
+                if item.get("subscriber") == s and "matched" in item:
+                    link.matched = bool(item["matched"])
+        else:
+            link.reason, link.verdict = _tcpros_reason(pub, sub, topic)
+        links.append(link)
+    return links
+
+
+def probe_all(master: Master, names: Iterable[str]) -> Dict[str, NodeReport]:
+    """Probe nodes in parallel (each call bounded by :data:`NODE_TIMEOUT`)."""
+    names = sorted(set(names))
+    if not names:
+        return {}
+    with concurrent.futures.ThreadPoolExecutor(max_workers=min(16, len(names))) as pool:
+        uris = dict(zip(names, pool.map(master.lookup_node, names)))
+        reports = pool.map(lambda n: probe_node(n, uris[n]), names)
+        return {r.name: r for r in reports}
+
+
+def snapshot(master: Master, topics: Optional[Iterable[str]] = None) -> GraphSnapshot:
+    """The graph (or only ``topics``): the master's state, every node involved probed, links built."""
+    pubs, subs = master.system_state()
+    types = master.topic_types()
+    wanted = set(topics) if topics is not None else set(pubs) | set(subs) | set(types)
+    names = {n for t in wanted for n in pubs.get(t, []) + subs.get(t, [])}
+    nodes = probe_all(master, names)
+    links = [link for t in sorted(wanted) for link in build_links(t, pubs.get(t, []), subs.get(t, []), nodes)]
+    return GraphSnapshot(master.uri, types, pubs, subs, nodes, links)
+

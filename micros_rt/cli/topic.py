@@ -1,0 +1,275 @@
+"""``micros-rt topic``: which protocol and QoS each link of a topic uses (``info``), and its latency
+(``latency``)."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import math
+import sys
+import time
+from typing import Any, Dict, List, Optional
+
+from . import CommandError
+from ._graphinfo import Master, resolve_topic, snapshot
+
+__all__ = ["main", "format_info", "info_data", "latency_report", "format_latency"]
+
+USAGE = """micros-rt topic is a command-line tool for the links and latency of micros_rt topics.
+
+Commands:
+\tmicros-rt topic info\tprint every link of a topic: protocol, both sides' QoS, priority, why not DDS
+\tmicros-rt topic latency\tmeasure a topic's rate, latency, drops, deadline and budget misses
+
+Type micros-rt topic <command> -h for more detailed usage, e.g. 'micros-rt topic info -h'"""
+
+
+def main(argv: List[str]) -> int:
+    """``micros-rt topic <command> ...``."""
+    if not argv or argv[0] in ("-h", "--help", "help"):
+        print(USAGE)
+        return 0 if argv else 2
+    commands = {"info": info_main, "latency": latency_main}
+    if argv[0] not in commands:
+        raise CommandError(f"unknown command '{argv[0]}' (commands: {', '.join(commands)})", code=2)
+    return commands[argv[0]](argv[1:])
+
+
+# --------------------------------------------------------------------------- info
+
+def info_main(argv: List[str]) -> int:
+    parser = argparse.ArgumentParser(
+        prog="micros-rt topic info", usage="%(prog)s [--json] /topic",
+        description="Print the publishers and subscribers of a topic and every publisher->subscriber link: "
+                    "its protocol (DDS or TCPROS), both sides' QoS, the transport priority and, for a TCPROS "
+                    "link between two micros_rt nodes, why DDS was declined (the negotiation's verdict).")
+    parser.add_argument("topic", help="topic name, e.g. /chatter")
+    parser.add_argument("--json", action="store_true", help="print JSON (for scripts) instead of text")
+    args = parser.parse_args(argv)
+    data = info_data(Master(), resolve_topic(args.topic))
+    print(json.dumps(data, indent=2) if args.json else format_info(data))
+    return 0
+
+
+def info_data(master: Master, topic: str) -> Dict[str, Any]:
+    """What ``topic info`` shows, as plain data (also its ``--json`` output)."""
+    snap = snapshot(master, [topic])
+    if topic not in snap.types and topic not in snap.publishers and topic not in snap.subscribers:
+        raise CommandError(f"unknown topic {topic} (no node publishes or subscribes to it; see rostopic list)")
+    return {
+        "topic": topic,
+        "type": snap.types.get(topic, "unknown"),
+        "publishers": [snap.endpoint(n, topic, publisher=True) for n in sorted(snap.publishers.get(topic, []))],
+        "subscribers": [snap.endpoint(n, topic, publisher=False) for n in sorted(snap.subscribers.get(topic, []))],
+        "links": [link.to_dict() for link in snap.links],
+    }
+
+
+def format_info(data: Dict[str, Any]) -> str:
+    """The text form of :func:`info_data` (rostopic info's layout, plus the links)."""
+    lines = [f"Type: {data['type']}", ""]
+    sides = {}
+    for title, key in (("Publishers", "publishers"), ("Subscribers", "subscribers")):
+        lines.append(f"{title}:" if data[key] else f"{title}: None")
+        for ep in data[key]:
+            sides[(key, ep["node"])] = ep["description"]
+            lines.append(f" * {ep['node']} ({ep['uri'] or 'unknown URI'})  [{ep['kind']}] {ep['description']}")
+        lines.append("")
+    lines.append("Links:" if data["links"] else "Links: None")
+    for link in data["links"]:
+        prio = link["transport_priority"] or "n/a (stock publisher)"
+        state = "" if link["matched"] is not False else " (DDS discovery not matched yet)"
+        lines.append(f" * {link['publisher']} -> {link['subscriber']}: {link['protocol']}{state}, "
+                     f"transport priority {prio}")
+        lines.append(f"     publisher QoS:  {sides.get(('publishers', link['publisher']), 'unknown')}")
+        lines.append(f"     subscriber QoS: {sides.get(('subscribers', link['subscriber']), 'unknown')}")
+        if link["reason"]:
+            label = "DDS declined" if link["verdict"] else "why TCPROS"
+            lines.append(f"     {label}: {link['reason']}")
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- latency
+
+def latency_main(argv: List[str]) -> int:
+    parser = argparse.ArgumentParser(
+        prog="micros-rt topic latency", usage="%(prog)s [--count N] [--json] [--plot FILE.png] /topic",
+        description="Subscribe to a topic with micros_rt (DDS where the publisher can, else TCPROS) and show, "
+                    "refreshed in place, its rate and latency (p50/p99/max) from DDS source timestamps or "
+                    "Header stamps, drops, deadline misses and latency-budget misses. Ctrl-C, --count or "
+                    "--timeout stop it and print a report.")
+    parser.add_argument("topic", help="topic name, e.g. /chatter")
+    parser.add_argument("-n", "--count", type=int, default=0, metavar="N", help="stop after N messages")
+    parser.add_argument("--json", action="store_true", help="print only the final report, as JSON")
+    parser.add_argument("--plot", metavar="FILE.png", help="write a latency histogram to FILE.png")
+    parser.add_argument("--timeout", type=float, default=0.0, metavar="SEC",
+                        help="stop after SEC seconds (exit 1 when fewer than --count messages came)")
+    parser.add_argument("--deadline", type=float, default=0.0, metavar="SEC",
+                        help="count deadline misses: gaps longer than SEC seconds between messages")
+    args = parser.parse_args(argv)
+    if args.count < 0 or args.timeout < 0 or args.deadline < 0:
+        raise CommandError("--count, --timeout and --deadline must not be negative", code=2)
+    topic = resolve_topic(args.topic)
+    type_name = Master().topic_types().get(topic)
+    if type_name is None:
+        raise CommandError(f"unknown topic {topic} (no publisher has advertised it; see rostopic list)")
+    return _measure(topic, type_name, args)
+
+
+class Arrivals:
+    """Message count and first/last arrival (monotonic seconds), updated on the delivery thread."""
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.first = self.last = 0.0
+
+    def on_message(self, _msg: Any) -> None:
+        now = time.monotonic()
+        if not self.n:
+            self.first = now
+        self.n += 1
+        self.last = now
+
+
+def _measure(topic: str, type_name: str, args: argparse.Namespace) -> int:
+    import roslib.message
+
+    data_class = roslib.message.get_message_class(type_name)
+    if data_class is None:
+        raise CommandError(f"topic {topic}: cannot load message type {type_name} (is its package installed?)")
+    import micros_rt
+
+    micros_rt.init_node("micros_rt_topic_latency", anonymous=True, disable_signals=True, disable_rosout=True)
+    arrivals = Arrivals()
+
+    nh = micros_rt.NodeHandle()
+    if args.deadline:
+        qos = micros_rt.SubscribeQoSOptions(deadline=args.deadline, ordered_by_sending_timestamp=False)
+        sub = nh.subscribe_with_qos(topic, data_class, arrivals.on_message, None, qos)
+    else:
+        sub = nh.subscribe(topic, data_class, arrivals.on_message, None)
+    live = not args.json
+    tty = sys.stdout.isatty()
+    start = time.monotonic()
+    last_show, last_n = start, 0
+    try:
+        while not micros_rt.is_shutdown():
+            now = time.monotonic()
+            if args.count and arrivals.n >= args.count:
+                break
+            if args.timeout and now - start > args.timeout:
+                break
+            if live and now - last_show >= 1.0:
+                rate = (arrivals.n - last_n) / (now - last_show)
+                last_show, last_n = now, arrivals.n
+                line = format_live(latency_report(topic, type_name, sub, arrivals), rate)
+                print(f"\r{line}\033[K" if tty else line, end="" if tty else "\n", flush=True)
+            time.sleep(0.02)
+    except KeyboardInterrupt:
+        pass
+    report = latency_report(topic, type_name, sub, arrivals)
+    samples = [s * 1e3 for s in list(sub.latency.samples)]
+    micros_rt.shutdown()
+    if live and tty:
+        print()
+    print(json.dumps(report, indent=2) if args.json else format_latency(report))
+    if args.plot:
+        write_histogram(args.plot, samples, f"{topic} ({report['timestamps']}): {len(samples)} messages")
+    if args.count and report["messages"] < args.count:
+        print(f"micros-rt topic latency: only {report['messages']} of {args.count} messages on {topic} within "
+              f"{args.timeout:g} s", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _num(value: float, scale: float = 1.0) -> Optional[float]:
+    return None if value is None or math.isnan(value) or math.isinf(value) else round(value * scale, 4)
+
+
+def latency_report(topic: str, type_name: str, sub: Any, arrivals: "Arrivals") -> Dict[str, Any]:
+    """The numbers ``topic latency`` shows, from the micros_rt Subscriber's own statistics."""
+    n = arrivals.n
+    span = arrivals.last - arrivals.first
+    lat = sub.latency.summary()
+    stats = sub.statistics()
+    transports = sub.connection_transports()
+    protocols = set(transports.values())
+    if n == 0:
+        stamps = "none yet"
+    elif lat["count"] == 0:
+        stamps = "none (no DDS link and no Header stamp)"
+    elif protocols == {"DDS"} or not getattr(sub.data_class, "_has_header", False):
+        stamps = "DDS source timestamps"
+    elif "DDS" in protocols:
+        stamps = "DDS source timestamps and Header stamps"
+    else:
+        stamps = "Header stamps"
+    drops = {"queue_full": stats.dropped_queue_full, "expired": stats.dropped_expired,
+             "filtered": stats.dropped_filtered, "malformed": stats.malformed}
+    drops["total"] = sum(drops.values())
+    return {
+        "topic": topic, "type": type_name, "messages": n, "rate_hz": _num((n - 1) / span) if n > 1 and span > 0
+        else None, "transports": transports, "timestamps": stamps,
+        "latency_ms": {"count": lat["count"], "mean": _num(lat["mean"], 1e3), "p50": _num(lat["p50"], 1e3),
+                       "p99": _num(lat["p99"], 1e3), "max": _num(lat["max"], 1e3)},
+        "drops": drops, "deadline_misses": stats.deadline_missed,
+        "budget_misses": lat["budget_misses"], "budget_checked": lat["budget_checked"],
+    }
+
+
+def _ms(value: Optional[float]) -> str:
+    return "-" if value is None else f"{value:.3f} ms"
+
+
+def format_live(report: Dict[str, Any], rate: float) -> str:
+    """One refreshed status line."""
+    lat = report["latency_ms"]
+    links = ",".join(sorted(set(report["transports"].values()))) or "no publisher yet"
+    return (f"{report['topic']} [{links}] {report['messages']} msgs  rate {rate:.1f} Hz  latency p50 {_ms(lat['p50'])}"
+            f"  p99 {_ms(lat['p99'])}  max {_ms(lat['max'])}  drops {report['drops']['total']}  deadline misses "
+            f"{report['deadline_misses']}  budget misses {report['budget_misses']}")
+
+
+def format_latency(report: Dict[str, Any]) -> str:
+    """The final report as text."""
+    lat = report["latency_ms"]
+    rate = "-" if report["rate_hz"] is None else f"{report['rate_hz']:.2f} Hz"
+    links = ", ".join(f"{uri} {proto}" for uri, proto in sorted(report["transports"].items())) or "none"
+    return "\n".join([
+        f"topic:     {report['topic']} ({report['type']})",
+        f"links:     {links}",
+        f"messages:  {report['messages']}, rate {rate}",
+        f"latency:   p50 {_ms(lat['p50'])}, p99 {_ms(lat['p99'])}, max {_ms(lat['max'])}, mean {_ms(lat['mean'])}"
+        f" ({lat['count']} of {report['messages']} measured, from {report['timestamps']})",
+        f"drops:     {report['drops']['total']} (queue full {report['drops']['queue_full']}, expired "
+        f"{report['drops']['expired']}, filtered {report['drops']['filtered']}, malformed {report['drops']['malformed']})",
+        f"deadline misses: {report['deadline_misses']}, latency budget misses: {report['budget_misses']} of "
+        f"{report['budget_checked']} checked",
+    ])
+
+
+def write_histogram(path: str, samples_ms: List[float], title: str) -> None:
+    """A latency histogram (matplotlib, no display needed)."""
+    try:
+        # through importlib: matplotlib has no type stubs (and is only needed here)
+        matplotlib = importlib.import_module("matplotlib")
+        matplotlib.use("Agg")
+        plt = importlib.import_module("matplotlib.pyplot")
+    except ImportError as exc:
+        raise CommandError(f"--plot needs matplotlib ({exc}); apt-get install python3-matplotlib") from None
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    if samples_ms:
+        ax.hist(samples_ms, bins=min(60, max(10, len(samples_ms) // 10)), color="#1f77b4")
+    else:
+        ax.text(0.5, 0.5, "no latency samples", ha="center", va="center", transform=ax.transAxes)
+    ax.set_xlabel("latency (ms)")
+    ax.set_ylabel("messages")
+    ax.set_title(title)
+    fig.tight_layout()
+    try:
+        fig.savefig(path, dpi=100)
+    except OSError as exc:
+        raise CommandError(f"cannot write {path}: {exc.strerror or exc}") from None
+    finally:
+        plt.close(fig)
