@@ -1,0 +1,349 @@
+"""The bridge node: mqtt_client's behaviour (ROS 1) on micros_rt's publish/subscribe.
+
+ROS -> MQTT: each ``bridge.ros2mqtt`` topic is subscribed with micros_rt (DDS from micros_rt publishers,
+TCPROS from stock nodes) as soon as the master knows its type, and every message is sent to the broker
+in mqtt_client's framing (its type announced, retained, on ``mqtt_client/ros_msg_type/<mqtt_topic>``),
+as primitive text or as JSON.
+
+MQTT -> ROS: each ``bridge.mqtt2ros`` topic is published with micros_rt once its type is known: from the
+announcement (an installed class when the md5 matches, else a class built from the announced
+definition), from ``ros_type``, or from the first primitive text. Unlike mqtt_client, the data topic is
+subscribed from the start and messages that arrive before their type are held (up to
+:data:`PENDING_LIMIT` per topic), so the first message is never lost.
+
+Bad input (a payload that does not decode, an unknown type, a text that does not fit the topic's type,
+a message too large to send) is logged once per topic and kind in words, then counted; the node keeps
+running. :meth:`MqttBridge.counters` has the counts; they are logged on close.
+"""
+
+from __future__ import annotations
+
+import collections
+import io
+import threading
+import time
+from typing import Any, Callable, Deque, Dict, Optional, Type
+
+import genmsg  # type: ignore[import-untyped]
+import genmsg.gentools  # type: ignore[import-untyped]
+import genmsg.msg_loader  # type: ignore[import-untyped]
+import genpy
+import genpy.dynamic
+import roslib.message
+import rospy
+from std_msgs.msg import Float64
+
+import micros_rt
+
+from .._logging import nonblocking_logger
+from ..negotiation.ratelimit import RateLimitedLog
+from . import codec
+from .client import MqttConnection
+from .params import Mqtt2RosParams, MqttParams, Ros2MqttParams
+
+__all__ = ["MqttBridge", "PENDING_LIMIT", "is_connected_service_class"]
+
+_log = nonblocking_logger("rosout.micros_rt.mqtt")
+
+#: Messages held per MQTT topic while its ROS type is not yet known.
+PENDING_LIMIT = 100
+#: How often the master is asked for the types of ROS topics not yet subscribed (seconds).
+RESOLVE_INTERVAL = 0.3
+
+
+def is_connected_service_class() -> Type[Any]:
+    """mqtt_client's ``mqtt_client/IsConnected`` service (empty request, ``bool connected``), built at run
+    time with mqtt_client's md5 so that its own clients can call this node."""
+    ctx = genmsg.MsgContext.create_default()
+    spec = genmsg.msg_loader.load_srv_from_string(ctx, "---\nbool connected\n", "mqtt_client/IsConnected")
+    request = genpy.dynamic.generate_dynamic("mqtt_client/IsConnectedRequest", "")["mqtt_client/IsConnectedRequest"]
+    response = genpy.dynamic.generate_dynamic("mqtt_client/IsConnectedResponse",
+                                              "bool connected\n")["mqtt_client/IsConnectedResponse"]
+
+    class IsConnected:
+        _type = "mqtt_client/IsConnected"
+        _md5sum = genmsg.gentools.compute_md5(ctx, spec)
+        _request_class = request
+        _response_class = response
+
+    return IsConnected
+
+
+class _Problems:
+    """Bad input: the first of each (topic, kind) in words, then counted (and summarised every 30 s)."""
+
+    def __init__(self) -> None:
+        self._log = RateLimitedLog(_log, interval=30.0)
+        self._lock = threading.Lock()
+        self.counts: Dict[str, int] = collections.Counter()
+
+    def report(self, topic: str, kind: str, text: str) -> None:
+        with self._lock:
+            self.counts[kind] += 1
+        self._log.warning((topic, kind), text)
+
+
+class _Ros2Mqtt:
+    """One ROS topic sent to the broker."""
+
+    def __init__(self, bridge: "MqttBridge", p: Ros2MqttParams) -> None:
+        self.bridge, self.p = bridge, p
+        self.subscriber: Optional[micros_rt.Subscriber] = None
+        self.data_class: Optional[Type[genpy.Message]] = None
+        self.type_sent = False
+        self.sent = 0
+
+    def attach(self, data_class: Type[genpy.Message]) -> None:
+        self.data_class = data_class
+        self.subscriber = self.bridge.nh.subscribe(self.p.ros_topic, data_class, self.on_ros, self.p.queue_size)
+        _log.info("micros_rt mqtt: ROS topic '%s' (%s) subscribed", self.p.ros_topic, data_class._type)
+
+    def on_ros(self, msg: genpy.Message) -> None:
+        p = self.p
+        conn = self.bridge.connection
+        if p.primitive:
+            payload = codec.msg_to_text(msg).encode("utf-8")
+        elif p.json:
+            payload = codec.msg_to_json(msg).encode("utf-8")
+        else:
+            if not self.type_sent:
+                announcement = codec.encode_msg_type(codec.RosMsgType.of(type(msg)))
+                conn.publish(codec.ROS_MSG_TYPE_PREFIX + p.mqtt_topic, announcement, qos=p.qos, retain=True)
+                self.type_sent = True
+            buf = io.BytesIO()
+            msg.serialize(buf)
+            stamp = genpy.Time.from_sec(time.time()) if p.inject_timestamp else None
+            payload = codec.encode_ros_payload(buf.getvalue(), stamp=stamp)
+        try:
+            if conn.publish(p.mqtt_topic, payload, qos=p.qos, retain=p.retained):
+                self.sent += 1
+        except ValueError as exc:   # paho: payload above MQTT's 256 MB limit
+            self.bridge.problems.report(p.ros_topic, "too_large",
+                                        f"ROS topic {p.ros_topic}: a {len(payload)}-byte message cannot be sent to "
+                                        f"MQTT topic '{p.mqtt_topic}': {exc}")
+
+
+class _Mqtt2Ros:
+    """One MQTT topic published on ROS."""
+
+    def __init__(self, bridge: "MqttBridge", p: Mqtt2RosParams) -> None:
+        self.bridge, self.p = bridge, p
+        self.lock = threading.Lock()
+        self.publisher: Optional[micros_rt.Publisher] = None
+        self.data_class: Optional[Type[genpy.Message]] = None
+        self.md5 = ""
+        self.pending: Deque[bytes] = collections.deque()
+        self.latency_pub: Optional[micros_rt.Publisher] = None
+        self.delivered = 0
+        if p.ros_type:
+            cls = roslib.message.get_message_class(p.ros_type)
+            if cls is None:
+                raise micros_rt.TypeMappingError(
+                    f"bridge/mqtt2ros: ros_type '{p.ros_type}' of MQTT topic '{p.mqtt_topic}' is not an installed "
+                    "ROS message type")
+            self._advertise(cls)
+
+    # -- ROS side
+
+    def _advertise(self, cls: Type[genpy.Message]) -> None:
+        if self.publisher is not None:
+            self.publisher.unregister()
+        self.publisher = self.bridge.nh.advertise(self.p.ros_topic, cls, self.p.queue_size, latch=self.p.latched)
+        self.data_class, self.md5 = cls, cls._md5sum
+        _log.info("ROS publisher message type on topic '%s' set to '%s'", self.p.ros_topic, cls._type)
+
+    def _publish(self, msg: genpy.Message) -> None:
+        assert self.publisher is not None
+        self.publisher.publish(msg)
+        self.delivered += 1
+
+    def _latency(self, stamp: genpy.Time) -> None:
+        if self.latency_pub is None:
+            self.latency_pub = self.bridge.nh.advertise("~latencies/" + self.p.ros_topic.lstrip("/"), Float64, 1)
+        self.latency_pub.publish(Float64(data=time.time() - stamp.to_sec()))
+
+    # -- MQTT side (paho's network thread)
+
+    def on_type(self, topic: str, payload: bytes) -> None:
+        problems = self.bridge.problems
+        try:
+            announced = codec.decode_msg_type(payload)
+        except codec.CodecError as exc:
+            problems.report(topic, "bad_type", f"MQTT topic '{topic}': type announcement does not decode: {exc}")
+            return
+        with self.lock:
+            if announced.md5 == self.md5:
+                return
+            if self.p.ros_type and announced.name != self.p.ros_type:
+                problems.report(topic, "type_mismatch",
+                                f"MQTT topic '{self.p.mqtt_topic}' announces {announced.name}, but ros_type is "
+                                f"{self.p.ros_type}: its messages are dropped")
+                self.md5 = ""
+                return
+            try:
+                cls = _message_class(announced)
+            except Exception as exc:  # genmsg/genpy raise several kinds for a bad definition
+                problems.report(topic, "unknown_type", f"MQTT topic '{self.p.mqtt_topic}': cannot build ROS type "
+                                f"{announced.name} from its announced definition: {exc}")
+                return
+            self._advertise(cls)
+            pending, self.pending = list(self.pending), collections.deque()
+        for data in pending:
+            self.on_data(self.p.mqtt_topic, data)
+
+    def on_data(self, topic: str, payload: bytes) -> None:
+        p = self.p
+        if p.primitive or p.json:
+            self._on_text(topic, payload)
+            return
+        with self.lock:
+            cls = self.data_class
+            if cls is None or (self.p.ros_type and not self.md5):
+                if len(self.pending) >= PENDING_LIMIT:
+                    self.pending.popleft()
+                    self.bridge.problems.report(topic, "no_type",
+                                                f"MQTT topic '{topic}': no ROS type announced yet on "
+                                                f"'{codec.ROS_MSG_TYPE_PREFIX}{topic}'; holding the newest "
+                                                f"{PENDING_LIMIT} messages, dropping older ones")
+                self.pending.append(payload)
+                return
+        try:
+            stamp, body = codec.decode_ros_payload(payload)
+            msg = cls()
+            msg.deserialize(bytes(body))
+        except Exception as exc:  # genpy raises struct.error, DeserializationError, UnicodeDecodeError...
+            self.bridge.problems.report(topic, "malformed",
+                                        f"MQTT topic '{topic}': a {len(payload)}-byte payload does not decode as "
+                                        f"mqtt_client's {cls._type}: {exc or type(exc).__name__}")
+            return
+        if stamp is not None:
+            self._latency(stamp)
+        self._publish(msg)
+
+    def _on_text(self, topic: str, payload: bytes) -> None:
+        p = self.p
+        try:
+            text = payload.decode("utf-8")
+        except UnicodeDecodeError:
+            self.bridge.problems.report(topic, "malformed", f"MQTT topic '{topic}': payload is not UTF-8 text "
+                                        f"({len(payload)} bytes)")
+            return
+        try:
+            with self.lock:
+                if p.json:
+                    assert self.data_class is not None
+                    msg = codec.json_to_msg(text, self.data_class)
+                elif self.data_class is None:
+                    msg = codec.probe_primitive(text)
+                    self._advertise(type(msg))
+                else:
+                    msg = codec.text_to_msg(text, self.data_class)
+        except codec.CodecError as exc:
+            self.bridge.problems.report(topic, "unfit_text", f"MQTT topic '{topic}' -> ROS topic '{p.ros_topic}': "
+                                        f"{exc}")
+            return
+        self._publish(msg)
+
+
+def _message_class(t: codec.RosMsgType) -> Type[genpy.Message]:
+    """The installed class when its md5 matches the announcement, else one built from the definition."""
+    cls = roslib.message.get_message_class(t.name)
+    if cls is not None and cls._md5sum == t.md5:
+        return cls  # type: ignore[no-any-return]
+    built = genpy.dynamic.generate_dynamic(t.name, t.definition)[t.name]
+    if built._md5sum != t.md5:
+        raise ValueError(f"the definition's md5 is {built._md5sum}, the announcement says {t.md5}")
+    return built  # type: ignore[no-any-return]
+
+
+class MqttBridge:
+    """The bridge; ``micros_rt.init_node`` must have been called. ``close()`` (or ``with``) stops it."""
+
+    def __init__(self, params: MqttParams, *, on_fatal: Optional[Callable[[str], None]] = None) -> None:
+        self.params = params
+        self.nh = micros_rt.NodeHandle()
+        self.problems = _Problems()
+        self._closed = threading.Event()
+        self.connection = MqttConnection(params, on_fatal=on_fatal, on_connection_change=self._connection_changed)
+        self.ros2mqtt = [_Ros2Mqtt(self, p) for p in params.ros2mqtt]
+        self.mqtt2ros = [_Mqtt2Ros(self, p) for p in params.mqtt2ros]
+        for r in self.ros2mqtt:
+            kind = "primitive " if r.p.primitive else "JSON " if r.p.json else ""
+            _log.info("Bridging %sROS topic '%s' to MQTT topic '%s'", kind, r.p.ros_topic, r.p.mqtt_topic)
+        for m in self.mqtt2ros:
+            kind = "primitive " if m.p.primitive else "JSON " if m.p.json else ""
+            _log.info("Bridging MQTT topic '%s' to %sROS topic '%s'", m.p.mqtt_topic, kind, m.p.ros_topic)
+            self.connection.subscribe(m.p.mqtt_topic, m.p.qos, m.on_data)
+            if not (m.p.primitive or m.p.json):
+                self.connection.subscribe(codec.ROS_MSG_TYPE_PREFIX + m.p.mqtt_topic, m.p.qos, m.on_type)
+        self._service = rospy.Service("~is_connected", is_connected_service_class(), self._is_connected)
+        self._resolver = threading.Thread(target=self._resolve_loop, name="micros_rt mqtt types", daemon=True)
+
+    def start(self) -> None:
+        """Connect to the broker (in the background) and start subscribing ROS topics as they appear."""
+        self.connection.start()
+        self._resolver.start()
+
+    def _is_connected(self, request: Any) -> Any:
+        return is_connected_service_class()._response_class(connected=self.connection.is_connected)
+
+    def _connection_changed(self, connected: bool) -> None:
+        if connected:
+            for r in self.ros2mqtt:
+                r.type_sent = False     # the retained announcement may be gone with a restarted broker
+
+    def _resolve_loop(self) -> None:
+        warned: Dict[str, str] = {}
+        while not self._closed.wait(RESOLVE_INTERVAL):
+            waiting = [r for r in self.ros2mqtt if r.subscriber is None]
+            if not waiting:
+                return
+            try:
+                published = dict(rospy.get_published_topics())
+            except Exception as exc:  # master away: try again
+                _log.debug("micros_rt mqtt: cannot ask the master for topic types: %s", exc)
+                continue
+            for r in waiting:
+                name = rospy.resolve_name(r.p.ros_topic)
+                type_name = published.get(name)
+                if type_name is None:
+                    continue
+                cls = roslib.message.get_message_class(type_name)
+                if cls is None:
+                    if warned.get(name) != type_name:
+                        warned[name] = type_name
+                        self.problems.report(name, "unknown_type", f"ROS topic {name} has type {type_name}, whose "
+                                             "Python package is not installed here: it cannot be bridged")
+                    continue
+                r.attach(cls)
+
+    def counters(self) -> Dict[str, Any]:
+        """Counts: messages sent and delivered, each kind of bad input, the connection's counters."""
+        out: Dict[str, Any] = {"sent": {r.p.ros_topic: r.sent for r in self.ros2mqtt},
+                               "delivered": {m.p.ros_topic: m.delivered for m in self.mqtt2ros},
+                               "bad_input": dict(self.problems.counts)}
+        out.update(vars(self.connection.counters()))
+        return out
+
+    def close(self) -> None:
+        """Stop the bridge (disconnects cleanly, so no last will); harmless twice."""
+        if self._closed.is_set():
+            return
+        self._closed.set()
+        self.connection.close()
+        self._service.shutdown()
+        for r in self.ros2mqtt:
+            if r.subscriber is not None:
+                r.subscriber.unregister()
+        for m in self.mqtt2ros:
+            for pub in (m.publisher, m.latency_pub):
+                if pub is not None:
+                    pub.unregister()
+        _log.info("micros_rt mqtt: counters: %s", self.counters())
+
+    def __enter__(self) -> "MqttBridge":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+

@@ -1,0 +1,322 @@
+"""Payload formats on MQTT, pure functions (no broker, no ROS graph).
+
+- mqtt_client's ROS 1 framing: ``[1 | ros::Time (uint32 secs, uint32 nsecs) | message]`` when a
+  timestamp is injected, ``[0 | message]`` otherwise, the message in ROS 1 serialization.
+- mqtt_client's type announcement: a serialized ``RosMsgType`` (``string md5``, ``string name``,
+  ``string definition``) on ``mqtt_client/ros_msg_type/<mqtt_topic>``.
+- Primitive text: ``std_msgs`` primitives as their value; text from MQTT probed as bool, then integer,
+  then float, then string (mqtt_client's order).
+- JSON: every field (time as ``{"secs", "nsecs"}``, ``uint8[]`` as a list of numbers).
+
+>>> encode_ros_payload(b"\\x02\\x00\\x00\\x00hi")
+b'\\x00\\x02\\x00\\x00\\x00hi'
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+from typing import Any, Dict, Optional, Tuple, Type
+
+import genmsg.msgs  # type: ignore[import-untyped]
+import genpy
+
+__all__ = [
+    "CodecError",
+    "PRIMITIVE_TYPES",
+    "ROS_MSG_TYPE_PREFIX",
+    "RosMsgType",
+    "decode_msg_type",
+    "decode_ros_payload",
+    "encode_msg_type",
+    "encode_ros_payload",
+    "json_to_msg",
+    "msg_to_json",
+    "msg_to_text",
+    "probe_primitive",
+    "text_to_msg",
+]
+
+#: mqtt_client's prefix of the retained topic that carries a data topic's ROS type.
+ROS_MSG_TYPE_PREFIX = "mqtt_client/ros_msg_type/"
+
+_TIME = struct.Struct("<II")
+_LEN = struct.Struct("<I")
+
+#: std_msgs types that travel as plain text (type name -> field type).
+PRIMITIVE_TYPES: Dict[str, str] = {
+    "std_msgs/String": "string", "std_msgs/Bool": "bool", "std_msgs/Char": "char",
+    "std_msgs/UInt8": "uint8", "std_msgs/UInt16": "uint16", "std_msgs/UInt32": "uint32", "std_msgs/UInt64": "uint64",
+    "std_msgs/Int8": "int8", "std_msgs/Int16": "int16", "std_msgs/Int32": "int32", "std_msgs/Int64": "int64",
+    "std_msgs/Float32": "float32", "std_msgs/Float64": "float64",
+}
+
+_INT_RANGES: Dict[str, Tuple[int, int]] = {
+    "char": (0, 255), "uint8": (0, 2**8 - 1), "uint16": (0, 2**16 - 1), "uint32": (0, 2**32 - 1),
+    "uint64": (0, 2**64 - 1), "int8": (-2**7, 2**7 - 1), "int16": (-2**15, 2**15 - 1),
+    "int32": (-2**31, 2**31 - 1), "int64": (-2**63, 2**63 - 1),
+}
+
+
+class CodecError(ValueError):
+    """A payload that does not decode; the message says what was wrong with it."""
+
+
+# ----------------------------------------------------------------------------- mqtt_client framing
+
+
+def encode_ros_payload(serialized: bytes, *, stamp: Optional[genpy.Time] = None) -> bytes:
+    """mqtt_client's payload for an already serialized ROS 1 message (``stamp``: the injected time)."""
+    if stamp is None:
+        return b"\x00" + serialized
+    return b"\x01" + _TIME.pack(int(stamp.secs), int(stamp.nsecs)) + serialized
+
+
+def decode_ros_payload(payload: bytes) -> Tuple[Optional[genpy.Time], memoryview]:
+    """(injected stamp or None, serialized message) of an mqtt_client payload."""
+    if not payload:
+        raise CodecError("empty payload (mqtt_client payloads start with a 0 or 1 byte)")
+    flag = payload[0]
+    if flag == 0:
+        return None, memoryview(payload)[1:]
+    if flag == 1:
+        if len(payload) < 1 + _TIME.size:
+            raise CodecError(f"stamped payload of {len(payload)} bytes is shorter than its 8-byte timestamp")
+        secs, nsecs = _TIME.unpack_from(payload, 1)
+        if nsecs >= 1_000_000_000:
+            raise CodecError(f"injected timestamp has {nsecs} nanoseconds (must be below 1e9)")
+        return genpy.Time(secs, nsecs), memoryview(payload)[1 + _TIME.size:]
+    raise CodecError(f"first byte is {flag}, mqtt_client payloads start with 0 (no timestamp) or 1 (timestamp)")
+
+
+class RosMsgType:
+    """mqtt_client's ``RosMsgType`` message: a type's md5, name and full definition."""
+
+    __slots__ = ("md5", "name", "definition")
+
+    def __init__(self, md5: str, name: str, definition: str) -> None:
+        self.md5, self.name, self.definition = md5, name, definition
+
+    @classmethod
+    def of(cls, data_class: Type[genpy.Message]) -> "RosMsgType":
+        """The announcement for a genpy message class."""
+        return cls(data_class._md5sum, data_class._type, data_class._full_text)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, RosMsgType) and (self.md5, self.name, self.definition) == (
+            other.md5, other.name, other.definition)
+
+    def __repr__(self) -> str:
+        return f"RosMsgType(md5={self.md5!r}, name={self.name!r}, definition=<{len(self.definition)} chars>)"
+
+
+def encode_msg_type(t: RosMsgType) -> bytes:
+    """``RosMsgType`` in ROS 1 serialization (three length-prefixed UTF-8 strings)."""
+    out = bytearray()
+    for s in (t.md5, t.name, t.definition):
+        b = s.encode("utf-8")
+        out += _LEN.pack(len(b)) + b
+    return bytes(out)
+
+
+def decode_msg_type(payload: bytes) -> RosMsgType:
+    """Inverse of :func:`encode_msg_type`; checks lengths and that the name looks like ``pkg/Type``."""
+    fields = []
+    pos = 0
+    for what in ("md5", "name", "definition"):
+        if pos + 4 > len(payload):
+            raise CodecError(f"RosMsgType ends before its {what} field")
+        (n,) = _LEN.unpack_from(payload, pos)
+        pos += 4
+        if pos + n > len(payload):
+            raise CodecError(f"RosMsgType {what} field claims {n} bytes, only {len(payload) - pos} remain")
+        try:
+            fields.append(bytes(payload[pos:pos + n]).decode("utf-8"))
+        except UnicodeDecodeError as exc:
+            raise CodecError(f"RosMsgType {what} field is not UTF-8") from exc
+        pos += n
+    md5, name, definition = fields
+    if name.count("/") != 1 or len(md5) != 32:
+        raise CodecError(f"RosMsgType names type {name!r} with md5 {md5!r}: expected 'package/Type' and 32 hex digits")
+    return RosMsgType(md5, name, definition)
+
+
+# ----------------------------------------------------------------------------- primitive text
+
+
+def _float_text(value: float, bits: int) -> str:
+    """Shortest text that reads back to the same float32/float64 value."""
+    if bits == 64 or not math.isfinite(value):
+        return repr(float(value))
+    for digits in range(6, 10):
+        text = f"{value:.{digits}g}"
+        if struct.unpack("<f", struct.pack("<f", float(text)))[0] == struct.unpack("<f", struct.pack("<f", value))[0]:
+            return text
+    return repr(float(value))
+
+
+def msg_to_text(msg: genpy.Message) -> str:
+    """A message as mqtt_client's primitive text: the bare value for std_msgs primitives, else YAML."""
+    kind = PRIMITIVE_TYPES.get(msg._type)
+    if kind is None:
+        return str(msg)
+    value = msg.data
+    if kind == "bool":
+        return "true" if value else "false"
+    if kind == "string":
+        return str(value)
+    if kind in ("float32", "float64"):
+        return _float_text(float(value), 32 if kind == "float32" else 64)
+    return str(int(value))
+
+
+def probe_primitive(text: str) -> genpy.Message:
+    """mqtt_client's probing of incoming text: bool, then int (Int32), then float (Float32), then String."""
+    from std_msgs.msg import Bool, Float32, Int32, String
+
+    stripped = text.strip()
+    if stripped in ("true", "false"):
+        return Bool(data=stripped == "true")
+    try:
+        as_int = int(stripped, 10)
+    except ValueError:
+        pass
+    else:
+        if -2**31 <= as_int < 2**31:
+            return Int32(data=as_int)
+    try:
+        as_float = float(stripped)
+    except ValueError:
+        pass
+    else:
+        if stripped and (not math.isfinite(as_float) or abs(as_float) <= 3.4028234663852886e38):
+            return Float32(data=as_float)
+    return String(data=text)
+
+
+def text_to_msg(text: str, data_class: Type[genpy.Message]) -> genpy.Message:
+    """Text as a message of a fixed primitive type; :class:`CodecError` in words when it does not fit."""
+    kind = PRIMITIVE_TYPES.get(data_class._type)
+    if kind is None:
+        raise CodecError(f"{data_class._type} is not a primitive type (primitive types: "
+                         f"{', '.join(PRIMITIVE_TYPES)})")
+    stripped = text.strip()
+    value: Any
+    if kind == "string":
+        value = text
+    elif kind == "bool":
+        lowered = stripped.lower()
+        if lowered in ("true", "1"):
+            value = True
+        elif lowered in ("false", "0"):
+            value = False
+        else:
+            raise CodecError(f"text {_short(text)} is not a bool (true/false) for {data_class._type}")
+    elif kind in ("float32", "float64"):
+        try:
+            value = float(stripped)
+        except ValueError:
+            raise CodecError(f"text {_short(text)} is not a number for {data_class._type}") from None
+    else:
+        try:
+            value = int(stripped, 10)
+        except ValueError:
+            raise CodecError(f"text {_short(text)} is not an integer for {data_class._type}") from None
+        lo, hi = _INT_RANGES[kind]
+        if not lo <= value <= hi:
+            raise CodecError(f"{value} does not fit {data_class._type} ({lo}..{hi})")
+    return data_class(data=value)
+
+
+def _short(text: str) -> str:
+    return repr(text if len(text) <= 40 else text[:40] + "...")
+
+
+# ----------------------------------------------------------------------------- JSON
+
+
+def _to_jsonable(value: Any) -> Any:
+    if isinstance(value, genpy.Message):
+        return {slot: _to_jsonable(getattr(value, slot)) for slot in value.__slots__}
+    if isinstance(value, (genpy.Time, genpy.Duration)):
+        return {"secs": int(value.secs), "nsecs": int(value.nsecs)}
+    if isinstance(value, (bytes, bytearray)):
+        return list(value)
+    if isinstance(value, (list, tuple)):
+        return [_to_jsonable(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    return value
+
+
+def msg_to_json(msg: genpy.Message) -> str:
+    """Every field of a message as one JSON object."""
+    return json.dumps(_to_jsonable(msg), separators=(",", ":"))
+
+
+def json_to_msg(text: str, data_class: Type[genpy.Message]) -> genpy.Message:
+    """A message from JSON (missing fields keep their defaults); :class:`CodecError` naming the field."""
+    try:
+        data = json.loads(text)
+    except ValueError as exc:
+        raise CodecError(f"not JSON: {exc}") from None
+    msg = data_class()
+    _fill(msg, data, msg._type)
+    try:
+        msg._check_types()
+    except Exception as exc:  # genpy raises SerializationError/TypeError/ValueError in words
+        raise CodecError(f"JSON does not fit {data_class._type}: {exc}") from None
+    return msg
+
+
+def _fill(msg: genpy.Message, data: Any, where: str) -> None:
+    if not isinstance(data, dict):
+        raise CodecError(f"{where}: expected a JSON object, got {type(data).__name__}")
+    types = dict(zip(msg.__slots__, msg._slot_types))
+    for key, value in data.items():
+        if key not in types:
+            raise CodecError(f"{where}: {msg._type} has no field {key!r}")
+        setattr(msg, key, _convert(getattr(msg, key), types[key], value, f"{where}.{key}"))
+
+
+def _convert(current: Any, slot_type: str, value: Any, where: str) -> Any:
+    base, is_array, _ = genmsg.msgs.parse_type(slot_type)
+    if is_array:
+        if base in ("uint8", "char"):
+            if not isinstance(value, list) or not all(isinstance(v, int) and 0 <= v <= 255 for v in value):
+                raise CodecError(f"{where}: expected a list of numbers 0..255")
+            return bytes(value)
+        if not isinstance(value, list):
+            raise CodecError(f"{where}: expected a JSON array")
+        if base in genmsg.msgs.BUILTIN_TYPES:
+            return [_scalar(base, v, f"{where}[{i}]") for i, v in enumerate(value)]
+        import roslib.message
+
+        cls = roslib.message.get_message_class(genmsg.msgs.resolve_type(base, "std_msgs"))
+        if cls is None:
+            raise CodecError(f"{where}: unknown message type {base}")
+        items = []
+        for i, v in enumerate(value):
+            item = cls()
+            _fill(item, v, f"{where}[{i}]")
+            items.append(item)
+        return items
+    if isinstance(current, genpy.Message):
+        _fill(current, value, where)
+        return current
+    return _scalar(base, value, where)
+
+
+def _scalar(base: str, value: Any, where: str) -> Any:
+    if base in ("time", "duration"):
+        if not isinstance(value, dict):
+            raise CodecError(f"{where}: expected {{\"secs\": ..., \"nsecs\": ...}}")
+        cls = genpy.Time if base == "time" else genpy.Duration
+        return cls(int(value.get("secs", 0)), int(value.get("nsecs", 0)))
+    if base in ("float32", "float64") and isinstance(value, str):
+        try:
+            return float(value)                       # "nan", "inf" as written by msg_to_json
+        except ValueError:
+            raise CodecError(f"{where}: {value!r} is not a number") from None
+    return value
