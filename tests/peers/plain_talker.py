@@ -1,0 +1,57 @@
+#!/usr/bin/python3
+"""A plain rospy talker: rospy only, no micros_rt import, no test helpers.
+
+Runs as a stock node (``/usr/bin/python3 plain_talker.py``) and unchanged under ``micros-rt run``
+(and from a launch file). Publishes ``std_msgs/String`` "<~greeting> <n>" on ``chatter`` (a relative
+name: remappings and namespaces apply). Prints JSON lines: ``ready`` (node, topic, pid, uri, greeting),
+``done`` (sent). Options: --count N (0: until shutdown), --rate HZ (0: as fast as publish() returns),
+--wait-subscribers N, --queue-size N, --latch.
+"""
+
+import argparse
+import json
+import os
+import sys
+import time
+
+import rospy
+from std_msgs.msg import String
+
+
+def emit(event, **fields):
+    sys.stdout.write(json.dumps(dict(event=event, **fields)) + "\n")
+    sys.stdout.flush()
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--topic", default="chatter")
+    ap.add_argument("--count", type=int, default=0)
+    ap.add_argument("--rate", type=float, default=10.0)
+    ap.add_argument("--wait-subscribers", type=int, default=0)
+    ap.add_argument("--queue-size", type=int, default=100)
+    ap.add_argument("--latch", action="store_true")
+    args = ap.parse_args(rospy.myargv()[1:])
+
+    rospy.init_node("plain_talker")
+    greeting = rospy.get_param("~greeting", "hello")
+    pub = rospy.Publisher(args.topic, String, queue_size=args.queue_size, latch=args.latch)
+    emit("ready", node=rospy.get_name(), topic=pub.resolved_name, pid=os.getpid(), uri=rospy.get_node_uri(),
+         greeting=greeting, is_rospy_publisher=isinstance(pub, rospy.Publisher))
+    while pub.get_num_connections() < args.wait_subscribers and not rospy.is_shutdown():
+        time.sleep(0.02)
+    rate = rospy.Rate(args.rate) if args.rate > 0 else None
+    sent = 0
+    try:
+        while not rospy.is_shutdown() and (args.count == 0 or sent < args.count):
+            pub.publish(String(data="%s %d" % (greeting, sent)))
+            sent += 1
+            if rate is not None:
+                rate.sleep()
+    except rospy.ROSInterruptException:
+        pass
+    emit("done", sent=sent, connections=pub.get_num_connections())
+
+
+if __name__ == "__main__":
+    main()
