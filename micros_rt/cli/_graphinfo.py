@@ -247,7 +247,7 @@ def _queue(qos: Mapping[str, Any]) -> str:
 def describe_publisher_qos(qos: Mapping[str, Any]) -> str:
     """``AdvertiseQoSOptions.to_dict()`` (+ queue_size, latch) in a few words.
 
-    >>> describe_publisher_qos({"transport_priority": "HIGH", "using_best_effort_protocol": True})
+    >>> describe_publisher_qos({"transport_priority": "HIGH", "using_best_effort_protocol": True, "queue_size": None})
     'best effort, priority HIGH, lossless (queue_size None)'
     """
     parts = ["best effort" if qos.get("using_best_effort_protocol") else "reliable",
@@ -260,7 +260,8 @@ def describe_publisher_qos(qos: Mapping[str, Any]) -> str:
         parts.append(f"valid for {_fmt_secs(lifespan)}")
     if qos.get("latch"):
         parts.append("latched")
-    parts.append(_queue(qos))
+    if "queue_size" in qos:
+        parts.append(_queue(qos))
     return ", ".join(parts)
 
 
@@ -278,7 +279,8 @@ def describe_subscriber_qos(qos: Mapping[str, Any]) -> str:
     if tf > 0:
         parts.append(f"time filter {_fmt_secs(tf)}")
     parts.append("by source time" if qos.get("ordered_by_sending_timestamp", True) else "by arrival")
-    parts.append(_queue(qos))
+    if "queue_size" in qos:
+        parts.append(_queue(qos))
     hints = qos.get("hints")
     if hints and list(hints) != ["DDS", "TCPROS"]:
         parts.append("hints " + ",".join(hints))

@@ -1,0 +1,303 @@
+"""``micros-rt doctor``: check the set-up a micros_rt node depends on, each failure with a one-line fix.
+
+Checks: the ROS master answers; ``ROS_IP``/``ROS_HOSTNAME`` resolve to this host and agree; which network
+interface and Cyclone configuration micros_rt will use (the same functions the library uses:
+:mod:`micros_rt.dds.participant`) and whether multicast is on; ``ROS_DOMAIN_ID`` is valid; Cyclone starts
+with that configuration; the clocks of the graph's micros_rt nodes agree with this one; the YAML profile
+named by ``MICROS_RT_QOS_PROFILE`` is valid. Exit code 0 only when every check passes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ipaddress
+import os
+import re
+import socket
+import subprocess
+import urllib.parse
+from dataclasses import dataclass
+from typing import Callable, Dict, List, Mapping, Optional
+
+from . import CommandError
+from ._graphinfo import MICROS_RT, Master, master_uri, probe_all
+
+__all__ = ["Check", "main", "run_checks", "interface_addresses"]
+
+OK, FAIL, SKIP = "OK", "FAIL", "SKIP"
+
+
+@dataclass(frozen=True)
+class Check:
+    """One check's outcome: ``status`` OK, FAIL or SKIP (not applicable; not a failure), what was found
+    and, when it failed, the one line that fixes it."""
+
+    name: str
+    status: str
+    detail: str
+    fix: str = ""
+
+    @property
+    def failed(self) -> bool:
+        return self.status == FAIL
+
+
+def main(argv: List[str]) -> int:
+    """``micros-rt doctor [-v]``."""
+    parser = argparse.ArgumentParser(
+        prog="micros-rt doctor", usage="%(prog)s [-v]",
+        description="Check what micros_rt nodes depend on: the ROS master, ROS_IP/ROS_HOSTNAME, the network "
+                    "interface and Cyclone DDS configuration micros_rt will use (and multicast), ROS_DOMAIN_ID, "
+                    "that Cyclone starts, the clock offset of the graph's micros_rt nodes, and the profile in "
+                    "MICROS_RT_QOS_PROFILE. Each failed check prints a one-line fix; the exit code is 0 only "
+                    "when every check passes.")
+    parser.add_argument("-v", "--verbose", action="store_true", help="also print the full Cyclone configuration")
+    args = parser.parse_args(argv)
+    checks = run_checks(os.environ)
+    width = max(len(c.name) for c in checks)
+    for c in checks:
+        print(f"[{c.status:^4}] {c.name:<{width}}  {c.detail}")
+        if c.fix:
+            print(f"       {'':<{width}}  fix: {c.fix}")
+    if args.verbose:
+        from ..dds.participant import cyclone_config
+
+        try:
+            print(f"\nCyclone configuration (later sources win):\n  {cyclone_config(os.environ)}")
+        except Exception as exc:
+            print(f"\nCyclone configuration: cannot be built ({exc})")
+    failed = sum(c.failed for c in checks)
+    print(f"\n{failed} of {len(checks)} checks failed" if failed else f"\nall {len(checks)} checks passed")
+    return 1 if failed else 0
+
+
+def run_checks(env: Mapping[str, str]) -> List[Check]:
+    """Every check, in order; a check that cannot run because an earlier one failed says so."""
+    master = check_master(env)
+    domain = check_domain(env)
+    return [master, check_address(env), check_dds_network(env), domain,
+            check_cyclone(env) if not domain.failed else
+            Check("Cyclone DDS", SKIP, "not started: ROS_DOMAIN_ID is invalid"),
+            check_clocks(env) if not master.failed else Check("clocks", SKIP, "not checked: no ROS master"),
+            check_profile(env)]
+
+
+# --------------------------------------------------------------------------- checks
+
+def check_master(env: Mapping[str, str]) -> Check:
+    uri = master_uri(env)
+    try:
+        pid = Master(uri, timeout=3.0).call("getPid")
+    except CommandError as exc:
+        return Check("ROS master", FAIL, str(exc).split(";")[0],
+                     "start roscore (or rosmaster --core), or export ROS_MASTER_URI=http://HOST:11311/ naming "
+                     "the running master")
+    return Check("ROS master", OK, f"{uri} answers (pid {pid})")
+
+
+def interface_addresses() -> Dict[str, str]:
+    """IPv4 address -> interface name of this host (``ip -4 -o addr show``)."""
+    found = {"127.0.0.1": "lo"}
+    try:
+        out = subprocess.run(["ip", "-4", "-o", "addr", "show"], capture_output=True, text=True,
+                             timeout=5).stdout
+    except (OSError, subprocess.SubprocessError):
+        return found
+    for line in out.splitlines():
+        parts = line.split()
+        if "inet" in parts and len(parts) > 1:
+            found[parts[parts.index("inet") + 1].split("/")[0]] = parts[1]
+    return found
+
+
+def _resolve(host: str) -> Optional[str]:
+    try:
+        return socket.gethostbyname(host)
+    except (OSError, UnicodeError):
+        return None
+
+
+def _is_loopback(address: str) -> bool:
+    try:
+        return ipaddress.ip_address(address).is_loopback
+    except ValueError:
+        return False
+
+
+def _local(address: str, interfaces: Mapping[str, str]) -> bool:
+    return _is_loopback(address) or address in interfaces
+
+
+def check_address(env: Mapping[str, str], interfaces: Optional[Mapping[str, str]] = None) -> Check:
+    """ROS_IP / ROS_HOSTNAME: resolvable, this host's, consistent with each other and with the master."""
+    name = "ROS_IP/ROS_HOSTNAME"
+    ifaces = interface_addresses() if interfaces is None else interfaces
+    ros_ip, ros_host = env.get("ROS_IP", "").strip(), env.get("ROS_HOSTNAME", "").strip()
+    if ros_ip:
+        try:
+            ipaddress.ip_address(ros_ip)
+        except ValueError:
+            return Check(name, FAIL, f"ROS_IP={ros_ip!r} is not an IP address",
+                         "export ROS_IP=<an address of this host>, or put a name in ROS_HOSTNAME instead")
+        if not _local(ros_ip, ifaces):
+            return Check(name, FAIL, f"ROS_IP={ros_ip} is not an address of this host (it has "
+                         f"{', '.join(sorted(ifaces))})", "export ROS_IP=<one of this host's addresses>")
+    host_addr = None
+    if ros_host:
+        host_addr = _resolve(ros_host)
+        if host_addr is None:
+            return Check(name, FAIL, f"ROS_HOSTNAME={ros_host} does not resolve",
+                         f"add {ros_host} to /etc/hosts (or DNS), or export ROS_IP=<this host's address> instead")
+        if not _local(host_addr, ifaces):
+            return Check(name, FAIL, f"ROS_HOSTNAME={ros_host} resolves to {host_addr}, not an address of this host",
+                         "export ROS_HOSTNAME=<this host's name>, or ROS_IP=<this host's address>")
+    if ros_ip and host_addr and host_addr != ros_ip:
+        return Check(name, FAIL, f"ROS_IP={ros_ip} but ROS_HOSTNAME={ros_host} ({host_addr}): rospy advertises "
+                     f"ROS_HOSTNAME, micros_rt's DDS follows ROS_IP",
+                     "set only one of ROS_IP and ROS_HOSTNAME, or make them name the same address")
+    address = ros_ip or host_addr
+    if address is None:
+        hostname = socket.gethostname()
+        address = _resolve(hostname)
+        if address is None:
+            return Check(name, FAIL, f"neither is set and the host name {hostname!r} does not resolve",
+                         "export ROS_IP=<this host's address> (127.0.0.1 for a single machine)")
+        shown = f"neither set: nodes advertise the host name {hostname} ({address})"
+    else:
+        shown = f"nodes advertise {ros_ip or ros_host}" + (f" ({address})" if address != (ros_ip or ros_host) else "")
+    master_host = urllib.parse.urlparse(master_uri(env)).hostname or "localhost"
+    master_addr = _resolve(master_host)
+    if master_addr is not None and not _local(master_addr, ifaces) and _is_loopback(address):
+        return Check(name, FAIL, f"{shown}, a loopback address, but the master {master_host} is on another host: "
+                     "its other nodes cannot reach this one", "export ROS_IP=<this host's address on the "
+                     "master's network>")
+    return Check(name, OK, shown)
+
+
+def _user_network(uri: str) -> str:
+    """The interface and multicast a user's CYCLONEDDS_URI sets (file, file:// URI or inline XML)."""
+    texts = []
+    for part in uri.split(","):
+        part = part.strip()
+        if part.startswith("<"):
+            texts.append(part)
+            continue
+        path = urllib.parse.urlparse(part).path if part.startswith("file://") else part
+        try:
+            with open(path, encoding="utf-8") as f:
+                texts.append(f.read())
+        except OSError as exc:
+            raise ValueError(f"CYCLONEDDS_URI names {part}, which cannot be read ({exc.strerror})") from None
+    text = "\n".join(texts)
+    iface = re.findall(r'<NetworkInterface\s[^>]*(?:name|address)\s*=\s*"([^"]+)"', text, flags=re.IGNORECASE)
+    where = f"interface {iface[-1]}" if iface else "Cyclone's choice of interface"
+    found = re.findall(r"<AllowMulticast>\s*([^<\s]+)\s*</AllowMulticast>", text, flags=re.IGNORECASE)
+    if found:
+        value = found[-1].lower()
+        return f"{where}, multicast {'off' if value == 'false' else value}"
+    if re.search(r'multicast\s*=\s*"false"', text, flags=re.IGNORECASE):
+        return f"{where}, multicast off"
+    return f"{where}, multicast on (Cyclone's default where the interface supports it)"
+
+
+def check_dds_network(env: Mapping[str, str], interfaces: Optional[Mapping[str, str]] = None) -> Check:
+    """Which interface and Cyclone configuration micros_rt will use, and multicast (as the library picks
+    them: :func:`micros_rt.dds.participant.cyclone_config`)."""
+    from ..dds import participant
+    from ..exceptions import DDSUnavailableError
+
+    name = "DDS network"
+    ifaces = interface_addresses() if interfaces is None else interfaces
+    try:
+        participant.cyclone_config(env)
+        lease = participant.lease_duration(env)
+    except DDSUnavailableError as exc:
+        return Check(name, FAIL, str(exc), "unset MICROS_RT_LEASE_DURATION or give it 0.5..3600 seconds")
+    user = env.get("CYCLONEDDS_URI", "").strip()
+    if user:
+        try:
+            network = _user_network(user)
+        except ValueError as exc:
+            return Check(name, FAIL, str(exc), "point CYCLONEDDS_URI at a readable Cyclone XML file, or unset it")
+        return Check(name, OK, f"{network} (CYCLONEDDS_URI={user}, layered over micros_rt's defaults: lease "
+                     f"{lease:g} s)")
+    address = participant._ros_address(env)
+    if participant._is_loopback(env):
+        return Check(name, OK, f"interface lo ({address} is loopback): multicast off, unicast discovery on "
+                     f"127.0.0.1, 63 KB fragments, lease {lease:g} s")
+    iface = ifaces.get(address, "no interface holds it")
+    return Check(name, OK, f"interface {iface} ({address}): multicast on (Cyclone's default), lease {lease:g} s")
+
+
+def check_domain(env: Mapping[str, str]) -> Check:
+    from ..dds.participant import domain_id_from_env
+    from ..exceptions import DDSUnavailableError
+
+    try:
+        domain = domain_id_from_env(env)
+    except DDSUnavailableError as exc:
+        return Check("ROS_DOMAIN_ID", FAIL, str(exc),
+                     "export ROS_DOMAIN_ID=0 (any integer 0..232, the same on every node that should talk)")
+    given = "" if env.get("ROS_DOMAIN_ID", "").strip() else " (not set: the default)"
+    return Check("ROS_DOMAIN_ID", OK, f"{domain}{given}")
+
+
+def check_cyclone(env: Mapping[str, str]) -> Check:
+    """Start a Cyclone participant with micros_rt's configuration (in this process) and close it."""
+    from ..dds.participant import DDSParticipant, cyclone_config, domain_id_from_env
+    from ..exceptions import DDSUnavailableError
+
+    try:
+        domain = domain_id_from_env(env)
+        p = DDSParticipant(domain, cyclone_config(env))
+    except DDSUnavailableError as exc:
+        return Check("Cyclone DDS", FAIL, str(exc), "fix CYCLONEDDS_URI (or unset it) and the interface named by "
+                     "ROS_IP; micros_rt falls back to TCPROS until then")
+    except ImportError as exc:
+        return Check("Cyclone DDS", FAIL, f"cyclonedds cannot be imported ({exc})", "pip install cyclonedds")
+    guid = p.guid
+    p.close()
+    return Check("Cyclone DDS", OK, f"a participant started on domain {domain} (guid {guid})")
+
+
+def check_clocks(env: Mapping[str, str], *, probe: Optional[Callable[[Master], Dict[str, float]]] = None) -> Check:
+    """Wall-clock offset of every micros_rt node of the graph against this host's."""
+    from ..qos import CLOCK_SKEW_WARN_SECONDS
+
+    master = Master(master_uri(env), timeout=3.0)
+    try:
+        offsets = (probe or _clock_offsets)(master)
+    except CommandError as exc:
+        return Check("clocks", SKIP, f"not checked: {exc}")
+    if not offsets:
+        return Check("clocks", OK, "no micros_rt nodes in the graph to compare with")
+    worst = max(offsets, key=lambda n: abs(offsets[n]))
+    text = f"{len(offsets)} micros_rt node(s); largest offset {offsets[worst] * 1e3:+.1f} ms ({worst})"
+    if abs(offsets[worst]) > CLOCK_SKEW_WARN_SECONDS:
+        return Check("clocks", FAIL, text + f", over {CLOCK_SKEW_WARN_SECONDS:g} s",
+                     "synchronise the hosts' clocks (chrony or NTP); source-time ordering and msg_valid_period "
+                     "depend on them")
+    return Check("clocks", OK, text)
+
+
+def _clock_offsets(master: Master) -> Dict[str, float]:
+    pubs, subs = master.system_state()
+    names = {n for nodes in list(pubs.values()) + list(subs.values()) for n in nodes}
+    reports = probe_all(master, names)
+    return {r.name: r.clock_offset for r in reports.values() if r.kind == MICROS_RT and r.clock_offset is not None}
+
+
+def check_profile(env: Mapping[str, str]) -> Check:
+    from ..exceptions import ProfileError
+    from ..qos import QoSProfile
+
+    path = env.get("MICROS_RT_QOS_PROFILE", "").strip()
+    if not path:
+        return Check("QoS profile", OK, "MICROS_RT_QOS_PROFILE not set (no profile)")
+    try:
+        profile = QoSProfile.load(path)
+    except ProfileError as exc:
+        return Check("QoS profile", FAIL, str(exc),
+                     f"correct the line named (micros-rt profile check {path}), or unset MICROS_RT_QOS_PROFILE")
+    return Check("QoS profile", OK, f"{path}: {len(profile.publishers)} publisher and {len(profile.subscribers)} "
+                 "subscriber rules")

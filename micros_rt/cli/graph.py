@@ -1,0 +1,144 @@
+"""``micros-rt graph``: the live graph's nodes and topics, every link coloured by protocol and labelled with
+its QoS, as Graphviz (``--dot``) or a picture (``--png``, drawn by Graphviz's ``dot``)."""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import subprocess
+import sys
+from typing import Dict, List, Set
+
+from . import CommandError
+from ._graphinfo import MICROS_RT, GraphSnapshot, Master, snapshot
+
+__all__ = ["main", "to_dot", "PROTOCOL_COLOURS"]
+
+#: Link colour per protocol (a colour-blind-safe pair), and for links that carry nothing yet.
+PROTOCOL_COLOURS = {"DDS": "#1f77b4", "TCPROS": "#e66100"}
+OTHER_COLOUR = "#888888"
+#: Plumbing every ROS graph has; shown with --all.
+HIDDEN_TOPICS = frozenset({"/rosout", "/rosout_agg"})
+HIDDEN_NODES = frozenset({"/rosout"})
+
+
+def main(argv: List[str]) -> int:
+    """``micros-rt graph [--png FILE] [--dot [FILE]] [--all]``."""
+    parser = argparse.ArgumentParser(
+        prog="micros-rt graph", usage="%(prog)s [--png FILE.png] [--dot [FILE.dot]] [--all]",
+        description="Draw the live ROS graph: nodes (micros_rt or stock) and topics, each publisher->subscriber "
+                    "link coloured by its protocol (DDS blue, TCPROS orange) and labelled with its QoS. "
+                    "Needs Graphviz's 'dot' for --png.")
+    parser.add_argument("--png", metavar="FILE.png", help="write the picture to FILE.png")
+    parser.add_argument("--dot", metavar="FILE.dot", nargs="?", const="-",
+                        help="write the Graphviz source to FILE.dot (stdout without FILE)")
+    parser.add_argument("--all", action="store_true", help="also show /rosout and its links")
+    args = parser.parse_args(argv)
+    if not args.png and not args.dot:
+        raise CommandError("nothing to draw to: give --png FILE.png and/or --dot [FILE.dot]", code=2)
+    dot = to_dot(snapshot(Master()), include_all=args.all)
+    if args.dot == "-":
+        sys.stdout.write(dot)
+    elif args.dot:
+        _write(args.dot, dot)
+    if args.png:
+        render_png(dot, args.png)
+        print(f"wrote {args.png}", file=sys.stderr)
+    return 0
+
+
+def _write(path: str, text: str) -> None:
+    try:
+        with open(path, "w", encoding="utf-8") as f:
+            f.write(text)
+    except OSError as exc:
+        raise CommandError(f"cannot write {path}: {exc.strerror or exc}") from None
+
+
+def render_png(dot: str, path: str) -> None:
+    """Run Graphviz's ``dot -Tpng`` (bounded: 60 s)."""
+    exe = shutil.which("dot")
+    if exe is None:
+        raise CommandError("Graphviz's 'dot' is not installed; apt-get install graphviz (or use --dot)")
+    try:
+        done = subprocess.run([exe, "-Tpng", "-o", path], input=dot, capture_output=True, text=True, timeout=60)
+    except subprocess.TimeoutExpired:
+        raise CommandError("Graphviz's dot took longer than 60 s; use --dot and draw it yourself") from None
+    if done.returncode != 0:
+        first = (done.stderr.strip().splitlines() or [f"exit code {done.returncode}"])[0]
+        raise CommandError(f"Graphviz's dot could not write {path}: {first}")
+
+
+def _q(text: str) -> str:
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+
+
+def _short_pub(qos: Dict[str, object]) -> str:
+    words = ["best effort" if qos.get("using_best_effort_protocol") else "reliable",
+             str(qos.get("transport_priority", "NORMAL"))]
+    if qos.get("latency_budget") not in (0, 0.0, None):
+        words.append(f"budget {qos['latency_budget']} s")
+    return ", ".join(words)
+
+
+def _short_sub(qos: Dict[str, object]) -> str:
+    words = ["best effort ok" if qos.get("using_best_effort_protocol") else "reliable"]
+    if qos.get("deadline") not in ("inf", None):
+        words.append(f"deadline {qos['deadline']} s")
+    if qos.get("time_filter_duration") not in (0, 0.0, None):
+        words.append(f"filter {qos['time_filter_duration']} s")
+    return ", ".join(words)
+
+
+def to_dot(snap: GraphSnapshot, *, include_all: bool = False) -> str:
+    """Graphviz source for ``snap``: nodes as ellipses, topics as boxes, node->topic per publisher
+    (labelled with its QoS), topic->node per link (coloured by protocol, labelled with the publisher,
+    the subscriber's QoS and, for a declined DDS offer, the verdict)."""
+    topics = sorted(t for t in set(snap.publishers) | set(snap.subscribers)
+                    if include_all or t not in HIDDEN_TOPICS)
+    lines = ["digraph micros_rt {", "  rankdir=LR;", '  graph [fontname="Helvetica", fontsize=11, nodesep=0.4];',
+             '  node [fontname="Helvetica", fontsize=10];', '  edge [fontname="Helvetica", fontsize=8];']
+    shown: Set[str] = set()
+    for t in topics:
+        shown.update(snap.publishers.get(t, []))
+        shown.update(snap.subscribers.get(t, []))
+    if not include_all:
+        shown -= HIDDEN_NODES
+    for name in sorted(shown):
+        report = snap.nodes.get(name)
+        kind = report.kind if report is not None else "unreachable"
+        fill = "#d6e6f5" if kind == MICROS_RT else "#eeeeee"
+        lines.append(f"  {_q('n:' + name)} [label={_q(name + chr(10) + kind)}, shape=ellipse, style=filled, "
+                     f"fillcolor={_q(fill)}];")
+    for t in topics:
+        lines.append(f"  {_q('t:' + t)} [label={_q(t + chr(10) + snap.types.get(t, '?'))}, shape=box];")
+        for pub in sorted(snap.publishers.get(t, [])):
+            if pub not in shown:
+                continue
+            report = snap.nodes.get(pub)
+            ep = report.publication(t) if report is not None else None
+            label = _short_pub(dict(ep.get("qos") or {})) if ep else "stock"
+            lines.append(f"  {_q('n:' + pub)} -> {_q('t:' + t)} [label={_q(label)}, color={_q(OTHER_COLOUR)}];")
+        linked = set()
+        for link in snap.links:
+            if link.topic != t or link.subscriber not in shown:
+                continue
+            linked.add(link.subscriber)
+            words = [f"{link.protocol} from {link.publisher}"]
+            if link.subscriber_qos:
+                words.append(_short_sub(link.subscriber_qos))
+            if link.verdict and link.verdict != "accepted":
+                words.append(f"DDS declined: {link.verdict}")
+            colour = PROTOCOL_COLOURS.get(link.protocol, OTHER_COLOUR)
+            lines.append(f"  {_q('t:' + t)} -> {_q('n:' + link.subscriber)} [label={_q(chr(10).join(words))}, "
+                         f"color={_q(colour)}, fontcolor={_q(colour)}, penwidth=2];")
+        for sub in sorted(set(snap.subscribers.get(t, [])) & shown - linked):
+            lines.append(f"  {_q('t:' + t)} -> {_q('n:' + sub)} [label=\"no link\", style=dashed, "
+                         f"color={_q(OTHER_COLOUR)}];")
+    lines += ["  subgraph cluster_legend {", '    label="links"; fontsize=9; color="#cccccc";',
+              '    node [shape=plaintext, fontsize=9];']
+    for i, (proto, colour) in enumerate(PROTOCOL_COLOURS.items()):
+        lines.append(f'    "legend_{i}a" [label=""]; "legend_{i}b" [label={_q(proto)}, fontcolor={_q(colour)}];')
+        lines.append(f'    "legend_{i}a" -> "legend_{i}b" [color={_q(colour)}, penwidth=2];')
+    lines += ["  }", "}", ""]
+    return "\n".join(lines)
