@@ -1,0 +1,347 @@
+"""The bridge's YAML configuration: what goes to and comes from the microcontroller.
+
+::
+
+    microcontroller: {address: 127.0.0.2, topic_port: 20000, service_port: 20001}   # the board
+    bind: {address: 127.0.0.1, topic_port: 20000, service_port: 20001}              # the bridge
+    mtu: 1472                                    # payload bytes per datagram
+    stats_period: 1.0                            # seconds between ~stats messages
+    to_microcontroller:                          # ROS topics sent to the board
+      - {topic: /cmd_vel, type: geometry_msgs/Twist, qos: {time_filter_duration: 0.05}}
+    from_microcontroller:                        # datagrams from the board, published on ROS topics
+      - {topic: /imu, type: sensor_msgs/Imu, name: imu, qos: {deadline: 0.5}}
+    services_on_microcontroller:                 # served by the board, offered as ROS services
+      - {service: /mcu/reset, type: std_srvs/Trigger, name: reset, timeout: 2.0}
+    services_for_microcontroller:                # ROS services the board may call through the bridge
+      - {service: /set_mode, type: std_srvs/SetBool, name: set_mode}
+
+Every error (:class:`McuConfigError`) names the file, the line and the key. ``qos:`` values are
+parsed and validated exactly as in a YAML QoS profile (:mod:`micros_rt.qos.profiles`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import ipaddress
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional, Tuple, Type
+
+import genpy
+import roslib.message
+import rosgraph.names
+import yaml
+
+from micros_rt.exceptions import ProfileError
+from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions
+from micros_rt.qos.profiles import _construct, _expect_mapping, _is_null, _kind, _pairs, _parse_options, _where
+
+from .errors import McuConfigError
+
+__all__ = ["Address", "TopicEntry", "ServiceEntry", "McuConfig", "load_config", "parse_config",
+           "DEFAULT_TOPIC_PORT", "DEFAULT_SERVICE_PORT", "DEFAULT_MTU", "MAX_MTU"]
+
+DEFAULT_TOPIC_PORT = 20000
+DEFAULT_SERVICE_PORT = 20001
+DEFAULT_MTU = 1472          # 1500-byte Ethernet MTU - 20 (IPv4) - 8 (UDP)
+MAX_MTU = 65507             # the largest IPv4 UDP payload
+DEFAULT_SERVICE_TIMEOUT = 2.0
+
+#: qos keys each kind of entry understands, and what each does there (for the error message).
+_TO_QOS = ("transport_priority", "msg_valid_period", "time_filter_duration", "using_best_effort_protocol")
+_FROM_QOS = ("deadline", "time_filter_duration", "transport_priority", "latency_budget", "msg_valid_period",
+             "using_best_effort_protocol")
+_SERVICE_QOS = ("transport_priority",)
+_ADVERTISE_KEYS = ("transport_priority", "latency_budget", "msg_valid_period")
+
+
+@dataclass(frozen=True)
+class Address:
+    """An IP address (a literal, v4 or v6) with the link's two ports."""
+
+    address: str
+    topic_port: int = DEFAULT_TOPIC_PORT
+    service_port: int = DEFAULT_SERVICE_PORT
+
+    @property
+    def family_v6(self) -> bool:
+        return ipaddress.ip_address(self.address).version == 6
+
+    def topic(self) -> Tuple[str, int]:
+        return (self.address, self.topic_port)
+
+    def service(self) -> Tuple[str, int]:
+        return (self.address, self.service_port)
+
+
+@dataclass(frozen=True)
+class TopicEntry:
+    """One stream: a ROS topic and the datagram name it travels under."""
+
+    topic: str
+    type: str
+    name: str
+    data_class: Type[genpy.Message] = field(compare=False, repr=False)
+    advertise: AdvertiseQoSOptions = AdvertiseQoSOptions()
+    subscribe: SubscribeQoSOptions = SubscribeQoSOptions(using_best_effort_protocol=True)
+    line: int = 0
+
+
+@dataclass(frozen=True)
+class ServiceEntry:
+    """One service: a ROS service name, its type and the name it is called by on the wire."""
+
+    service: str
+    type: str
+    name: str
+    service_class: Any = field(compare=False, repr=False)
+    timeout: float = DEFAULT_SERVICE_TIMEOUT
+    advertise: AdvertiseQoSOptions = AdvertiseQoSOptions()
+    line: int = 0
+
+
+@dataclass(frozen=True)
+class McuConfig:
+    """The whole configuration (see the module docstring)."""
+
+    microcontroller: Address
+    bind: Address = Address("0.0.0.0")
+    mtu: int = DEFAULT_MTU
+    stats_period: float = 1.0
+    to_microcontroller: Tuple[TopicEntry, ...] = ()
+    from_microcontroller: Tuple[TopicEntry, ...] = ()
+    services_on_microcontroller: Tuple[ServiceEntry, ...] = ()
+    services_for_microcontroller: Tuple[ServiceEntry, ...] = ()
+    source: str = "<string>"
+
+
+def load_config(path: str | os.PathLike[str]) -> McuConfig:
+    """Read a bridge configuration file; errors are :class:`McuConfigError` naming file, line, key."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            text = f.read()
+    except OSError as exc:
+        raise McuConfigError(f"{os.fspath(path)}: cannot read the bridge configuration: {exc}") from exc
+    return parse_config(text, source=os.fspath(path))
+
+
+def parse_config(text: str, *, source: str = "<string>") -> McuConfig:
+    """Parse configuration YAML ``text``; ``source`` names it in error messages."""
+    try:
+        return _Parser(source).parse(text)
+    except ProfileError as exc:  # from the shared YAML helpers: already file:line: key: words
+        raise McuConfigError(str(exc)) from exc
+
+
+class _Parser:
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def error(self, node: yaml.Node, path: str, words: str) -> McuConfigError:
+        return McuConfigError(f"{_where(self.source, node)}: {path}: {words}")
+
+    def parse(self, text: str) -> McuConfig:
+        try:
+            root = yaml.compose(text, Loader=yaml.SafeLoader)
+        except yaml.YAMLError as exc:
+            raise McuConfigError(f"{self.source}: not valid YAML: {exc}") from exc
+        if root is None:
+            raise McuConfigError(f"{self.source}: empty configuration; at least 'microcontroller: "
+                                 f"{{address: ...}}' is needed")
+        _expect_mapping(root, self.source, "the top level", "a mapping")
+        known = ("microcontroller", "bind", "mtu", "stats_period", "to_microcontroller", "from_microcontroller",
+                 "services_on_microcontroller", "services_for_microcontroller")
+        values: Dict[str, Any] = {"source": self.source}
+        board: Optional[Address] = None
+        for key_node, node in _pairs(root, self.source, ""):
+            key = key_node.value
+            if key not in known:
+                raise self.error(key_node, key, f"unknown key; known keys: {', '.join(known)}")
+            if key == "microcontroller":
+                board = self.address(node, key, required_address=True)
+            elif key == "bind":
+                values[key] = self.address(node, key, required_address=False)
+            elif key == "mtu":
+                values[key] = self.integer(node, key, 8, MAX_MTU)
+            elif key == "stats_period":
+                values[key] = self.seconds(node, key)
+            elif key in ("to_microcontroller", "from_microcontroller"):
+                values[key] = self.topics(node, key)
+            else:
+                values[key] = self.services(node, key)
+        if board is None:
+            raise McuConfigError(f"{self.source}:{root.start_mark.line + 1}: microcontroller: missing; say where "
+                                 f"the board is, e.g. 'microcontroller: {{address: 192.168.1.20}}'")
+        bind = values.get("bind", Address("0.0.0.0"))
+        if bind.family_v6 != board.family_v6:
+            raise McuConfigError(f"{self.source}: bind.address {bind.address} and microcontroller.address "
+                                 f"{board.address} must both be IPv4 or both IPv6")
+        return McuConfig(microcontroller=board, **values)
+
+    # -- scalars
+    def scalar(self, node: yaml.Node, path: str) -> Any:
+        if not isinstance(node, yaml.ScalarNode):
+            raise self.error(node, path, f"expected a single value, got {_kind(node)}")
+        return _construct(node)
+
+    def integer(self, node: yaml.Node, path: str, lo: int, hi: int) -> int:
+        value = self.scalar(node, path)
+        if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+            raise self.error(node, path, f"{value!r} is invalid: expected an integer {lo}..{hi}")
+        return value
+
+    def seconds(self, node: yaml.Node, path: str) -> float:
+        value = self.scalar(node, path)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < math.inf:
+            raise self.error(node, path, f"{value!r} is invalid: expected a duration > 0 in seconds")
+        return float(value)
+
+    def text(self, node: yaml.Node, path: str) -> str:
+        value = self.scalar(node, path)
+        if not isinstance(value, str) or not value.strip():
+            raise self.error(node, path, f"{value!r} is invalid: expected a non-empty string")
+        return value.strip()
+
+    def address(self, node: yaml.Node, path: str, *, required_address: bool) -> Address:
+        _expect_mapping(node, self.source, path, "a mapping with address, topic_port, service_port")
+        got: Dict[str, Any] = {}
+        for key_node, value_node in _pairs(node, self.source, path):
+            key = key_node.value
+            if key == "address":
+                text = self.text(value_node, f"{path}.address")
+                try:
+                    ipaddress.ip_address(text)
+                except ValueError:
+                    raise self.error(value_node, f"{path}.address",
+                                     f"{text!r} is invalid: expected an IP address such as 192.168.1.20 "
+                                     f"(host names are not resolved)") from None
+                got[key] = text
+            elif key in ("topic_port", "service_port"):
+                got[key] = self.integer(value_node, f"{path}.{key}", 1, 65535)
+            else:
+                raise self.error(key_node, f"{path}.{key}", "unknown key; known keys: address, topic_port, "
+                                                            "service_port")
+        if "address" not in got:
+            if required_address:
+                raise self.error(node, f"{path}.address", "missing; the board's IP address is required")
+            got["address"] = "0.0.0.0"
+        return Address(**got)
+
+    # -- entries
+    def entries(self, node: yaml.Node, path: str) -> List[Tuple[int, yaml.MappingNode]]:
+        if _is_null(node):
+            return []
+        if not isinstance(node, yaml.SequenceNode):
+            raise self.error(node, path, f"expected a list of entries, got {_kind(node)}")
+        out = []
+        for i, item in enumerate(node.value):
+            _expect_mapping(item, self.source, f"{path}[{i}]", "a mapping")
+            out.append((i, item))
+        return out
+
+    def fields(self, item: yaml.MappingNode, path: str, known: Tuple[str, ...],
+               required: Tuple[str, ...]) -> Dict[str, Tuple[yaml.Node, yaml.Node]]:
+        got: Dict[str, Tuple[yaml.Node, yaml.Node]] = {}
+        for key_node, value_node in _pairs(item, self.source, path):
+            if key_node.value not in known:
+                raise self.error(key_node, f"{path}.{key_node.value}", f"unknown key; known keys: {', '.join(known)}")
+            got[key_node.value] = (key_node, value_node)
+        for key in required:
+            if key not in got:
+                raise self.error(item, f"{path}.{key}", "missing")
+        return got
+
+    def unique(self, seen: Dict[str, int], value: str, node: yaml.Node, path: str, what: str) -> None:
+        if value in seen:
+            raise self.error(node, path, f"{what} {value!r} is already used by the entry on line {seen[value]}")
+        seen[value] = node.start_mark.line + 1
+
+    def topics(self, node: yaml.Node, section: str) -> Tuple[TopicEntry, ...]:
+        out: List[TopicEntry] = []
+        names: Dict[str, int] = {}
+        topics: Dict[str, int] = {}
+        for i, item in self.entries(node, section):
+            path = f"{section}[{i}]"
+            got = self.fields(item, path, ("topic", "type", "name", "qos"), ("topic", "type"))
+            topic = self.ros_name(got["topic"][1], f"{path}.topic")
+            self.unique(topics, topic, got["topic"][1], f"{path}.topic", "topic")
+            type_name = self.text(got["type"][1], f"{path}.type")
+            data_class = roslib.message.get_message_class(type_name) if "/" in type_name else None
+            if data_class is None:
+                raise self.error(got["type"][1], f"{path}.type",
+                                 f"unknown message type {type_name!r}: expected 'package/Type' of an installed "
+                                 f"message package (e.g. geometry_msgs/Twist from Debian's python3-geometry-msgs)")
+            name = self.text(got["name"][1], f"{path}.name") if "name" in got else type_name
+            self.unique(names, name, got["name"][1] if "name" in got else item, f"{path}.name", "stream name")
+            allowed = _TO_QOS if section == "to_microcontroller" else _FROM_QOS
+            advertise, subscribe = self.qos(got.get("qos"), f"{path}.qos", allowed, section)
+            out.append(TopicEntry(topic, type_name, name, data_class, advertise, subscribe, item.start_mark.line + 1))
+        return tuple(out)
+
+    def services(self, node: yaml.Node, section: str) -> Tuple[ServiceEntry, ...]:
+        out: List[ServiceEntry] = []
+        names: Dict[str, int] = {}
+        services: Dict[str, int] = {}
+        for i, item in self.entries(node, section):
+            path = f"{section}[{i}]"
+            got = self.fields(item, path, ("service", "type", "name", "timeout", "qos"), ("service", "type"))
+            service = self.ros_name(got["service"][1], f"{path}.service")
+            self.unique(services, service, got["service"][1], f"{path}.service", "service")
+            type_name = self.text(got["type"][1], f"{path}.type")
+            service_class = roslib.message.get_service_class(type_name) if "/" in type_name else None
+            if service_class is None:
+                raise self.error(got["type"][1], f"{path}.type",
+                                 f"unknown service type {type_name!r}: expected 'package/Type' of an installed "
+                                 f"package (e.g. std_srvs/Trigger from Debian's python3-std-srvs)")
+            name = self.text(got["name"][1], f"{path}.name") if "name" in got else type_name
+            self.unique(names, name, got["name"][1] if "name" in got else item, f"{path}.name", "service name")
+            timeout = self.seconds(got["timeout"][1], f"{path}.timeout") if "timeout" in got \
+                else DEFAULT_SERVICE_TIMEOUT
+            advertise, _ = self.qos(got.get("qos"), f"{path}.qos", _SERVICE_QOS, section)
+            out.append(ServiceEntry(service, type_name, name, service_class, timeout, advertise,
+                                    item.start_mark.line + 1))
+        return tuple(out)
+
+    def ros_name(self, node: yaml.Node, path: str) -> str:
+        value = self.text(node, path)
+        if not rosgraph.names.is_legal_name(value) or value in ("/", "~"):
+            raise self.error(node, path, f"{value!r} is not a legal ROS name (letters, digits, '_' and '/', "
+                                         f"e.g. /cmd_vel)")
+        return value
+
+    def qos(self, pair: Optional[Tuple[yaml.Node, yaml.Node]], path: str, allowed: Tuple[str, ...],
+            section: str) -> Tuple[AdvertiseQoSOptions, SubscribeQoSOptions]:
+        advertise, subscribe = AdvertiseQoSOptions(), SubscribeQoSOptions(using_best_effort_protocol=True)
+        if pair is None or _is_null(pair[1]):
+            return advertise, subscribe
+        node = pair[1]
+        _expect_mapping(node, self.source, path, "a mapping of QoS option names to values")
+        adv_pairs: List[Tuple[yaml.Node, yaml.Node]] = []
+        sub_pairs: List[Tuple[yaml.Node, yaml.Node]] = []
+        for key_node, value_node in _pairs(node, self.source, path):
+            key = key_node.value
+            known = key in AdvertiseQoSOptions._KEYS or key in SubscribeQoSOptions._KEYS or key == "deadline_cb"
+            if key not in allowed:
+                why = "does not apply to" if known else "is not a QoS option of"
+                raise self.error(key_node, f"{path}.{key}", f"{why} {section} entries; allowed here: "
+                                                            f"{', '.join(allowed)}")
+            if key == "using_best_effort_protocol" and self.scalar(value_node, f"{path}.{key}") is False:
+                raise self.error(value_node, f"{path}.{key}",
+                                 "reliable delivery (false) cannot be given on the microcontroller link: it "
+                                 "carries one UDP datagram per message, with no acknowledgement and no "
+                                 "retransmission, so it is best effort only. Remove the option (or set it to "
+                                 "true); for requests that must not be lost, use a service "
+                                 "(services_on_microcontroller), which waits for the board's answer")
+            (adv_pairs if key in _ADVERTISE_KEYS else sub_pairs).append((key_node, value_node))
+        if adv_pairs:
+            advertise = _parse_options(AdvertiseQoSOptions, _mapping(node, adv_pairs), self.source, path)
+        if sub_pairs:
+            parsed = _parse_options(SubscribeQoSOptions, _mapping(node, sub_pairs), self.source, path)
+            subscribe = dataclasses.replace(parsed, using_best_effort_protocol=True)  # the link's only kind
+        return advertise, subscribe
+
+
+def _mapping(like: yaml.Node, pairs: List[Tuple[yaml.Node, yaml.Node]]) -> yaml.MappingNode:
+    """A mapping node of some of ``like``'s pairs, so the profile parser validates just those."""
+    return yaml.MappingNode("tag:yaml.org,2002:map", pairs, like.start_mark, like.end_mark)

@@ -1,0 +1,464 @@
+"""The microcontroller link's wire format (seed 003, the CVRA ROS MessagePack bridge): pure functions.
+
+**Topic datagram** (one UDP datagram per message)::
+
+    msgpack(name) + msgpack({field: value, ...})        # map form: a string, then a map
+    msgpack([name, field1, field2, ...])                 # array form (accepted on input)
+
+Nested messages are nested maps (or, on input, arrays in definition order), arrays are arrays,
+``time``/``duration`` are ``[secs, nsecs]``, ``uint8[]``/``char[]`` are MessagePack bin.
+
+**Service call** (one TCP connection per call): the client sends ``msgpack([name, *request fields])``
+as a *serial datagram* -- the payload, its CRC32 (zlib's, big-endian) appended, SLIP-escaped
+(END 0xC0 -> ESC 0xDB + 0xDC, ESC -> ESC + 0xDD) and closed by END; the server answers
+``msgpack({response field: value})`` unframed and closes the connection.
+
+Every ROS message type works: codecs are built from genpy's ``__slots__``/``_slot_types``.
+
+>>> from std_msgs.msg import String
+>>> encode_datagram("chatter", MessageCodec(String).to_wire(String(data="hi")))
+b'\\xa7chatter\\x81\\xa4data\\xa2hi'
+"""
+
+from __future__ import annotations
+
+import struct
+import threading
+import zlib
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Type
+
+import genpy
+import msgpack
+import roslib.message
+
+from .errors import WireError
+
+__all__ = [
+    "END", "ESC", "ESC_END", "ESC_ESC", "MessageCodec", "codec_for", "encode_datagram", "split_datagram",
+    "frame", "unframe", "FrameReader", "encode_request", "decode_request", "encode_response",
+    "decode_response",
+]
+
+END = 0xC0
+ESC = 0xDB
+ESC_END = 0xDC
+ESC_ESC = 0xDD
+
+_INT_RANGES: Dict[str, Tuple[int, int]] = {
+    "int8": (-2**7, 2**7 - 1), "byte": (-2**7, 2**7 - 1),
+    "uint8": (0, 2**8 - 1), "char": (0, 2**8 - 1),
+    "int16": (-2**15, 2**15 - 1), "uint16": (0, 2**16 - 1),
+    "int32": (-2**31, 2**31 - 1), "uint32": (0, 2**32 - 1),
+    "int64": (-2**63, 2**63 - 1), "uint64": (0, 2**64 - 1),
+}
+_FLOATS = ("float32", "float64")
+_NSEC = 1_000_000_000
+
+# Encoder and decoder of one field: to_wire(value, path) and from_wire(obj, path).
+_Enc = Callable[[Any, str], Any]
+_Dec = Callable[[Any, str], Any]
+
+
+def _shown(obj: Any) -> str:
+    """A received value in words, short enough for a log line."""
+    kinds = {bool: "a boolean", int: "an integer", float: "a float", str: "the string",
+             bytes: "bin data", list: "an array", dict: "a map", type(None): "nil"}
+    kind = kinds.get(type(obj), type(obj).__name__)
+    if isinstance(obj, (bool, int, float, str)) or obj is None:
+        text = repr(obj)
+        return f"{kind} {text[:40]}{'...' if len(text) > 40 else ''}"
+    if isinstance(obj, (bytes, list, dict)):
+        return f"{kind} of {len(obj)}"
+    return kind
+
+
+def _bad(path: str, expected: str, obj: Any) -> WireError:
+    return WireError("bad_field", f"field '{path}' should be {expected}, got {_shown(obj)}")
+
+
+def _message_class(type_name: str) -> Type[genpy.Message]:
+    if type_name == "Header":
+        type_name = "std_msgs/Header"
+    cls = roslib.message.get_message_class(type_name)
+    if cls is None:
+        raise ValueError(f"unknown ROS message type {type_name!r}")
+    return cls  # type: ignore[no-any-return]
+
+
+def _split_array(slot_type: str) -> Tuple[str, Optional[int], bool]:
+    """'float64[9]' -> ('float64', 9, True); 'uint8[]' -> ('uint8', None, True); 'int32' -> (.., False)."""
+    if not slot_type.endswith("]"):
+        return slot_type, None, False
+    base, _, size = slot_type[:-1].partition("[")
+    return base, (int(size) if size else None), True
+
+
+# --------------------------------------------------------------------------- scalar codecs
+
+def _int_codec(base: str) -> Tuple[_Enc, _Dec]:
+    lo, hi = _INT_RANGES[base]
+    expected = f"an integer {base} ({lo}..{hi})"
+
+    def enc(v: Any, path: str) -> Any:
+        if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+            raise genpy.SerializationError(f"field '{path}': {v!r} is not {expected}")
+        return v
+
+    def dec(obj: Any, path: str) -> Any:
+        if isinstance(obj, bool) or not isinstance(obj, int) or not lo <= obj <= hi:
+            raise _bad(path, expected, obj)
+        return obj
+    return enc, dec
+
+
+def _float_codec(base: str) -> Tuple[_Enc, _Dec]:
+    def enc(v: Any, path: str) -> Any:
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise genpy.SerializationError(f"field '{path}': {v!r} is not a number ({base})")
+        return float(v)
+
+    def dec(obj: Any, path: str) -> Any:
+        if isinstance(obj, bool) or not isinstance(obj, (int, float)):
+            raise _bad(path, f"a number ({base})", obj)
+        return float(obj)
+    return enc, dec
+
+
+def _bool_enc(v: Any, path: str) -> Any:
+    if not isinstance(v, (bool, int)):
+        raise genpy.SerializationError(f"field '{path}': {v!r} is not a bool")
+    return bool(v)
+
+
+def _bool_dec(obj: Any, path: str) -> Any:
+    if isinstance(obj, bool):
+        return obj
+    if isinstance(obj, int) and obj in (0, 1):  # C firmware often sends 0/1
+        return bool(obj)
+    raise _bad(path, "a boolean (true/false, or 0/1)", obj)
+
+
+def _string_enc(v: Any, path: str) -> Any:
+    if isinstance(v, bytes):
+        try:
+            return v.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise genpy.SerializationError(f"field '{path}': not UTF-8 text: {exc}") from exc
+    if not isinstance(v, str):
+        raise genpy.SerializationError(f"field '{path}': {v!r} is not a string")
+    return v
+
+
+def _string_dec(obj: Any, path: str) -> Any:
+    if not isinstance(obj, str):
+        raise _bad(path, "a string", obj)
+    return obj
+
+
+def _time_codec(base: str) -> Tuple[_Enc, _Dec]:
+    cls = genpy.Time if base == "time" else genpy.Duration
+    lo, hi = _INT_RANGES["uint32" if base == "time" else "int32"]
+    expected = f"[secs, nsecs] ({base}: secs {lo}..{hi}, nsecs 0..999999999)"
+
+    def enc(v: Any, path: str) -> Any:
+        if not isinstance(v, (genpy.Time, genpy.Duration)):
+            raise genpy.SerializationError(f"field '{path}': {v!r} is not a {base}")
+        return [v.secs, v.nsecs]
+
+    def dec(obj: Any, path: str) -> Any:
+        if (not isinstance(obj, list) or len(obj) != 2
+                or any(isinstance(x, bool) or not isinstance(x, int) for x in obj)
+                or not lo <= obj[0] <= hi or not 0 <= obj[1] < _NSEC):
+            raise _bad(path, expected, obj)
+        return cls(obj[0], obj[1])
+    return enc, dec
+
+
+def _bytes_codec(size: Optional[int]) -> Tuple[_Enc, _Dec]:
+    expected = "bin data" + (f" of exactly {size} bytes" if size is not None else "")
+
+    def enc(v: Any, path: str) -> Any:
+        try:
+            data = bytes(v)
+        except (TypeError, ValueError) as exc:
+            raise genpy.SerializationError(f"field '{path}': {v!r} is not bytes: {exc}") from exc
+        if size is not None and len(data) != size:
+            raise genpy.SerializationError(f"field '{path}': {len(data)} bytes, the type needs {size}")
+        return data
+
+    def dec(obj: Any, path: str) -> Any:
+        if isinstance(obj, list) and all(isinstance(x, int) and not isinstance(x, bool) and 0 <= x <= 255
+                                         for x in obj):
+            obj = bytes(obj)  # an array of small integers is accepted for uint8[] too
+        if not isinstance(obj, bytes) or (size is not None and len(obj) != size):
+            raise _bad(path, expected, obj)
+        return obj
+    return enc, dec
+
+
+def _array_codec(item: Tuple[_Enc, _Dec], size: Optional[int]) -> Tuple[_Enc, _Dec]:
+    item_enc, item_dec = item
+    expected = "an array" + (f" of exactly {size} elements" if size is not None else "")
+
+    def enc(v: Any, path: str) -> Any:
+        if not isinstance(v, (list, tuple)):
+            raise genpy.SerializationError(f"field '{path}': {v!r} is not a list")
+        if size is not None and len(v) != size:
+            raise genpy.SerializationError(f"field '{path}': {len(v)} elements, the type needs {size}")
+        return [item_enc(x, f"{path}[{i}]") for i, x in enumerate(v)]
+
+    def dec(obj: Any, path: str) -> Any:
+        if not isinstance(obj, list) or (size is not None and len(obj) != size):
+            raise _bad(path, expected, obj)
+        return [item_dec(x, f"{path}[{i}]") for i, x in enumerate(obj)]
+    return enc, dec
+
+
+def _field_codec(slot_type: str) -> Tuple[_Enc, _Dec]:
+    base, size, is_array = _split_array(slot_type)
+    if is_array and base in ("uint8", "char"):
+        return _bytes_codec(size)
+    if base in _INT_RANGES:
+        one = _int_codec(base)
+    elif base in _FLOATS:
+        one = _float_codec(base)
+    elif base == "bool":
+        one = (_bool_enc, _bool_dec)
+    elif base == "string":
+        one = (_string_enc, _string_dec)
+    elif base in ("time", "duration"):
+        one = _time_codec(base)
+    else:
+        nested = codec_for(_message_class(base))
+        one = (nested._enc, nested._dec)
+    return _array_codec(one, size) if is_array else one
+
+
+# --------------------------------------------------------------------------- messages
+
+class MessageCodec:
+    """Converts one ROS message type to and from its MessagePack form (maps of fields).
+
+    ``to_wire`` raises ``genpy.SerializationError`` on a bad field value (like genpy's serializer);
+    ``from_wire`` raises :class:`WireError` (``missing_field``, ``unknown_field``, ``bad_field``) naming
+    the field path. Use :func:`codec_for` to share one codec per type.
+    """
+
+    def __init__(self, data_class: Type[genpy.Message]) -> None:
+        self.data_class = data_class
+        self.type_name: str = data_class._type
+        self.field_names: Tuple[str, ...] = tuple(data_class.__slots__)
+        self._codecs: List[Tuple[str, _Enc, _Dec]] = [
+            (name, *_field_codec(slot)) for name, slot in zip(data_class.__slots__, data_class._slot_types)]
+
+    def to_wire(self, msg: genpy.Message) -> Dict[str, Any]:
+        """The fields of ``msg`` as a dict ready for ``msgpack.packb`` (definition order)."""
+        return self._enc(msg, "")  # type: ignore[no-any-return]
+
+    def to_wire_list(self, msg: genpy.Message) -> List[Any]:
+        """The fields of ``msg`` as a list in definition order (service requests)."""
+        return list(self.to_wire(msg).values())
+
+    def from_wire(self, obj: Any) -> genpy.Message:
+        """A message from a map of fields or an array of them in definition order."""
+        return self._dec(obj, "")
+
+    def _enc(self, msg: Any, path: str) -> Any:
+        if not isinstance(msg, self.data_class):
+            raise genpy.SerializationError(
+                f"field '{path or '.'}': expected a {self.type_name} message, got {type(msg).__name__}")
+        prefix = f"{path}." if path else ""
+        return {name: enc(getattr(msg, name), prefix + name) for name, enc, _ in self._codecs}
+
+    def _dec(self, obj: Any, path: str) -> Any:
+        prefix = f"{path}." if path else ""
+        msg = self.data_class()
+        if isinstance(obj, dict):
+            unknown = [k for k in obj if k not in self.field_names]
+            if unknown:
+                raise WireError("unknown_field",
+                                f"{self.type_name} has no field {_shown(unknown[0])} (at '{path or '.'}'); "
+                                f"its fields are {', '.join(self.field_names)}")
+            for name, _, dec in self._codecs:
+                if name not in obj:
+                    raise WireError("missing_field", f"field '{prefix}{name}' ({self.type_name}) is missing")
+                setattr(msg, name, dec(obj[name], prefix + name))
+            return msg
+        if isinstance(obj, list):
+            if len(obj) != len(self._codecs):
+                kind = "missing_field" if len(obj) < len(self._codecs) else "unknown_field"
+                raise WireError(kind, f"'{path or '.'}': {self.type_name} in array form needs "
+                                      f"{len(self._codecs)} fields ({', '.join(self.field_names)}), got {len(obj)}")
+            for (name, _, dec), value in zip(self._codecs, obj):
+                setattr(msg, name, dec(value, prefix + name))
+            return msg
+        raise _bad(path or ".", f"a {self.type_name} as a map of fields (or an array in definition order)", obj)
+
+
+_codecs: Dict[Type[genpy.Message], MessageCodec] = {}
+_codecs_lock = threading.RLock()
+
+
+def codec_for(data_class: Type[genpy.Message]) -> MessageCodec:
+    """The (shared) codec of ``data_class``; nested types get theirs on first use."""
+    with _codecs_lock:
+        codec = _codecs.get(data_class)
+        if codec is None:
+            codec = _codecs[data_class] = MessageCodec(data_class)
+        return codec
+
+
+# --------------------------------------------------------------------------- topic datagrams
+
+def encode_datagram(name: str, fields: Dict[str, Any]) -> bytes:
+    """One topic datagram in the seed's map form: the stream name, then the map of fields."""
+    return msgpack.packb(name, use_bin_type=True) + msgpack.packb(fields, use_bin_type=True)  # type: ignore[no-any-return]
+
+
+def _unpack_all(data: bytes, at_most: int) -> List[Any]:
+    """Up to ``at_most`` MessagePack objects making up ``data`` entirely (else WireError)."""
+    unpacker = msgpack.Unpacker(raw=False, strict_map_key=False, max_buffer_size=max(len(data), 1))
+    unpacker.feed(data)
+    objects: List[Any] = []
+    try:
+        for obj in unpacker:
+            objects.append(obj)
+            if len(objects) > at_most:
+                raise WireError("bad_shape", f"more than {at_most} MessagePack objects in one datagram")
+    except WireError:
+        raise
+    except (ValueError, msgpack.UnpackException) as exc:  # FormatError, StackError, bad UTF-8, ...
+        raise WireError("not_msgpack", f"not MessagePack ({exc})") from exc
+    if unpacker.tell() != len(data):
+        raise WireError("not_msgpack", f"not MessagePack (truncated after byte {unpacker.tell()} of {len(data)})")
+    if not objects:
+        raise WireError("not_msgpack", "an empty datagram")
+    return objects
+
+
+def split_datagram(data: bytes) -> Tuple[str, Any]:
+    """The stream name and the undecoded fields (a map, or a list in definition order) of a datagram.
+
+    >>> split_datagram(bytes.fromhex("a3696d7581a17801"))
+    ('imu', {'x': 1})
+    >>> split_datagram(bytes.fromhex("92a3696d7501"))
+    ('imu', [1])
+    """
+    objects = _unpack_all(data, 2)
+    first = objects[0]
+    if len(objects) == 2 and isinstance(first, str):
+        if not isinstance(objects[1], dict):
+            raise WireError("bad_shape", f"stream {first!r}: the name must be followed by a map of fields, "
+                                         f"got {_shown(objects[1])}")
+        return first, objects[1]
+    if len(objects) == 1 and isinstance(first, list) and first and isinstance(first[0], str):
+        return first[0], first[1:]
+    raise WireError("bad_shape", "expected a stream name (string) followed by a map of fields, or an array "
+                                 f"[name, field1, field2, ...]; got {' + '.join(_shown(o) for o in objects)}")
+
+
+# --------------------------------------------------------------------------- serial datagrams (SLIP + CRC32)
+
+_ESCAPES = {END: bytes((ESC, ESC_END)), ESC: bytes((ESC, ESC_ESC))}
+
+
+def frame(payload: bytes) -> bytes:
+    """A serial datagram: ``payload`` + CRC32 (big-endian), SLIP-escaped, then END.
+
+    >>> frame(b"\\xc0").hex()
+    'dbdc49662d3dc0'
+    """
+    data = payload + struct.pack(">I", zlib.crc32(payload) & 0xFFFFFFFF)
+    return data.replace(bytes((ESC,)), _ESCAPES[ESC]).replace(bytes((END,)), _ESCAPES[END]) + bytes((END,))
+
+
+def unframe(body: bytes) -> bytes:
+    """The payload of one serial datagram (``body`` without its END); WireError on a bad escape or CRC."""
+    out = bytearray()
+    escaped = False
+    for b in body:
+        if escaped:
+            if b == ESC_END:
+                out.append(END)
+            elif b == ESC_ESC:
+                out.append(ESC)
+            else:
+                raise WireError("bad_escape", f"SLIP escape 0xDB followed by 0x{b:02X} (only 0xDC or 0xDD may follow)")
+            escaped = False
+        elif b == ESC:
+            escaped = True
+        else:
+            out.append(b)
+    if escaped:
+        raise WireError("bad_escape", "the frame ends inside a SLIP escape (0xDB before END)")
+    if len(out) < 4:
+        raise WireError("short_frame", f"a frame of {len(out)} bytes cannot hold its 4-byte CRC32")
+    payload, (crc,) = bytes(out[:-4]), struct.unpack(">I", out[-4:])
+    actual = zlib.crc32(payload) & 0xFFFFFFFF
+    if crc != actual:
+        raise WireError("bad_crc", f"CRC32 mismatch: the frame says 0x{crc:08X}, the payload's is 0x{actual:08X}")
+    return payload
+
+
+class FrameReader:
+    """Collects bytes until the first END; ``feed`` returns the frame's body (before END) once complete.
+
+    Leading END bytes (an empty frame, sent by some firmware to flush the line) are skipped. More than
+    ``max_size`` bytes without END is :class:`WireError` ``frame_too_long``.
+    """
+
+    def __init__(self, max_size: int) -> None:
+        self.max_size = max_size
+        self._buf = bytearray()
+
+    def feed(self, data: bytes) -> Optional[bytes]:
+        if not self._buf:
+            data = data.lstrip(bytes((END,)))
+        end = data.find(END)
+        if end < 0:
+            self._buf += data
+            if len(self._buf) > self.max_size:
+                raise WireError("frame_too_long", f"more than {self.max_size:,} bytes without a SLIP END (0xC0)")
+            return None
+        self._buf += data[:end]
+        if len(self._buf) > self.max_size:
+            raise WireError("frame_too_long", f"a frame of {len(self._buf):,} bytes, more than {self.max_size:,}")
+        return bytes(self._buf)
+
+    @property
+    def pending(self) -> int:
+        """Bytes received so far without END."""
+        return len(self._buf)
+
+
+# --------------------------------------------------------------------------- service calls
+
+def encode_request(name: str, params: Sequence[Any]) -> bytes:
+    """A service request as sent on the wire: the serial datagram of ``[name, *params]``.
+
+    >>> encode_request("reset", []).hex()
+    '91a572657365740bbd6afbc0'
+    """
+    return frame(msgpack.packb([name, *params], use_bin_type=True))
+
+
+def decode_request(body: bytes) -> Tuple[str, List[Any]]:
+    """``(name, params)`` from a received frame body (before END)."""
+    objects = _unpack_all(unframe(body), 1)
+    call = objects[0]
+    if not isinstance(call, list) or not call or not isinstance(call[0], str):
+        raise WireError("bad_shape", f"a service request must be an array [name, param1, ...], got {_shown(call)}")
+    return call[0], call[1:]
+
+
+def encode_response(fields: Dict[str, Any]) -> bytes:
+    """A service answer: the response's fields as a MessagePack map (not framed)."""
+    packed: bytes = msgpack.packb(fields, use_bin_type=True)
+    return packed
+
+
+def decode_response(data: bytes) -> Any:
+    """The undecoded answer (a map, or an array in definition order); an empty answer is ``{}``."""
+    if not data:
+        return {}
+    return _unpack_all(data, 1)[0]
