@@ -9,7 +9,6 @@ named by ``MICROS_RT_QOS_PROFILE`` is valid. Exit code 0 only when every check p
 
 from __future__ import annotations
 
-import argparse
 import ipaddress
 import os
 import re
@@ -20,6 +19,7 @@ from dataclasses import dataclass
 from typing import Callable, Dict, List, Mapping, Optional
 
 from . import CommandError
+from ._args import ArgumentParser
 from ._graphinfo import MICROS_RT, Master, master_uri, probe_all
 
 __all__ = ["Check", "main", "run_checks", "interface_addresses"]
@@ -44,7 +44,7 @@ class Check:
 
 def main(argv: List[str]) -> int:
     """``micros-rt doctor [-v]``."""
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="micros-rt doctor", usage="%(prog)s [-v]",
         description="Check what micros_rt nodes depend on: the ROS master, ROS_IP/ROS_HOSTNAME, the network "
                     "interface and Cyclone DDS configuration micros_rt will use (and multicast), ROS_DOMAIN_ID, "

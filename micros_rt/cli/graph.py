@@ -3,13 +3,13 @@ its QoS, as Graphviz (``--dot``) or a picture (``--png``, drawn by Graphviz's ``
 
 from __future__ import annotations
 
-import argparse
 import shutil
 import subprocess
 import sys
 from typing import Dict, List, Set
 
 from . import CommandError
+from ._args import ArgumentParser
 from ._graphinfo import MICROS_RT, GraphSnapshot, Master, snapshot
 
 __all__ = ["main", "to_dot", "PROTOCOL_COLOURS"]
@@ -24,7 +24,7 @@ HIDDEN_NODES = frozenset({"/rosout"})
 
 def main(argv: List[str]) -> int:
     """``micros-rt graph [--png FILE] [--dot [FILE]] [--all]``."""
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="micros-rt graph", usage="%(prog)s [--png FILE.png] [--dot [FILE.dot]] [--all]",
         description="Draw the live ROS graph: nodes (micros_rt or stock) and topics, each publisher->subscriber "
                     "link coloured by its protocol (DDS blue, TCPROS orange) and labelled with its QoS. "

@@ -3,10 +3,10 @@ file and line) and, when a ROS master answers, show which live topics each rule 
 
 from __future__ import annotations
 
-import argparse
 from typing import Any, Dict, List, Mapping, Sequence, Union
 
 from . import CommandError
+from ._args import ArgumentParser
 from ._graphinfo import Master, describe_publisher_qos, describe_subscriber_qos
 
 __all__ = ["main", "rule_matches"]
@@ -26,7 +26,7 @@ def main(argv: List[str]) -> int:
         return 0 if argv else 2
     if argv[0] != "check":
         raise CommandError(f"unknown command '{argv[0]}' (commands: check)", code=2)
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="micros-rt profile check", usage="%(prog)s [--offline] FILE.yaml",
         description="Validate a YAML QoS profile exactly as micros_rt.init_node reads it (an error names the "
                     "file and line). With a ROS master running, list for each rule the live topics it matches "

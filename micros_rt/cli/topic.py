@@ -12,6 +12,7 @@ import time
 from typing import Any, Dict, List, Optional
 
 from . import CommandError
+from ._args import ArgumentParser
 from ._graphinfo import Master, resolve_topic, snapshot
 
 __all__ = ["main", "format_info", "info_data", "latency_report", "format_latency"]
@@ -39,7 +40,7 @@ def main(argv: List[str]) -> int:
 # --------------------------------------------------------------------------- info
 
 def info_main(argv: List[str]) -> int:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="micros-rt topic info", usage="%(prog)s [--json] /topic",
         description="Print the publishers and subscribers of a topic and every publisher->subscriber link: "
                     "its protocol (DDS or TCPROS), both sides' QoS, the transport priority and, for a TCPROS "
@@ -93,7 +94,7 @@ def format_info(data: Dict[str, Any]) -> str:
 # --------------------------------------------------------------------------- latency
 
 def latency_main(argv: List[str]) -> int:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="micros-rt topic latency", usage="%(prog)s [--count N] [--json] [--plot FILE.png] /topic",
         description="Subscribe to a topic with micros_rt (DDS where the publisher can, else TCPROS) and show, "
                     "refreshed in place, its rate and latency (p50/p99/max) from DDS source timestamps or "
