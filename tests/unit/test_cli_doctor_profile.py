@@ -1,0 +1,122 @@
+"""Unit tests of ``micros-rt doctor``'s checks that need no graph (each failure names its fix) and of
+``micros-rt profile check`` (library errors with file:line; which rule wins for a live topic)."""
+
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from micros_rt.cli import CommandError
+from micros_rt.cli import profile as profile_cmd
+from micros_rt.cli.doctor import (
+    FAIL,
+    OK,
+    check_address,
+    check_cyclone,
+    check_dds_network,
+    check_domain,
+    check_profile,
+)
+from micros_rt.qos import QoSProfile
+
+IFACES = {"127.0.0.1": "lo", "10.1.2.3": "eth0"}
+LOOPBACK_XML = ('<CycloneDDS><Domain id="any"><General><Interfaces><NetworkInterface name="lo" multicast="false"/>'
+                "</Interfaces><AllowMulticast>false</AllowMulticast></General></Domain></CycloneDDS>")
+
+
+@pytest.mark.parametrize("value", ["999", "-1", "two"])
+def test_a_bad_domain_id_fails_with_a_fix(value: str) -> None:
+    check = check_domain({"ROS_DOMAIN_ID": value})
+    assert check.status == FAIL and value in check.detail
+    assert check.fix.startswith("export ROS_DOMAIN_ID=")
+
+
+def test_a_good_domain_id_passes() -> None:
+    assert check_domain({"ROS_DOMAIN_ID": "232"}).status == OK
+    assert "default" in check_domain({}).detail
+
+
+@pytest.mark.parametrize("env,expected", [
+    ({"ROS_IP": "not-an-ip"}, "is not an IP address"),
+    ({"ROS_IP": "10.9.9.9"}, "not an address of this host"),
+    ({"ROS_HOSTNAME": "no-such-host.invalid"}, "does not resolve"),
+    ({"ROS_IP": "127.0.0.1", "ROS_HOSTNAME": "10.1.2.3"}, "rospy advertises ROS_HOSTNAME"),
+    ({"ROS_IP": "127.0.0.1", "ROS_MASTER_URI": "http://10.1.2.4:11311/"}, "on another host"),
+])
+def test_address_problems_fail_with_a_fix(env: dict[str, str], expected: str) -> None:
+    check = check_address(env, IFACES)
+    assert check.status == FAIL and expected in check.detail, check
+    assert check.fix
+
+
+@pytest.mark.parametrize("env", [{"ROS_IP": "127.0.0.1"}, {"ROS_IP": "10.1.2.3"},
+                                 {"ROS_HOSTNAME": "localhost"},
+                                 {"ROS_IP": "127.0.0.1", "ROS_MASTER_URI": "http://localhost:11311/"}])
+def test_consistent_addresses_pass(env: dict[str, str]) -> None:
+    assert check_address(env, IFACES).status == OK
+
+
+def test_dds_network_reports_what_micros_rt_picks(tmp_path: Path) -> None:
+    loop = check_dds_network({"ROS_IP": "127.0.0.1"}, IFACES)
+    assert loop.status == OK and "interface lo" in loop.detail and "multicast off" in loop.detail
+    lan = check_dds_network({"ROS_IP": "10.1.2.3"}, IFACES)
+    assert lan.status == OK and "interface eth0" in lan.detail and "multicast on" in lan.detail
+    cfg = tmp_path / "cyclone.xml"
+    cfg.write_text(LOOPBACK_XML)
+    user = check_dds_network({"ROS_IP": "10.1.2.3", "CYCLONEDDS_URI": cfg.as_uri()}, IFACES)
+    assert user.status == OK and "interface lo, multicast off" in user.detail
+    missing = check_dds_network({"CYCLONEDDS_URI": str(tmp_path / "missing.xml")}, IFACES)
+    assert missing.status == FAIL and "cannot be read" in missing.detail and missing.fix
+    lease = check_dds_network({"ROS_IP": "127.0.0.1", "MICROS_RT_LEASE_DURATION": "0"}, IFACES)
+    assert lease.status == FAIL and "MICROS_RT_LEASE_DURATION" in lease.fix
+
+
+def test_cyclone_starts_with_micros_rt_loopback_configuration() -> None:
+    # domain 231: away from the per-run test domains (1..200); loopback only
+    check = check_cyclone({"ROS_IP": "127.0.0.1", "ROS_DOMAIN_ID": "231"})
+    assert check.status == OK, check
+
+
+def test_profile_check_of_the_environment(tmp_path: Path) -> None:
+    assert check_profile({}).status == OK
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("publishers:\n  /a: {transport_priority: LOUD}\n")
+    check = check_profile({"MICROS_RT_QOS_PROFILE": str(bad)})
+    assert check.status == FAIL and f"{bad}:2:" in check.detail
+    assert "micros-rt profile check" in check.fix
+
+
+PROFILE = textwrap.dedent("""\
+    publishers:
+      /chatter: {transport_priority: HIGH}
+      "/cha*": {using_best_effort_protocol: true}
+      "/camera/*": {msg_valid_period: 0.1}
+    subscribers:
+      "/*": {time_filter_duration: 0.5}
+    """)
+
+
+def test_rule_matches_uses_the_library_precedence() -> None:
+    profile = QoSProfile.from_string(PROFILE, source="qos.yaml")
+    live = {"/chatter": ["/b", "/a"], "/chatter2": ["/c"], "/scan": ["/d"]}
+    assert profile_cmd.rule_matches(profile, "publishers", "/chatter", live) == {"/chatter": (["/a", "/b"], None)}
+    assert profile_cmd.rule_matches(profile, "publishers", "/cha*", live) == {
+        "/chatter": (["/a", "/b"], "/chatter"), "/chatter2": (["/c"], None)}
+    assert profile_cmd.rule_matches(profile, "publishers", "/camera/*", live) == {}
+    assert set(profile_cmd.rule_matches(profile, "subscribers", "/*", live)) == {"/chatter", "/chatter2", "/scan"}
+
+
+def test_profile_check_offline(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    good = tmp_path / "good.yaml"
+    good.write_text(PROFILE)
+    assert profile_cmd.main(["check", "--offline", str(good)]) == 0
+    text = capsys.readouterr().out
+    assert "valid (3 publisher rules, 1 subscriber rule)" in text
+    assert "/chatter: reliable, priority HIGH" in text
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("subscribers:\n  /a:\n    deadline: 0\n")
+    with pytest.raises(CommandError) as info:
+        profile_cmd.main(["check", "--offline", str(bad)])
+    assert f"{bad}:3:" in str(info.value) and "deadline" in str(info.value)
