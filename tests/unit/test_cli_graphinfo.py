@@ -132,7 +132,7 @@ def test_why_tcpros_between_micros_rt_nodes_without_a_verdict(hints: List[str], 
 
 
 def test_qos_in_words() -> None:
-    pub = dict(AdvertiseQoSOptions(transport_priority="HIGH", latency_budget=0.005, msg_valid_period=2.0,
+    pub = dict(AdvertiseQoSOptions(transport_priority=TransportPriority.HIGH, latency_budget=0.005, msg_valid_period=2.0,
                                    using_best_effort_protocol=True).to_dict(), queue_size=None, latch=True)
     assert describe_publisher_qos(pub) == ("best effort, priority HIGH, latency budget 5 ms, valid for 2 s, latched, "
                                            "lossless (queue_size None)")
