@@ -42,6 +42,7 @@ StatsCallback = Callable[[Dict[str, Any]], None]
 _PUBLISH_QUEUE = 100   # ROS-side publisher of a board stream: keeps the newest 100, never blocks the bridge
 _SUBSCRIBE_QUEUE = 10  # ROS-side subscriber of a topic for the board
 _POLL = 0.05           # seconds between deadline checks
+_DEADLINE_REMINDER = 10.0  # seconds between log lines while a stream stays silent
 
 
 @dataclass
@@ -51,6 +52,8 @@ class _FromStream:
     publisher: micros_rt.Publisher
     time_filter: TimeFilter
     deadline: DeadlineMonitor
+    in_silence: bool = False
+    last_reminder: float = 0.0
 
 
 class McuBridge:
@@ -167,6 +170,7 @@ class McuBridge:
             now = time.monotonic()
             resumed = stream.deadline.delivered(now)
             if resumed is not None:
+                stream.in_silence = False
                 _log.warning("micros_rt: mcu-bridge: %s: data from the microcontroller resumed after %.1f s of "
                              "silence (deadline %g s)", stream.entry.topic, resumed, stream.deadline.deadline)
             if not stream.time_filter.admit(now):
@@ -181,15 +185,20 @@ class McuBridge:
             self.stats.add("from_microcontroller", "published", entry=stream.entry.name)
 
     def _check_deadline(self, stream: _FromStream) -> None:
-        silent = stream.deadline.poll(time.monotonic())
+        now = time.monotonic()
+        silent = stream.deadline.poll(now)
         if silent is None:
             return
         entry, board = stream.entry, self.config.microcontroller
         self.stats.add("from_microcontroller", "deadline_missed", entry=entry.name)
-        _log.warning("micros_rt: mcu-bridge: %s: no %r datagram from the microcontroller %s for %.1f s, longer "
-                     "than the deadline of %g s (%d misses so far); is the board running and sending to %s:%d?",
-                     entry.topic, entry.name, board.address, silent, entry.subscribe.deadline,
-                     stream.deadline.missed_total, self.config.bind.address, self.config.bind.topic_port)
+        # The first miss of a silence in words, then a reminder at most every _DEADLINE_REMINDER seconds:
+        # a board that stays off must not fill the log (deadline_cb still hears every miss).
+        if not stream.in_silence or now - stream.last_reminder >= _DEADLINE_REMINDER:
+            stream.in_silence, stream.last_reminder = True, now
+            _log.warning("micros_rt: mcu-bridge: %s: no %r datagram from the microcontroller %s for %.1f s, longer "
+                         "than the deadline of %g s (%d misses so far); is the board running and sending to %s:%d?",
+                         entry.topic, entry.name, board.address, silent, entry.subscribe.deadline,
+                         stream.deadline.missed_total, self.config.bind.address, self.config.bind.topic_port)
         if self._deadline_cb is not None:
             try:
                 self._deadline_cb(DeadlineMissed(entry.topic, entry.subscribe.deadline, silent,
