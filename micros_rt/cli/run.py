@@ -9,10 +9,12 @@ traceback are its own), after :func:`micros_rt._drop_in.install` has put micros_
 from __future__ import annotations
 
 import argparse
+import builtins
+import io
 import os
-import runpy
 import sys
 import traceback
+import types
 from typing import List, Optional, Tuple
 
 from .. import _drop_in
@@ -113,15 +115,29 @@ def _load_profile(path: Optional[str]) -> None:
         raise CommandError(f"profile {path}: {exc}", code=2) from None
 
 
-def _print_script_exception(exc: BaseException, script: str) -> None:
+def _print_script_exception(exc: BaseException, path: str) -> None:
     """The traceback python would print: from the script's first frame on, through sys.excepthook."""
     tb = exc.__traceback__
-    while tb is not None and tb.tb_frame.f_code.co_filename != script:
+    while tb is not None and tb.tb_frame.f_code.co_filename != path:
         tb = tb.tb_next
+    if tb is not None:
+        exc.__traceback__ = tb  # python's default hook prints the exception's own traceback
     try:
-        sys.excepthook(type(exc), exc, tb if tb is not None else exc.__traceback__)
+        sys.excepthook(type(exc), exc, exc.__traceback__)
     except Exception:
-        traceback.print_exception(type(exc), exc, tb)
+        traceback.print_exception(type(exc), exc, exc.__traceback__)
+
+
+def _run_as_main(path: str) -> None:
+    """Run the file as python runs its main script: its code in a fresh ``__main__`` module that stays
+    ``sys.modules["__main__"]`` (threads, atexit handlers and pickle find it after the code returns).
+    Not runpy.run_path: that rewrites ``sys.argv[0]`` and puts the old ``__main__`` back."""
+    with io.open_code(path) as f:
+        code = compile(f.read(), path, "exec", dont_inherit=True)
+    main_module = types.ModuleType("__main__")
+    main_module.__dict__.update(__file__=path, __builtins__=builtins, __cached__=None)
+    sys.modules["__main__"] = main_module
+    exec(code, main_module.__dict__)
 
 
 def main(argv: List[str]) -> int:
@@ -144,14 +160,15 @@ def main(argv: List[str]) -> int:
         sys.path.append(script_dir)
 
     _drop_in.install(profile=profile, hints=hints)
+    path = os.path.abspath(script)  # python >= 3.9 makes the main script's __file__ absolute
     try:
-        runpy.run_path(script, run_name="__main__")
+        _run_as_main(path)
     except SystemExit:
         raise  # the script's exit code (and message), as python handles it
     except KeyboardInterrupt as exc:
-        _print_script_exception(exc, script)
+        _print_script_exception(exc, path)
         return 130
     except BaseException as exc:
-        _print_script_exception(exc, script)
+        _print_script_exception(exc, path)
         return 1
     return 0

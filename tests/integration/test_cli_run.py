@@ -1,0 +1,210 @@
+"""``micros-rt run``: unmodified rospy scripts (tests/peers/plain_*.py) on micros_rt, with real processes.
+
+Two plain scripts run this way talk DDS (no TCP link between them in the kernel's socket table) and
+TCPROS with stock rospy nodes and ``rostopic``; a YAML profile gives an unmodified subscriber a time
+filter; services, parameters, timers, time and ``wait_for_message`` keep working; the script's
+``__name__``, ``sys.argv``, ``sys.path[0]``, remappings, traceback and exit code are its own.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+from typing import Any, Dict, List, Optional
+
+import harness
+from helpers import bus_info, received, tcp_links_between, transports
+
+MICROS_RT = str(harness.REPO_ROOT / ".venv" / "bin" / "micros-rt")
+PLAIN_TALKER = str(harness.PEERS_DIR / "plain_talker.py")
+PLAIN_LISTENER = str(harness.PEERS_DIR / "plain_listener.py")
+PLAIN_PROBE = str(harness.PEERS_DIR / "plain_probe.py")
+
+
+def run(script: str, *args: str, profile: Optional[Path] = None, hints: Optional[str] = None) -> List[str]:
+    """``micros-rt run [--profile P] [--hints H] SCRIPT ARGS...``"""
+    argv = [MICROS_RT, "run"]
+    if profile is not None:
+        argv += ["--profile", str(profile)]
+    if hints is not None:
+        argv += ["--hints", hints]
+    return argv + [script, *args]
+
+
+def stock(script: str, *args: str) -> List[str]:
+    """The same plain script as a stock rospy node."""
+    return [harness.STOCK_PYTHON, script, *args]
+
+
+def links_of(master: harness.RosMaster, node: str, topic: str) -> Dict[str, str]:
+    """getBusInfo of ``node`` for ``topic``: peer (caller id or URI) -> transport."""
+    return {str(c[1]): str(c[3]) for c in bus_info(master, node) if c[4] == topic}
+
+
+def test_two_plain_scripts_talk_dds_and_tcpros_with_stock_nodes(ros_master: harness.RosMaster,
+                                                                spawn: harness.Spawner) -> None:
+    topic = "/run_chatter"
+    listener = spawn(run(PLAIN_LISTENER, "--topic", topic, "__name:=run_listener"), name="run_listener")
+    stock_listener = spawn(stock(PLAIN_LISTENER, "--topic", topic, "__name:=stock_plain_listener"),
+                           name="stock_plain_listener")
+    # a stock talker the micros_rt listener must hear over TCPROS
+    stock_talker = spawn(stock(PLAIN_TALKER, "--topic", "/stock_chatter", "--rate", "20",
+                               "__name:=stock_plain_talker"), name="stock_plain_talker")
+    from_stock = spawn(run(PLAIN_LISTENER, "--topic", "/stock_chatter", "--tcp-nodelay", "__name:=run_from_stock"),
+                       name="run_from_stock")
+    for peer in (listener, stock_listener, from_stock):
+        assert peer.wait_for("ready", 60)["is_rospy_subscriber"] is True
+    talker = spawn(run(PLAIN_TALKER, "--topic", topic, "--rate", "300", "--queue-size", "1000",
+                       "--wait-subscribers", "2", "__name:=run_talker"), name="run_talker")
+    assert talker.wait_for("ready", 60)["is_rospy_publisher"] is True
+
+    # 1,000 messages, in order, over DDS between the two micros-rt run scripts; TCPROS to the stock one
+    listener.wait_for_count("recv", 1000, timeout=60)
+    stock_listener.wait_for_count("recv", 1000, timeout=60)
+    assert received(listener)[:1000] == [f"hello {i}" for i in range(1000)]
+    assert set(transports(listener)) == {"DDS"}
+    assert received(stock_listener)[:1000] == [f"hello {i}" for i in range(1000)]
+    assert set(transports(stock_listener)) == {"TCPROS"}
+
+    # the kernel's socket table: no TCP link between the two micros-rt run processes, one to the stock node
+    dds_pair = tcp_links_between(talker.pid, listener.pid) + tcp_links_between(listener.pid, talker.pid)
+    stock_pair = tcp_links_between(stock_listener.pid, talker.pid)
+    print(f"ss: run_talker(pid {talker.pid}) <-> run_listener(pid {listener.pid}): {dds_pair}; "
+          f"stock_plain_listener(pid {stock_listener.pid}) -> run_talker: {stock_pair}")
+    assert dds_pair == []
+    assert stock_pair, "the stock listener should hold a TCPROS socket to the talker"
+
+    # what the ROS graph says: getBusInfo and rosnode info
+    talker_links = links_of(ros_master, "/run_talker", topic)
+    print("getBusInfo /run_talker:", talker_links)
+    assert talker_links == {"/run_listener": "DDS", "/stock_plain_listener": "TCPROS"}
+    info = harness.rosnode(ros_master, "info", "/run_listener", timeout=30).stdout
+    assert "/run_talker" in info and "DDS" in info, info
+
+    # rostopic echo (stock, TCPROS) hears the micros-rt run talker
+    echo = harness.rostopic(ros_master, "echo", "-n", "3", topic, timeout=30).stdout
+    assert echo.count("data: \"hello") == 3, echo
+
+    # the micros-rt run listener hears the stock talker over TCPROS (tcp_nodelay=True asked for)
+    from_stock.wait_for_count("recv", 5, timeout=30)
+    assert set(transports(from_stock)) == {"TCPROS"}
+    assert set(links_of(ros_master, "/run_from_stock", "/stock_chatter").values()) == {"TCPROS"}
+    assert stock_talker.alive()
+
+
+def test_profile_gives_an_unmodified_subscriber_a_time_filter(ros_master: harness.RosMaster,
+                                                              spawn: harness.Spawner, tmp_path: Path) -> None:
+    profile = tmp_path / "qos.yaml"
+    profile.write_text("subscribers:\n  /run_filtered: {time_filter_duration: 1.0}\n")
+    filtered = spawn(run(PLAIN_LISTENER, "--topic", "/run_filtered", "__name:=run_filtered", profile=profile),
+                     name="run_filtered")
+    unfiltered = spawn(run(PLAIN_LISTENER, "--topic", "/run_filtered", "__name:=run_unfiltered"),
+                       name="run_unfiltered")
+    filtered.wait_for("ready", 60)
+    unfiltered.wait_for("ready", 60)
+    talker = spawn(run(PLAIN_TALKER, "--topic", "/run_filtered", "--rate", "50", "--count", "200",
+                       "--wait-subscribers", "2"), name="run_filtered_talker")
+    assert talker.wait(60) == 0
+    assert talker.events("done")[0]["sent"] == 200
+    unfiltered.wait_for_count("recv", 200, timeout=30)
+    filtered.stop()
+    n_filtered, n_all = len(received(filtered)), len(received(unfiltered))
+    print(f"time filter 1.0 s from the profile: {n_filtered} of {n_all} messages (200 sent at 50 Hz, ~4 s)")
+    assert n_all == 200
+    assert set(transports(filtered)) == {"DDS"}
+    assert 2 <= n_filtered <= 7, n_filtered  # ~4 s of data at one message per second
+
+
+def test_services_params_timers_and_wait_for_message_under_run(ros_master: harness.RosMaster,
+                                                              spawn: harness.Spawner) -> None:
+    talker = spawn(run(PLAIN_TALKER, "--topic", "/run_wfm", "--rate", "20", "__name:=run_wfm_talker"),
+                   name="run_wfm_talker")
+    talker.wait_for("ready", 60)
+    probe = spawn(run(PLAIN_PROBE, "services", "--topic", "/run_wfm", "__name:=run_probe"), name="run_probe")
+    assert probe.wait(60) == 0, probe.stderr_tail()
+    events = {e["event"]: e for e in probe.events()}
+    print("probe:", json.dumps({k: {f: v for f, v in e.items() if f != "_rx"} for k, e in events.items()}))
+    params = events["params"]
+    assert params["private"] == 42 and params["resolved"] == "/run_probe/answer" and params["has"] is True
+    assert params["glob"] == {"a": [1, 2], "b": "x"} and params["default"] == "fallback"
+    assert events["param_deleted"]["has"] is False
+    assert events["service"] == {**events["service"], "success": True, "message": "triggered 1"}
+    assert events["timer"]["ticks"] >= 3
+    assert abs(events["time"]["get_time"] - events["time"]["wall"]) < 5.0
+    assert events["wait_for_message"]["data"].startswith("hello ")
+    assert events["wait_for_message"]["transport"] == "DDS"
+    assert events["wait_timeout"]["raised"] is True
+    assert events["shutdown"] == {**events["shutdown"], "is_shutdown": True, "hooks": ["called"]}
+    assert "plain_probe says hello on /rosout" in "\n".join(e.get("line", "") for e in probe.events("_raw"))
+    # wait_for_message's subscriber was unregistered again: the talker keeps no link to the probe
+    harness.wait_until(lambda: "/run_probe" not in links_of(ros_master, "/run_wfm_talker", "/run_wfm"), 20,
+                       message="the probe's links to go")
+
+
+def _run_cli(argv: List[str], env: Dict[str, str], cwd: Optional[Path] = None) -> "subprocess.CompletedProcess[str]":
+    return subprocess.run(argv, env=env, cwd=str(cwd or harness.REPO_ROOT), stdin=subprocess.DEVNULL,
+                          capture_output=True, text=True, timeout=60)
+
+
+def _event(cp: "subprocess.CompletedProcess[str]", kind: str) -> Dict[str, Any]:
+    for line in cp.stdout.splitlines():
+        if line.startswith("{") and json.loads(line).get("event") == kind:
+            return dict(json.loads(line))
+    raise AssertionError(f"no {kind!r} event in stdout:\n{cp.stdout}\nstderr:\n{cp.stderr}")
+
+
+def test_argv_name_path_remappings_and_exit_code_are_the_scripts(ros_master: harness.RosMaster) -> None:
+    env = ros_master.env
+    args = ["argv", "--exit", "3", "-h", "--profile", "x", "chatter:=/remapped", "__name:=probe_argv", "__ns:=/ns1"]
+    cp = _run_cli(run(PLAIN_PROBE, *args), env)
+    assert cp.returncode == 3, cp.stderr
+    got = _event(cp, "argv")
+    print("micros-rt run argv:", got)
+    assert got["argv"] == [PLAIN_PROBE, *args]  # -h and --profile after SCRIPT are the script's
+    assert got["myargv"] == [PLAIN_PROBE, "argv", "--exit", "3", "-h", "--profile", "x"]
+    assert got["name"] == "__main__"
+    assert got["path0"] == str(harness.PEERS_DIR) and got["file"] == PLAIN_PROBE
+    assert got["node"] == "/ns1/probe_argv" and got["namespace"] == "/ns1/" and got["chatter"] == "/remapped"
+
+    # the same through python -m micros_rt, with a relative script path (python makes __file__ absolute)
+    cp = _run_cli([harness.MICROS_RT_PYTHON, "-m", "micros_rt", "run", "peers/plain_probe.py", "argv", "--exit", "0"],
+                  env, cwd=harness.TESTS_DIR)
+    assert cp.returncode == 0, cp.stderr
+    got = _event(cp, "argv")
+    assert got["argv"][0] == "peers/plain_probe.py" and got["file"] == PLAIN_PROBE and got["node"] == "/plain_probe"
+
+    # an exception: python's traceback (from the script's frame on) and exit code 1
+    cp = _run_cli(run(PLAIN_PROBE, "raise"), env)
+    assert cp.returncode == 1
+    assert cp.stderr.startswith("Traceback (most recent call last):\n  File \"" + PLAIN_PROBE), cp.stderr
+    assert cp.stderr.rstrip().endswith("RuntimeError: boom from the script"), cp.stderr
+    assert "micros_rt/cli" not in cp.stderr and "micros_rt" not in cp.stderr, cp.stderr
+    stock_cp = _run_cli(stock(PLAIN_PROBE, "raise"), env)
+    assert (stock_cp.returncode, stock_cp.stderr) == (cp.returncode, cp.stderr)
+
+    # sys.exit("message"): the message on stderr, exit code 1, as python does
+    cp = _run_cli(run(PLAIN_PROBE, "exit-message"), env)
+    assert (cp.returncode, cp.stderr.strip()) == (1, "bye from the script")
+
+
+def test_user_mistakes_are_one_line_errors(tmp_path: Path) -> None:
+    env = harness.child_env()
+    not_python = tmp_path / "node.sh"
+    not_python.write_text("#!/bin/sh\necho hi\n")
+    bad_profile = tmp_path / "bad.yaml"
+    bad_profile.write_text("subscribers:\n  /x: {time_filter: 1.0}\n")
+    cases = [
+        (run(str(tmp_path / "missing.py")), "can't open file"),
+        ([MICROS_RT, "run"], "no SCRIPT given"),
+        (run(PLAIN_PROBE, "raise", hints="dds,udp"), "unknown protocol 'udp'"),
+        (run(str(not_python)), "is not a Python script"),
+        (run(PLAIN_PROBE, "raise", profile=bad_profile), "time_filter"),
+    ]
+    for argv, words in cases:
+        cp = _run_cli(argv, env)
+        lines = cp.stderr.strip().splitlines()
+        assert cp.returncode == 2 and len(lines) == 1 and words in lines[0], (argv, cp.returncode, cp.stderr)
+        assert lines[0].startswith("micros-rt run: "), lines
+    cp = _run_cli([MICROS_RT, "run", "-h"], env)
+    assert cp.returncode == 0 and "SCRIPT [ARGS...]" in cp.stdout and "launch-prefix" in cp.stdout
