@@ -189,7 +189,7 @@ def test_user_mistakes_are_one_line_and_a_non_zero_exit(graph: Dict[str, str]) -
     assert_one_line_error(cli(graph, "topic", "info"), code=2, words="usage: micros-rt topic info")
     assert_one_line_error(cli(graph, "profile", "check", "/no/such/file.yaml"), code=1, words="cannot read")
     assert_one_line_error(cli(graph, "topic", "nonsense"), code=2, words="unknown command")
-    for args in (("--help",), ("topic", "-h"), ("topic", "info", "-h"), ("graph", "-h"), ("doctor", "-h"),
-                 ("profile", "check", "-h")):
-        cp = cli(graph, *args)
-        assert cp.returncode == 0 and cp.stdout.strip() and not cp.stderr, (args, cp.stderr)
+    for help_args in (["--help"], ["topic", "-h"], ["topic", "info", "-h"], ["graph", "-h"], ["doctor", "-h"],
+                      ["profile", "check", "-h"]):
+        cp = cli(graph, *help_args)
+        assert cp.returncode == 0 and cp.stdout.strip() and not cp.stderr, (help_args, cp.stderr)
