@@ -166,3 +166,23 @@ class MosquittoBroker:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+
+def write_params(path: Path, params: Dict[str, object]) -> Path:
+    """An mqtt_client params file (YAML)."""
+    import yaml
+
+    path.write_text(yaml.safe_dump(params, sort_keys=False))
+    return path
+
+
+def bridge_argv(params: Path, *, name: str = "mqtt_client", counters: float = 0.5) -> List[str]:
+    """``python -m micros_rt.mqtt`` (the bridge) with the project's venv, printing its counters."""
+    return [harness.MICROS_RT_PYTHON, "-m", "micros_rt.mqtt", "--params", str(params), "--name", name,
+            "--print-counters", str(counters)]
+
+
+def last_counters(peer: "harness.Peer") -> Dict[str, object]:
+    """The newest ``counters`` event a bridge printed ({} before the first)."""
+    events = peer.events("counters")
+    return events[-1] if events else {}

@@ -49,6 +49,8 @@ _log = nonblocking_logger("rosout.micros_rt.mqtt")
 PENDING_LIMIT = 100
 #: How often the master is asked for the types of ROS topics not yet subscribed (seconds).
 RESOLVE_INTERVAL = 0.3
+#: How long a new ROS publisher waits for the subscribers the master knows (seconds).
+SUBSCRIBER_WAIT = 3.0
 
 
 def is_connected_service_class() -> Type[Any]:
@@ -151,6 +153,8 @@ class _Mqtt2Ros:
         self.publisher = self.bridge.nh.advertise(self.p.ros_topic, cls, self.p.queue_size, latch=self.p.latched)
         self.data_class, self.md5 = cls, cls._md5sum
         _log.info("ROS publisher message type on topic '%s' set to '%s'", self.p.ros_topic, cls._type)
+        _await_subscribers(self.publisher)
+
 
     def _publish(self, msg: genpy.Message) -> None:
         assert self.publisher is not None
@@ -211,6 +215,7 @@ class _Mqtt2Ros:
             stamp, body = codec.decode_ros_payload(payload)
             msg = cls()
             msg.deserialize(bytes(body))
+            _check_length(msg, body)
         except Exception as exc:  # genpy raises struct.error, DeserializationError, UnicodeDecodeError...
             self.bridge.problems.report(topic, "malformed",
                                         f"MQTT topic '{topic}': a {len(payload)}-byte payload does not decode as "
@@ -243,6 +248,30 @@ class _Mqtt2Ros:
                                         f"{exc}")
             return
         self._publish(msg)
+
+
+def _check_length(msg: genpy.Message, body: memoryview) -> None:
+    """genpy trusts length prefixes: a string or array claiming more bytes than the buffer holds is read
+    short without complaint. A payload is well-formed only when its message serializes back to it."""
+    buf = io.BytesIO()
+    msg.serialize(buf)
+    if buf.tell() != len(body) or buf.getbuffer() != body:
+        raise ValueError(f"its {len(body)}-byte body does not re-encode to the same bytes (a length prefix "
+                         f"does not match the data, or trailing bytes)")
+
+
+def _await_subscribers(pub: micros_rt.Publisher, *, timeout: float = SUBSCRIBER_WAIT) -> None:
+    """Wait (bounded) until the subscribers the master lists for a new publisher's topic are connected, so
+    that the first message, published right after advertising, reaches them (mqtt_client loses it)."""
+    try:
+        _, subscribers, _ = rospy.get_master().getSystemState()[2]
+    except Exception as exc:  # master away: publish anyway
+        _log.debug("micros_rt mqtt: cannot ask the master for subscribers: %s", exc)
+        return
+    expected = sum(len(nodes) for topic, nodes in subscribers if topic == pub.resolved_name)
+    deadline = time.monotonic() + timeout
+    while pub.get_num_connections() < expected and time.monotonic() < deadline:
+        time.sleep(0.01)
 
 
 def _message_class(t: codec.RosMsgType) -> Type[genpy.Message]:

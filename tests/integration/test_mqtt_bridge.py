@@ -1,0 +1,159 @@
+"""The mqtt_client-compatible bridge against a real mosquitto: JSON and primitive text to mosquitto_sub,
+mosquitto_pub text to a micros_rt listener, the first message, bad input, the is_connected service."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import time
+from pathlib import Path
+from typing import Any, Dict, List
+
+import paho.mqtt.client as paho
+import pytest
+from paho.mqtt.enums import CallbackAPIVersion
+
+import harness
+from helpers import mrt
+from mqtt_broker import MosquittoBroker, bridge_argv, last_counters, write_params
+
+from micros_rt.mqtt import codec
+
+@pytest.fixture
+def broker(tmp_path: Path) -> Any:
+    with MosquittoBroker(tmp_path / "broker") as b:
+        yield b
+
+
+def raw_lines(peer: harness.Peer) -> List[str]:
+    return [e["line"] for e in peer.events("_raw")]
+
+
+def wait_connected(bridge: harness.Peer, timeout: float = 30.0) -> None:
+    harness.wait_until(lambda: int(last_counters(bridge).get("connects", 0)) >= 1, timeout,  # type: ignore[call-overload]
+                       message=f"bridge never connected:\n{bridge.stderr_tail()}")
+
+
+def publish_all(broker: MosquittoBroker, messages: List[tuple], timeout: float = 30.0) -> None:
+    """Publish (topic, payload, qos, retain) tuples in order from this process and wait for every ack."""
+    client = paho.Client(CallbackAPIVersion.VERSION2, client_id="", protocol=paho.MQTTv311)
+    client.connect(broker.host, broker.port)
+    client.loop_start()
+    try:
+        infos = [client.publish(t, p, q, r) for t, p, q, r in messages]
+        deadline = time.monotonic() + timeout
+        for info in infos:
+            info.wait_for_publish(max(0.1, deadline - time.monotonic()))
+    finally:
+        client.disconnect()
+        client.loop_stop()
+
+
+def test_talker_to_mosquitto_sub_as_json_and_text_and_mosquitto_pub_69_to_listener(
+        ros_master: harness.RosMaster, spawn: harness.Spawner, broker: MosquittoBroker, tmp_path: Path) -> None:
+    params = write_params(tmp_path / "params.yaml", {
+        "broker": {"host": broker.host, "port": broker.port},
+        "bridge": {
+            "ros2mqtt": [
+                {"ros_topic": "/mq1/pose", "mqtt_topic": "mq1/pose", "json": True},
+                {"ros_topic": "/mq1/count", "mqtt_topic": "mq1/count", "primitive": True},
+            ],
+            "mqtt2ros": [{"mqtt_topic": "mq1/in", "ros_topic": "/mq1/in", "primitive": True}],
+        },
+    })
+    bridge = spawn(bridge_argv(params, name="mq1_bridge"), name="bridge")
+    wait_connected(bridge)
+    sub_json = spawn(broker.sub_argv("mq1/pose", count=5, timeout=60), name="sub_json")
+    sub_text = spawn(broker.sub_argv("mq1/count", count=5, timeout=60), name="sub_text")
+    time.sleep(0.5)   # mosquitto_sub has subscribed (no retained messages here)
+    pose = {"header": {"frame_id": "map", "stamp": {"secs": 12, "nsecs": 34}},
+            "pose": {"position": {"x": 1.5, "y": -2.0, "z": 0.25}, "orientation": {"w": 1.0}}}
+    spawn(mrt("talk", "--topic", "/mq1/pose", "--type", "geometry_msgs/PoseStamped", "--count", 20, "--rate", 20,
+              "--wait-subscribers", 1, "--data-json", json.dumps(pose), "--node-name", "mq1_pose_talker"))
+    spawn(mrt("talk", "--topic", "/mq1/count", "--type", "std_msgs/Int32", "--count", 20, "--rate", 20,
+              "--wait-subscribers", 1, "--node-name", "mq1_count_talker"))
+
+    assert sub_json.wait(timeout=60) == 0, sub_json.stderr_tail()
+    # the harness parses JSON stdout lines itself (adding "_rx"): each is one message as JSON
+    docs = [{k: v for k, v in e.items() if k != "_rx"} for e in sub_json.events() if "header" in e]
+    assert len(docs) == 5
+    for doc in docs:
+        assert doc["header"]["frame_id"] == "map" and doc["header"]["stamp"] == {"secs": 12, "nsecs": 34}
+        assert doc["pose"]["position"] == {"x": 1.5, "y": -2.0, "z": 0.25}
+        assert doc["pose"]["orientation"] == {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
+    assert sub_text.wait(timeout=60) == 0, sub_text.stderr_tail()
+    texts = raw_lines(sub_text)
+    assert len(texts) == 5 and all(t.isdigit() for t in texts)
+    assert [int(t) for t in texts] == list(range(int(texts[0]), int(texts[0]) + 5)), texts
+    print(f"mosquitto_sub JSON: {json.dumps(docs[0])}\nmosquitto_sub text: {texts}")
+
+    listener = spawn(mrt("listen", "--topic", "/mq1/in", "--type", "std_msgs/Int32", "--duration", 60,
+                         "--exit-after", 1, "--node-name", "mq1_listener"), name="listener")
+    listener.wait_for("ready", timeout=30)
+    broker.pub("mq1/in", "69")
+    got = listener.wait_for("recv", timeout=30)
+    assert got["data"] == 69
+    print(f"mosquitto_pub -m 69 -> micros_rt listener: {got['data']} via {got['transport']}")
+
+
+def test_first_message_bad_input_and_is_connected(
+        ros_master: harness.RosMaster, spawn: harness.Spawner, broker: MosquittoBroker, tmp_path: Path) -> None:
+    params = write_params(tmp_path / "params.yaml", {
+        "broker": {"host": broker.host, "port": broker.port},
+        "bridge": {"mqtt2ros": [
+            {"mqtt_topic": "mq2/data", "ros_topic": "/mq2/data", "advanced": {"mqtt": {"qos": 1},
+                                                                              "ros": {"queue_size": 100}}},
+            {"mqtt_topic": "mq2/level", "ros_topic": "/mq2/level", "primitive": True, "ros_type": "std_msgs/UInt8"},
+        ]},
+    })
+    bridge = spawn(bridge_argv(params, name="mq2_bridge"), name="bridge")
+    wait_connected(bridge)
+    listener = spawn(mrt("listen", "--topic", "/mq2/data", "--type", "std_msgs/String", "--duration", 90,
+                         "--node-name", "mq2_listener"), name="listener")
+    listener.wait_for("ready", timeout=30)
+
+    from std_msgs.msg import String
+    import io
+
+    def ros1(text: str) -> bytes:
+        buf = io.BytesIO()
+        String(data=text).serialize(buf)
+        return codec.encode_ros_payload(buf.getvalue())
+
+    announcement = codec.encode_msg_type(codec.RosMsgType.of(String))
+    # the data arrives before its type: mqtt_client drops it, this bridge holds it until the type comes
+    publish_all(broker, [("mq2/data", ros1("first"), 1, False),
+                         ("mqtt_client/ros_msg_type/mq2/data", announcement, 1, True)])
+    first = listener.wait_for("recv", timeout=30)
+    assert first["data"] == "first"
+
+    malformed = [b"", b"\x07not mqtt_client", b"\x01\x00", b"\x00\xff\xff\xff\x7fshort"]
+    bad = [("mq2/data", malformed[i % len(malformed)], 1, False) for i in range(1000)]
+    bad += [("mq2/level", b"300", 1, False), ("mq2/level", b"abc", 1, False)]
+    publish_all(broker, bad + [("mq2/data", ros1("after 1000 bad"), 1, False), ("mq2/level", b"7", 1, False)])
+    after = listener.wait_for(lambda e: e.get("event") == "recv" and e.get("data") == "after 1000 bad", timeout=60)
+    assert after["data"] == "after 1000 bad"
+
+    def counted() -> bool:
+        bad_input: Dict[str, int] = last_counters(bridge).get("bad_input", {})  # type: ignore[assignment]
+        return bad_input.get("malformed") == 1000 and bad_input.get("unfit_text") == 2
+
+    try:
+        harness.wait_until(counted, 30)
+    except AssertionError:
+        raise AssertionError(f"counters: {last_counters(bridge)}") from None
+    counters: Dict[str, Any] = last_counters(bridge)
+    assert counters["delivered"]["/mq2/data"] == 2 and counters["delivered"]["/mq2/level"] == 1
+
+    call = subprocess.run([harness.MICROS_RT_PYTHON, "-c", (
+        "import rospy; from micros_rt.mqtt.bridge import is_connected_service_class as c; "
+        "rospy.wait_for_service('/mq2_bridge/is_connected', 20); "
+        "print(rospy.ServiceProxy('/mq2_bridge/is_connected', c())().connected)")],
+        env=ros_master.env, capture_output=True, text=True, timeout=60)
+    assert call.stdout.strip() == "True", call.stderr
+    assert bridge.alive()
+    bridge.stop()
+    warnings = [line for line in bridge.stderr_tail(200).splitlines() if "does not decode" in line]
+    assert len(warnings) == 1, warnings
+    print(f"1000 malformed payloads: counted {counters['bad_input']}, one warning: {warnings[0]}\n"
+          f"is_connected: {call.stdout.strip()}")
