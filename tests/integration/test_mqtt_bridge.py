@@ -7,7 +7,7 @@ import json
 import subprocess
 import time
 from pathlib import Path
-from typing import Any, Dict, List
+from typing import Any, Dict, List, Tuple
 
 import paho.mqtt.client as paho
 import pytest
@@ -34,7 +34,7 @@ def wait_connected(bridge: harness.Peer, timeout: float = 30.0) -> None:
                        message=f"bridge never connected:\n{bridge.stderr_tail()}")
 
 
-def publish_all(broker: MosquittoBroker, messages: List[tuple], timeout: float = 30.0) -> None:
+def publish_all(broker: MosquittoBroker, messages: List[Tuple[str, bytes, int, bool]], timeout: float = 30.0) -> None:
     """Publish (topic, payload, qos, retain) tuples in order from this process and wait for every ack."""
     client = paho.Client(CallbackAPIVersion.VERSION2, client_id="", protocol=paho.MQTTv311)
     client.connect(broker.host, broker.port)
