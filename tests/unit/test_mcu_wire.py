@@ -1,0 +1,176 @@
+"""The microcontroller link's wire format, byte for byte (seed 003): datagrams and serial datagrams.
+
+Fixtures are written out by hand from the MessagePack spec and the CRC32 check value, not produced by
+the code under test.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import genpy
+import msgpack
+import pytest
+from geometry_msgs.msg import Twist, Vector3
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Duration, Header, String, UInt8MultiArray
+from std_srvs.srv import SetBool, SetBoolRequest, TriggerResponse
+
+from micros_rt.mcu import wire
+from micros_rt.mcu.errors import WireError
+
+F0 = "cb" + "00" * 8  # float64 0.0
+
+TWIST_DATAGRAM = bytes.fromhex(
+    "a7636d645f76656c"                                   # "cmd_vel"
+    "82"                                                 # map of 2
+    "a66c696e656172" "83" "a178cb3ff8000000000000" f"a179{F0}" f"a17a{F0}"   # linear: {x: 1.5, y: 0, z: 0}
+    "a7616e67756c6172" "83" f"a178{F0}" f"a179{F0}" "a17acbbfe0000000000000"  # angular: {x: 0, y: 0, z: -0.5}
+)
+
+HEADER_DATAGRAM = bytes.fromhex(
+    "a3686472" "83" "a3736571" "07" "a57374616d70" "9201cd01f4" "a86672616d655f6964" "a161")
+
+
+def twist() -> Twist:
+    return Twist(linear=Vector3(1.5, 0.0, 0.0), angular=Vector3(0.0, 0.0, -0.5))
+
+
+def test_twist_datagram_is_name_then_map_of_nested_maps() -> None:
+    assert wire.encode_datagram("cmd_vel", wire.codec_for(Twist).to_wire(twist())) == TWIST_DATAGRAM
+
+
+def test_time_is_secs_nsecs_array() -> None:
+    msg = Header(seq=7, stamp=genpy.Time(1, 500), frame_id="a")
+    assert wire.encode_datagram("hdr", wire.codec_for(Header).to_wire(msg)) == HEADER_DATAGRAM
+    name, body = wire.split_datagram(HEADER_DATAGRAM)
+    assert name == "hdr" and wire.codec_for(Header).from_wire(body) == msg
+
+
+def test_negative_duration_and_uint8_array_as_bin() -> None:
+    dur = wire.encode_datagram("d", wire.codec_for(Duration).to_wire(Duration(data=genpy.Duration(-1, 5))))
+    assert dur == bytes.fromhex("a164" "81" "a464617461" "92ff05")
+    arr = UInt8MultiArray(data=b"\x01\x02\x03")
+    got = wire.encode_datagram("u", wire.codec_for(UInt8MultiArray).to_wire(arr))
+    assert got == bytes.fromhex("a175" "82" "a66c61796f7574" "82" "a364696d" "90" "ab646174615f6f6666736574" "00"
+                                "a464617461" "c403010203")
+    assert wire.codec_for(UInt8MultiArray).from_wire(wire.split_datagram(got)[1]).data == b"\x01\x02\x03"
+
+
+def test_array_form_is_accepted_with_nested_maps_or_arrays() -> None:
+    as_arrays = msgpack.packb(["cmd_vel", [1.5, 0, 0], [0, 0, -0.5]])
+    as_maps = msgpack.packb(["cmd_vel", {"x": 1.5, "y": 0, "z": 0}, {"x": 0, "y": 0, "z": -0.5}])
+    for data in (as_arrays, as_maps):
+        name, body = wire.split_datagram(data)
+        assert name == "cmd_vel" and wire.codec_for(Twist).from_wire(body) == twist()
+
+
+def test_map_form_round_trip_of_a_full_imu() -> None:
+    msg = Imu()
+    msg.header.stamp = genpy.Time(1_700_000_000, 123)
+    msg.header.frame_id = "imu_link"
+    msg.orientation.w = 1.0
+    msg.orientation_covariance = [0.01 * i for i in range(9)]
+    msg.linear_acceleration.z = 9.81
+    data = wire.encode_datagram("imu", wire.codec_for(Imu).to_wire(msg))
+    name, body = wire.split_datagram(data)
+    assert name == "imu" and wire.codec_for(Imu).from_wire(body) == msg
+
+
+@pytest.mark.parametrize("data, kind", [
+    (b"\xc1\x00", "not_msgpack"),                                       # 0xc1 is never used
+    (b"\xa3im", "not_msgpack"),                                         # truncated string
+    (b"", "not_msgpack"),
+    (msgpack.packb(42), "bad_shape"),
+    (msgpack.packb("imu") + msgpack.packb([1, 2]), "bad_shape"),        # name then an array
+    (msgpack.packb("a") + msgpack.packb({}) + msgpack.packb(1), "bad_shape"),
+])
+def test_malformed_datagrams_are_refused_by_kind(data: bytes, kind: str) -> None:
+    with pytest.raises(WireError) as info:
+        wire.split_datagram(data)
+    assert info.value.kind == kind
+
+
+@pytest.mark.parametrize("body, kind, words", [
+    ({"linear": {"x": 1.0, "y": 0.0}, "angular": {"x": 0, "y": 0, "z": 0}}, "missing_field", "'linear.z'"),
+    ({"linear": {"x": "fast", "y": 0, "z": 0}, "angular": {"x": 0, "y": 0, "z": 0}}, "bad_field",
+     "'linear.x' should be a number (float64), got the string 'fast'"),
+    ({"linear": {"x": 0, "y": 0, "z": 0}, "angular": [0, 0]}, "missing_field", "needs 3 fields"),
+    ({"linear": {"x": 0, "y": 0, "z": 0}, "angular": {"x": 0, "y": 0, "z": 0}, "spin": 1}, "unknown_field",
+     "no field the string 'spin'"),
+    ({"linear": 5, "angular": {"x": 0, "y": 0, "z": 0}}, "bad_field", "'linear' should be a geometry_msgs/Vector3"),
+])
+def test_bad_fields_name_the_field(body: Any, kind: str, words: str) -> None:
+    with pytest.raises(WireError) as info:
+        wire.codec_for(Twist).from_wire(body)
+    assert info.value.kind == kind and words in str(info.value)
+
+
+def test_integer_ranges_bools_and_fixed_arrays_are_checked() -> None:
+    codec = wire.codec_for(Header)
+    with pytest.raises(WireError, match="uint32"):
+        codec.from_wire({"seq": -1, "stamp": [0, 0], "frame_id": ""})
+    with pytest.raises(WireError, match="nsecs 0..999999999"):
+        codec.from_wire({"seq": 0, "stamp": [0, 1_000_000_000], "frame_id": ""})
+    with pytest.raises(WireError, match="exactly 9"):
+        body = wire.codec_for(Imu).to_wire(Imu())
+        body["orientation_covariance"] = [0.0] * 8
+        wire.codec_for(Imu).from_wire(body)
+    assert wire.codec_for(SetBool._request_class).from_wire([1]).data is True   # firmware's 0/1 bools
+    with pytest.raises(WireError):
+        wire.codec_for(SetBool._request_class).from_wire([2])
+
+
+def test_bad_values_refused_when_encoding_like_genpy() -> None:
+    with pytest.raises(genpy.SerializationError, match="'data'"):
+        wire.codec_for(String).to_wire(String(data=123))
+
+
+# --------------------------------------------------------------------------- serial datagrams
+
+
+def test_serial_datagram_appends_big_endian_crc32_and_end() -> None:
+    # CRC32("123456789") is the standard check value 0xCBF43926
+    assert wire.frame(b"123456789") == b"123456789" + bytes.fromhex("cbf43926") + b"\xc0"
+
+
+def test_serial_datagram_escapes_payload_and_crc() -> None:
+    assert wire.frame(b"\xc0\xdb\x01") == bytes.fromhex("dbdc" "dbdd" "01" "7b256310" "c0")
+    # the CRC of 00 07 86 is b4 db 69 c0: its own 0xDB and 0xC0 are escaped too
+    assert wire.frame(bytes.fromhex("000786")) == bytes.fromhex("000786" "b4" "dbdd" "69" "dbdc" "c0")
+    assert wire.unframe(bytes.fromhex("000786b4dbdd69dbdc")) == bytes.fromhex("000786")
+
+
+def test_service_request_is_framed_name_and_params() -> None:
+    req = SetBoolRequest(data=True)
+    params = wire.codec_for(SetBool._request_class).to_wire_list(req)
+    assert wire.encode_request("set_mode", params) == bytes.fromhex(
+        "92" "a87365745f6d6f6465" "c3" "b3779734" "c0")
+    assert wire.decode_request(wire.encode_request("set_mode", params)[:-1]) == ("set_mode", [True])
+
+
+def test_service_response_is_a_plain_map() -> None:
+    data = wire.encode_response(wire.codec_for(TriggerResponse).to_wire(TriggerResponse(True, "ok")))
+    assert data == bytes.fromhex("82" "a773756363657373" "c3" "a76d657373616765" "a26f6b")
+    assert wire.codec_for(TriggerResponse).from_wire(wire.decode_response(data)) == TriggerResponse(True, "ok")
+
+
+@pytest.mark.parametrize("body, kind", [
+    (bytes.fromhex("313233343536373839cbf43927"), "bad_crc"),
+    (bytes.fromhex("3132db01cbf43926"), "bad_escape"),
+    (bytes.fromhex("3132db"), "bad_escape"),
+    (bytes.fromhex("0102"), "short_frame"),
+])
+def test_bad_frames_by_kind(body: bytes, kind: str) -> None:
+    with pytest.raises(WireError) as info:
+        wire.unframe(body)
+    assert info.value.kind == kind
+
+
+def test_frame_reader_waits_for_end_and_bounds_the_size() -> None:
+    reader = wire.FrameReader(16)
+    assert reader.feed(b"\xc0\xc0abc") is None          # leading END bytes are skipped
+    assert reader.feed(b"def\xc0trailing") == b"abcdef"
+    with pytest.raises(WireError) as info:
+        wire.FrameReader(16).feed(b"x" * 17)
+    assert info.value.kind == "frame_too_long"
