@@ -46,7 +46,8 @@ class DDSTopicWriter:
         self.dds_topic = dds_topic_name(spec.topic)
         self.lossless = is_lossless(spec.queue_size) and not options.using_best_effort_protocol
         qos = writer_qos(options, queue_size=spec.queue_size, latch=spec.latch, user_data=make_user_data(**spec.tag))
-        self._writer = DDSWriter(backend.participant, self.dds_topic, self.dds_type, qos)
+        self._writer = DDSWriter(backend.participant, self.dds_topic, self.dds_type, qos,
+                                 latency_budget=options.latency_budget)
         self._ref = self._writer._ref
         self._write = self._writer.write_serialized
         self.guid = self._writer.guid

@@ -18,6 +18,7 @@ from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 
 from ..exceptions import DDSUnavailableError
+from .batching import flush_writer, flusher
 from .participant import DDSParticipant, delete_entity
 from .types import DDSType
 from .._logging import nonblocking_logger
@@ -51,8 +52,9 @@ class DDSWriter:
     """A DataWriter for one topic of one process, fed with genpy messages."""
 
     def __init__(self, participant: DDSParticipant, topic_name: str, dds_type: DDSType, qos: Any,
-                 on_matched: Optional[Callable[[int], None]] = None) -> None:
+                 on_matched: Optional[Callable[[int], None]] = None, *, latency_budget: float = 0.0) -> None:
         self.topic_name = topic_name
+        self.latency_budget = latency_budget
         self.dds_type = dds_type
         self._matched = 0
         self._on_matched = on_matched
@@ -67,6 +69,29 @@ class DDSWriter:
         self._ref = self._writer._ref
         self.guid = str(self._writer.guid)
         self.closed = False
+        self.write_serialized = self._batched_write() if latency_budget > 0 else self._flushed_write()
+
+    def _flushed_write(self) -> Callable[[bytes], int]:
+        ref, write, flush = self._ref, ddspy_write, flush_writer
+        flush(ref)  # binds the C function now, not on the first publish()
+
+        def write_serialized(data: bytes) -> int:
+            ret: int = write(ref, data)
+            if ret >= 0:
+                flush(ref)  # the participant batches writes (dds.batching): send this one now
+            return ret
+        return write_serialized
+
+    def _batched_write(self) -> Callable[[bytes], int]:
+        ref, write, budget = self._ref, ddspy_write, self.latency_budget
+        pending = flusher().pending
+
+        def write_serialized(data: bytes) -> int:
+            ret: int = write(ref, data)
+            if ret >= 0:
+                pending(ref, budget)  # sent with the next full datagram, or by the flusher within budget
+            return ret
+        return write_serialized
 
     def _matched_changed(self, _writer: Any, status: Any) -> None:
         self._matched = status.current_count
@@ -86,15 +111,17 @@ class DDSWriter:
                 out.append(str(data.key))
         return out
 
-    def write_serialized(self, data: bytes) -> int:
-        """Write one serialized sample (from the type's codec); Cyclone's return code (< 0: failed,
-        -10: timed out on back-pressure after the Reliability max_blocking_time)."""
-        return int(ddspy_write(self._ref, data))
+    #: ``write_serialized(data) -> int``: write one serialized sample (from the type's codec) and send
+    #: it now, or within ``latency_budget`` batched with the next ones; Cyclone's return code (< 0:
+    #: failed, -10: timed out on back-pressure after the Reliability max_blocking_time).
+    write_serialized: Callable[[bytes], int]
 
     def close(self) -> None:
         if self.closed:
             return
         self.closed = True
+        if self.latency_budget > 0:
+            flusher().forget(self._ref)  # what waits in the datagram leaves before the writer goes
         delete_entity(self._writer)
         self._participant.release_topic(self.topic_name)
 

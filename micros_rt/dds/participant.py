@@ -19,6 +19,7 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 
 from ..exceptions import DDSUnavailableError
 from .._logging import nonblocking_logger
+from .batching import WRITE_BATCH_CONFIG, close_flusher
 
 __all__ = [
     "LOOPBACK_CONFIG",
@@ -104,11 +105,12 @@ LOOPBACK_TRANSPORT = "<General><MaxMessageSize>65500B</MaxMessageSize><FragmentS
 
 def micros_rt_defaults(env: Mapping[str, str] = os.environ) -> str:
     """Settings micros_rt applies under any configuration (a user's ``CYCLONEDDS_URI`` overrides them):
-    the participant lease, and on a loopback node large fragments."""
+    the participant lease, write batching (each writer flushes after its write unless it has a latency
+    budget: :mod:`micros_rt.dds.batching`), and on a loopback node large fragments."""
     transport = LOOPBACK_TRANSPORT if _is_loopback(env) else ""
     return (f'<CycloneDDS><Domain id="any">{transport}<Discovery>'
             f"<LeaseDuration>{lease_duration(env):g}s</LeaseDuration>"
-            "</Discovery></Domain></CycloneDDS>")
+            f"</Discovery>{WRITE_BATCH_CONFIG}</Domain></CycloneDDS>")
 
 
 def cyclone_config(env: Mapping[str, str] = os.environ) -> str:
@@ -284,6 +286,7 @@ def close_participant() -> None:
     """Close the process participant (at shutdown)."""
     global _participant
     with _lock:
+        close_flusher()  # what batching writers still hold goes out before their participant does
         if _participant is not None:
             _participant.close()
             _participant = None

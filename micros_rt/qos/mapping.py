@@ -11,7 +11,11 @@ queue_size                     writer History KEEP_LAST(queue_size); 0/None (ros
                                the subscriber keeps the newest queue_size itself and counts drops
 latch / transient_local        Durability TRANSIENT_LOCAL (depth >= 1), else VOLATILE
 transport_priority             TransportPriority(level 0..6)
-latency_budget                 LatencyBudget on the writer; readers request infinite (see below)
+latency_budget                 LatencyBudget 0 on the writer (readers request infinite, see below);
+                               micros_rt batches the writer's samples into shared datagrams and
+                               sends them within the budget (:mod:`micros_rt.dds.batching`):
+                               Cyclone's own LatencyBudget > 0 mode hands every sample to a send
+                               thread, which measured slower than not batching at all
 using_best_effort_protocol     Reliability BEST_EFFORT / RELIABLE
 msg_valid_period               Lifespan (absent when infinite, which is the DDS default)
 ordered_by_sending_timestamp   DestinationOrder BY_SOURCE / BY_RECEPTION on the reader; writers
@@ -133,7 +137,8 @@ def writer_qos(
       ``queue_size`` is None/0 (:func:`is_lossless`): nothing dropped, ``publish()`` blocks instead.
     - Durability TRANSIENT_LOCAL if ``latch`` (late joiners get the last message) else VOLATILE.
     - Lifespan(msg_valid_period) only when finite.
-    - LatencyBudget(latency_budget) and TransportPriority(level) always.
+    - LatencyBudget 0 (micros_rt batches within ``latency_budget`` itself, see
+      :mod:`micros_rt.dds.batching`) and TransportPriority(level) always.
     - DestinationOrder BY_SOURCE_TIMESTAMP always: the strongest offer, compatible with readers of
       either kind (the subscriber's ``ordered_by_sending_timestamp`` decides).
     - Userdata(user_data) when non-empty (e.g. the graph tag).
@@ -154,7 +159,7 @@ def writer_qos(
                      PUBLISH_BLOCK_TIMEOUT if lossless else RELIABLE_MAX_BLOCKING_TIME),
         Policy.History.KeepAll if lossless else Policy.History.KeepLast(depth=history_depth(queue_size)),
         Policy.Durability.TransientLocal if latch else Policy.Durability.Volatile,
-        Policy.LatencyBudget(budget=duration_ns(options.latency_budget)),
+        Policy.LatencyBudget(budget=0),  # not Cyclone's send-thread mode: micros_rt batches (dds.batching)
         Policy.TransportPriority(priority=int(options.transport_priority)),
         Policy.DestinationOrder.BySourceTimestamp,
     ]
