@@ -10,6 +10,7 @@ signed nothing, for the wrong-CA test. Every wait is bounded.
 from __future__ import annotations
 
 import dataclasses
+import os
 import signal
 import socket
 import subprocess
@@ -75,6 +76,8 @@ class MosquittoBroker:
         self.proc: Optional["subprocess.Popen[bytes]"] = None
         lines = [f"listener {self.port} 127.0.0.1", "log_dest file " + str(self.log_path), "log_type all",
                  "connection_messages true", "log_timestamp true"]
+        if os.geteuid() == 0:
+            lines.append("user root")   # else mosquitto drops to 'mosquitto', who cannot read pytest's tmp dirs
         if passwords:
             pw = self.workdir / "passwords"
             pw.write_text("")
