@@ -123,7 +123,7 @@ def test_broker_down_at_start_up_buffer_on_disk_expired_dropped(ros_master: harn
         wait_log(bridge, r"Connected to broker")
         reader = spawn(broker.sub_argv("buf/seq", count=5, timeout=30, extra=reader_args), name="reader")
         assert reader.wait(timeout=60) == 0, reader.stderr_tail()
-        got = [e.get("line", e.get("event")) for e in reader.events()]
+        got = [str(e.get("line", e.get("event"))) for e in reader.events()]
         assert [int(x) for x in got] == [0, 1, 2, 3, 4], got           # the second talker's, in order
         harness.wait_until(lambda: last_counters(bridge).get("dropped_expired") == 5, 30)
         counters: Dict[str, Any] = last_counters(bridge)
