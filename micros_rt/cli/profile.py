@@ -6,26 +6,21 @@ from __future__ import annotations
 from typing import Any, Dict, List, Mapping, Sequence, Union
 
 from . import CommandError
-from ._args import ArgumentParser
+from ._args import ArgumentParser, dispatch
 from ._graphinfo import Master, describe_publisher_qos, describe_subscriber_qos
 
 __all__ = ["main", "rule_matches"]
 
-USAGE = """micros-rt profile is a command-line tool for YAML QoS profiles (MICROS_RT_QOS_PROFILE).
-
-Commands:
-\tmicros-rt profile check\tvalidate a profile and show which live topics each rule matches
-
-Type micros-rt profile <command> -h for more detailed usage, e.g. 'micros-rt profile check -h'"""
-
 
 def main(argv: List[str]) -> int:
     """``micros-rt profile check FILE``."""
-    if not argv or argv[0] in ("-h", "--help", "help"):
-        print(USAGE)
-        return 0 if argv else 2
-    if argv[0] != "check":
-        raise CommandError(f"unknown command '{argv[0]}' (commands: check)", code=2)
+    return dispatch("micros-rt profile", "a command-line tool for YAML QoS profiles (MICROS_RT_QOS_PROFILE).", {
+        "check": (check_main, "validate a profile and show which live topics each rule matches"),
+    }, argv)
+
+
+def check_main(argv: List[str]) -> int:
+    """``micros-rt profile check [--offline] FILE``."""
     parser = ArgumentParser(
         prog="micros-rt profile check", usage="%(prog)s [--offline] FILE.yaml",
         description="Validate a YAML QoS profile exactly as micros_rt.init_node reads it (an error names the "
@@ -33,7 +28,7 @@ def main(argv: List[str]) -> int:
                     "(an exact name beats a pattern; the longest pattern wins) and the QoS they would get.")
     parser.add_argument("file", help="the profile, e.g. qos.yaml")
     parser.add_argument("--offline", action="store_true", help="do not ask the ROS master for live topics")
-    args = parser.parse_args(argv[1:])
+    args = parser.parse_args(argv)
     from ..exceptions import ProfileError
     from ..qos import QoSProfile
 

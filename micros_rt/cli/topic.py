@@ -6,35 +6,25 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import logging
 import math
 import sys
 import time
 from typing import Any, Dict, List, Optional
 
 from . import CommandError
-from ._args import ArgumentParser
+from ._args import ArgumentParser, dispatch
 from ._graphinfo import Master, resolve_topic, snapshot
 
 __all__ = ["main", "format_info", "info_data", "latency_report", "format_latency"]
 
-USAGE = """micros-rt topic is a command-line tool for the links and latency of micros_rt topics.
-
-Commands:
-\tmicros-rt topic info\tprint every link of a topic: protocol, both sides' QoS, priority, why not DDS
-\tmicros-rt topic latency\tmeasure a topic's rate, latency, drops, deadline and budget misses
-
-Type micros-rt topic <command> -h for more detailed usage, e.g. 'micros-rt topic info -h'"""
-
 
 def main(argv: List[str]) -> int:
     """``micros-rt topic <command> ...``."""
-    if not argv or argv[0] in ("-h", "--help", "help"):
-        print(USAGE)
-        return 0 if argv else 2
-    commands = {"info": info_main, "latency": latency_main}
-    if argv[0] not in commands:
-        raise CommandError(f"unknown command '{argv[0]}' (commands: {', '.join(commands)})", code=2)
-    return commands[argv[0]](argv[1:])
+    return dispatch("micros-rt topic", "a command-line tool for the links and latency of micros_rt topics.", {
+        "info": (info_main, "print every link of a topic: protocol, both sides' QoS, priority, why not DDS"),
+        "latency": (latency_main, "measure a topic's rate, latency, drops, deadline and budget misses"),
+    }, argv)
 
 
 # --------------------------------------------------------------------------- info
@@ -95,7 +85,7 @@ def format_info(data: Dict[str, Any]) -> str:
 
 def latency_main(argv: List[str]) -> int:
     parser = ArgumentParser(
-        prog="micros-rt topic latency", usage="%(prog)s [--count N] [--json] [--plot FILE.png] /topic",
+        prog="micros-rt topic latency", usage="%(prog)s [--count N] [--json] [--plot FILE.png] [--deadline SEC] /topic",
         description="Subscribe to a topic with micros_rt (DDS where the publisher can, else TCPROS) and show, "
                     "refreshed in place, its rate and latency (p50/p99/max) from DDS source timestamps or "
                     "Header stamps, drops, deadline misses and latency-budget misses. Ctrl-C, --count or "
@@ -108,6 +98,8 @@ def latency_main(argv: List[str]) -> int:
                         help="stop after SEC seconds (exit 1 when fewer than --count messages came)")
     parser.add_argument("--deadline", type=float, default=0.0, metavar="SEC",
                         help="count deadline misses: gaps longer than SEC seconds between messages")
+    parser.add_argument("-v", "--verbose", action="store_true",
+                        help="also print micros_rt's warnings (QoS mismatches, each deadline miss)")
     args = parser.parse_args(argv)
     if args.count < 0 or args.timeout < 0 or args.deadline < 0:
         raise CommandError("--count, --timeout and --deadline must not be negative", code=2)
@@ -142,6 +134,10 @@ def _measure(topic: str, type_name: str, args: argparse.Namespace) -> int:
     import micros_rt
 
     micros_rt.init_node("micros_rt_topic_latency", anonymous=True, disable_signals=True, disable_rosout=True)
+    if not args.verbose:
+        # the report counts deadline misses and names each link's protocol; per-event warnings would
+        # break the line refreshed in place (init_node reset rospy's loggers, so set it after)
+        logging.getLogger("rosout.micros_rt").setLevel(logging.ERROR)
     arrivals = Arrivals()
 
     nh = micros_rt.NodeHandle()

@@ -67,11 +67,16 @@ def graph(ros_master: harness.RosMaster) -> Iterator[Dict[str, str]]:
         listener.wait_for("recv", 60)
         stock.wait_for("recv", 60)
 
-        def all_linked() -> bool:
-            links = links_of(ros_master.env)
-            return {pair: link["protocol"] for pair, link in links.items()} == EXPECTED
+        seen: List[Dict[Tuple[str, str], str]] = [{}]
 
-        harness.wait_until(all_linked, 60, interval=0.5, message=f"the four links of {TOPIC} {EXPECTED}")
+        def all_linked() -> bool:
+            seen[0] = {pair: link["protocol"] for pair, link in links_of(ros_master.env).items()}
+            return seen[0] == EXPECTED
+
+        try:
+            harness.wait_until(all_linked, 60, interval=0.5, message=f"the four links of {TOPIC} {EXPECTED}")
+        except AssertionError as exc:
+            raise AssertionError(f"{exc}; last seen {seen[0]}") from None
         yield dict(ros_master.env)
     finally:
         spawner.close()
