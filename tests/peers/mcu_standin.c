@@ -8,6 +8,7 @@
  *    field and the IP TOS it arrived with;
  *  - serves one service (--service-name, default "reset", std_srvs/Trigger's response) on its TCP
  *    service port: a serial datagram (SLIP + CRC32 big-endian) in, a MessagePack map out, then close;
+ *    (--hang-name NAME: a call of NAME is never answered, the board holds the connection up to 3 s);
  *  - can call a service through the bridge (--call NAME [--call-arg VALUE]... --call-after SECONDS).
  *
  * Build: gcc -O2 -Wall -o mcu_standin mcu_standin.c -lmsgpackc
@@ -41,7 +42,7 @@ static volatile sig_atomic_t stop_requested = 0;
 static void on_signal(int sig) { (void)sig; stop_requested = 1; }
 
 struct options {
-    const char *address, *bridge, *stream_name, *service_name, *call_name;
+    const char *address, *bridge, *stream_name, *service_name, *hang_name, *call_name;
     const char *call_args[MAX_ARGS];
     int n_call_args;
     int topic_port, service_port, bridge_topic_port, bridge_service_port;
@@ -294,7 +295,7 @@ static void receive_datagram(int udp) {
 
 static long served = 0;
 
-static void serve_one(int listener, const char *service_name) {
+static void serve_one(int listener, const char *service_name, const char *hang_name) {
     unsigned char buf[MAX_FRAME];
     int conn = accept(listener, NULL, NULL);
     if (conn < 0) return;
@@ -314,6 +315,7 @@ static void serve_one(int listener, const char *service_name) {
     }
     const msgpack_object_str *name = &req.data.via.array.ptr[0].via.str;
     int ours = name->size == strlen(service_name) && memcmp(name->ptr, service_name, name->size) == 0;
+    int hang = *hang_name && name->size == strlen(hang_name) && memcmp(name->ptr, hang_name, name->size) == 0;
     printf("{\"event\": \"served\", \"name\": ");
     json_string(name->ptr, name->size);
     printf(", \"params\": ");
@@ -323,6 +325,7 @@ static void serve_one(int listener, const char *service_name) {
     json_object(&params);
     printf(", \"known\": %s}\n", ours ? "true" : "false");
     fflush(stdout);
+    if (hang) read_until(conn, buf, sizeof buf, 3.0, 0);  /* a board that never answers: wait for the caller to give up */
     if (ours) {
         char message[64];
         msgpack_sbuffer sb;
@@ -394,13 +397,13 @@ static void usage(void) {
     fprintf(stderr,
             "mcu_standin [--address A] [--topic-port P] [--service-port P] [--bridge A] [--bridge-topic-port P]\n"
             "            [--bridge-service-port P] [--rate HZ] [--count N] [--stream-name NAME] [--array-form]\n"
-            "            [--pause-after N --pause S] [--service-name NAME] [--call NAME [--call-arg V]...\n"
+            "            [--pause-after N --pause S] [--service-name NAME] [--hang-name NAME] [--call NAME [--call-arg V]...\n"
             "            --call-after S] [--duration S] [--linger S]\n");
     exit(2);
 }
 
 int main(int argc, char **argv) {
-    struct options o = {"127.0.0.2", "127.0.0.1", "imu", "reset", NULL, {0}, 0,
+    struct options o = {"127.0.0.2", "127.0.0.1", "imu", "reset", "", NULL, {0}, 0,
                         20000, 20001, 20000, 20001, 100.0, 60.0, 0.0, 0.5, 1.0, 0, 0, 0};
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
@@ -420,6 +423,7 @@ int main(int argc, char **argv) {
         else if (strcmp(a, "--pause-after") == 0) o.pause_after = atol(v);
         else if (strcmp(a, "--pause") == 0) o.pause = atof(v);
         else if (strcmp(a, "--service-name") == 0) o.service_name = v;
+        else if (strcmp(a, "--hang-name") == 0) o.hang_name = v;
         else if (strcmp(a, "--call") == 0) o.call_name = v;
         else if (strcmp(a, "--call-arg") == 0 && o.n_call_args < MAX_ARGS) o.call_args[o.n_call_args++] = v;
         else if (strcmp(a, "--call-after") == 0) o.call_after = atof(v);
@@ -489,7 +493,7 @@ int main(int argc, char **argv) {
         struct pollfd fds[2] = {{udp, POLLIN, 0}, {listener, POLLIN, 0}};
         if (poll(fds, 2, ms) > 0) {
             if (fds[0].revents & POLLIN) receive_datagram(udp);
-            if (fds[1].revents & POLLIN) serve_one(listener, o.service_name);
+            if (fds[1].revents & POLLIN) serve_one(listener, o.service_name, o.hang_name);
         }
     }
     msgpack_sbuffer_destroy(&sb);
