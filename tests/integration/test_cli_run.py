@@ -208,3 +208,26 @@ def test_user_mistakes_are_one_line_errors(tmp_path: Path) -> None:
         assert lines[0].startswith("micros-rt run: "), lines
     cp = _run_cli([MICROS_RT, "run", "-h"], env)
     assert cp.returncode == 0 and "SCRIPT [ARGS...]" in cp.stdout and "launch-prefix" in cp.stdout
+
+
+def test_subscriber_listener_and_headers_under_run(ros_master: harness.RosMaster, spawn: harness.Spawner) -> None:
+    announcer = spawn(run(PLAIN_PROBE, "announce", "--topic", "/run_announce", "__name:=run_announcer"),
+                      name="run_announcer")
+    announcer.wait_for("ready", 60)
+    dds_listener = spawn(run(PLAIN_LISTENER, "--topic", "/run_announce", "__name:=run_welcomed"), name="run_welcomed")
+    tcp_listener = spawn([harness.STOCK_PYTHON, str(harness.STOCK_LISTENER), "--topic", "/run_announce",
+                          "--node-name", "stock_welcomed"], name="stock_welcomed")
+    # peer_subscribe for both subscribers: the TCPROS one (rospy's call) and the DDS one (micros_rt's)
+    announcer.wait_for(lambda e: e.get("event") == "peer_subscribe" and e.get("n") == 2, 60)
+    welcome_dds = dds_listener.wait_for("recv", 30)
+    welcome_tcp = tcp_listener.wait_for("recv", 30)
+    print("subscriber_listener:", welcome_dds["data"], welcome_dds["transport"], "/", welcome_tcp["data"],
+          welcome_tcp["connection_header"])
+    assert welcome_dds["data"].startswith("welcome ") and welcome_dds["transport"] == "DDS"
+    assert welcome_tcp["data"].startswith("welcome ")
+    assert welcome_tcp["connection_header"]["robot"] == "r2"  # Publisher(headers=...) on the TCPROS link
+    links = links_of(ros_master, "/run_announcer", "/run_announce")
+    assert links == {"/run_welcomed": "DDS", "/stock_welcomed": "TCPROS"}, links
+    # the DDS subscriber leaves: rospy's remove_connection tells the listener
+    dds_listener.stop()
+    announcer.wait_for("peer_unsubscribe", 30)

@@ -14,17 +14,18 @@ import os
 import sys
 import threading
 import time
+from typing import Any, List
 
 import rospy
 from std_msgs.msg import String
 
 
-def emit(event, **fields):
+def emit(event: str, **fields: Any) -> None:
     sys.stdout.write(json.dumps(dict(event=event, **fields)) + "\n")
     sys.stdout.flush()
 
 
-def main():
+def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--topic", default="chatter")
     ap.add_argument("--count", type=int, default=0)
@@ -37,7 +38,7 @@ def main():
     lock = threading.Lock()
     received = [0]
 
-    def callback(msg, tag):
+    def callback(msg: Any, tag: str) -> None:
         header = getattr(msg, "_connection_header", None) or {}
         with lock:
             received[0] += 1

@@ -11,6 +11,9 @@ Runs as a stock node and unchanged under ``micros-rt run``. First argument, the 
 * ``services --topic T``: parameters (set/get/has/delete/search, a private one), a std_srvs/Trigger
   service called through a ServiceProxy, a rospy.Timer, rospy.get_time/get_rostime, rospy.loginfo (to
   /rosout), rospy.wait_for_message on T, on_shutdown and signal_shutdown. One JSON line per check.
+* ``announce --topic T``: a Publisher with a ``subscriber_listener`` that greets each new subscriber with
+  ``peer_publish("welcome N")`` (prints ``peer_subscribe``/``peer_unsubscribe``), ``headers`` and
+  ``tcp_nodelay``; spins.
 """
 
 import json
@@ -18,16 +21,17 @@ import os
 import sys
 import threading
 import time
+from typing import Any, List
 
 import rospy
 
 
-def emit(event, **fields):
+def emit(event: str, **fields: Any) -> None:
     sys.stdout.write(json.dumps(dict(event=event, **fields)) + "\n")
     sys.stdout.flush()
 
 
-def mode_argv(args):
+def mode_argv(args: List[str]) -> None:
     code = int(args[args.index("--exit") + 1]) if "--exit" in args else 0
     rospy.init_node("plain_probe")
     emit("argv", argv=sys.argv, myargv=rospy.myargv(), name=__name__, path0=sys.path[0], file=__file__,
@@ -35,13 +39,13 @@ def mode_argv(args):
     sys.exit(code)
 
 
-def mode_services(args):
+def mode_services(args: List[str]) -> None:
     from std_msgs.msg import String
     from std_srvs.srv import Trigger, TriggerResponse
 
     topic = args[args.index("--topic") + 1] if "--topic" in args else "chatter"
     rospy.init_node("plain_probe")
-    shutdown_hooks = []
+    shutdown_hooks: List[str] = []
     rospy.on_shutdown(lambda: shutdown_hooks.append("called"))
 
     rospy.set_param("~answer", 42)
@@ -52,9 +56,9 @@ def mode_services(args):
     rospy.delete_param("~answer")
     emit("param_deleted", has=rospy.has_param("~answer"))
 
-    calls = []
+    calls: List[int] = []
 
-    def handle(_req):
+    def handle(_req: Any) -> Any:
         calls.append(1)
         return TriggerResponse(success=True, message="triggered %d" % len(calls))
 
@@ -64,10 +68,10 @@ def mode_services(args):
     answer = proxy()
     emit("service", success=answer.success, message=answer.message)
 
-    ticks = []
+    ticks: List[float] = []
     done = threading.Event()
 
-    def tick(event):
+    def tick(event: Any) -> None:
         ticks.append(event.current_real.to_sec())
         if len(ticks) >= 3:
             done.set()
@@ -94,7 +98,29 @@ def mode_services(args):
     emit("shutdown", is_shutdown=rospy.is_shutdown(), hooks=shutdown_hooks)
 
 
-def main():
+def mode_announce(args: List[str]) -> None:
+    from std_msgs.msg import String
+
+    topic = args[args.index("--topic") + 1] if "--topic" in args else "chatter"
+    rospy.init_node("plain_probe")
+    peers: List[str] = []
+
+    class Welcome(rospy.SubscribeListener):  # type: ignore[misc]
+        def peer_subscribe(self, topic_name: str, topic_publish: Any, peer_publish: Any) -> None:
+            peers.append(topic_name)
+            emit("peer_subscribe", topic=topic_name, n=len(peers))
+            peer_publish(String(data="welcome %d" % len(peers)))
+
+        def peer_unsubscribe(self, topic_name: str, num_peers: int) -> None:
+            emit("peer_unsubscribe", topic=topic_name, num_peers=num_peers)
+
+    pub = rospy.Publisher(topic, String, subscriber_listener=Welcome(), headers={"robot": "r2"}, queue_size=10,
+                          tcp_nodelay=True)
+    emit("ready", node=rospy.get_name(), topic=pub.resolved_name, uri=rospy.get_node_uri(), pid=os.getpid())
+    rospy.spin()
+
+
+def main() -> None:
     mode, args = sys.argv[1], sys.argv[2:]
     if mode == "argv":
         mode_argv(args)
@@ -102,6 +128,8 @@ def main():
         raise RuntimeError("boom from the script")
     elif mode == "exit-message":
         sys.exit("bye from the script")
+    elif mode == "announce":
+        mode_announce(args)
     elif mode == "services":
         mode_services(args)
     else:

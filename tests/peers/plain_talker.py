@@ -13,17 +13,18 @@ import json
 import os
 import sys
 import time
+from typing import Any, List
 
 import rospy
 from std_msgs.msg import String
 
 
-def emit(event, **fields):
+def emit(event: str, **fields: Any) -> None:
     sys.stdout.write(json.dumps(dict(event=event, **fields)) + "\n")
     sys.stdout.flush()
 
 
-def main():
+def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--topic", default="chatter")
     ap.add_argument("--count", type=int, default=0)
