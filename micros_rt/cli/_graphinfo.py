@@ -152,7 +152,10 @@ def probe_node(name: str, uri: Optional[str], *, timeout: float = NODE_TIMEOUT) 
     t0 = time.time()
     try:
         text = ros_call(uri, INFO_METHOD, timeout=timeout)
-    except (OSError, xmlrpc.client.Error, ValueError):
+    except ValueError as exc:  # a micros_rt node that could not collect its info (closing, say)
+        report.kind, report.error = MICROS_RT, str(exc)
+        return report
+    except (OSError, xmlrpc.client.Error):
         return report  # a fault: no such method, a stock node
     t1 = time.time()
     try:
@@ -205,7 +208,7 @@ class GraphSnapshot:
         ep = report.publication(topic) if publisher else report.subscription(topic)
         qos = _endpoint_qos(ep)
         return {"node": node, "uri": report.uri, "kind": report.kind, "qos": qos,
-                "description": _describe(report.kind, qos, publisher=publisher)}
+                "description": _describe(report, qos, publisher=publisher)}
 
 
 def _endpoint_qos(ep: Optional[Dict[str, Any]]) -> Optional[Dict[str, Any]]:
@@ -220,7 +223,10 @@ def _endpoint_qos(ep: Optional[Dict[str, Any]]) -> Optional[Dict[str, Any]]:
     return qos
 
 
-def _describe(kind: str, qos: Optional[Dict[str, Any]], *, publisher: bool) -> str:
+def _describe(report: NodeReport, qos: Optional[Dict[str, Any]], *, publisher: bool) -> str:
+    kind = report.kind
+    if kind == MICROS_RT and report.info is None:
+        return f"micros_rt node whose QoS is unknown ({report.error})"
     if kind == STOCK or (kind == MICROS_RT and qos is None):
         return "stock ROS endpoint (TCPROS only, no micros_rt QoS)"
     if kind == UNREACHABLE:
@@ -289,6 +295,9 @@ def describe_subscriber_qos(qos: Mapping[str, Any]) -> str:
 
 def _tcpros_reason(pub: NodeReport, sub: NodeReport, topic: str) -> Tuple[str, Optional[str]]:
     """(why this link is TCPROS, verdict kind or None)."""
+    for node in (pub, sub):
+        if node.kind == MICROS_RT and node.info is None:
+            return f"unknown: micros_rt node {node.name} did not say ({node.error})", None
     if pub.kind != MICROS_RT or pub.publication(topic) is None:
         return "the publisher is a stock ROS node (TCPROS only)", None
     if sub.kind != MICROS_RT or sub.subscription(topic) is None:
