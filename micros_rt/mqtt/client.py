@@ -312,7 +312,7 @@ class MqttConnection:
             was = self._connected
             self._connected = False
             self._live = False
-            if was:
+            if was and not self._closed:
                 self._counters.disconnects += 1
         if was and not self._closed:
             _log.error("Connection to broker %s lost (%s), will try to reconnect...", self.uri, _reason_text(rc))
