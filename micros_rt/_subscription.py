@@ -282,9 +282,10 @@ class _Subscription:
             head.seq = state.header_seq
         header = state.conn_header
         if header is None:
-            # one dict per writer, shared by its messages as rospy shares one per connection
+            # one dict per writer, shared by its messages as rospy shares one per connection; callerid is
+            # the publisher's node name, as in rospy's TCPROS header
             acc = state.accepted
-            header = {"callerid": acc.conn.endpoint_id if acc else state.guid, "topic": self.topic,
+            header = {"callerid": (acc.node or acc.conn.endpoint_id) if acc else state.guid, "topic": self.topic,
                       "type": self.data_class._type, "md5sum": self.data_class._md5sum, "transport": "DDS"}
             if acc is not None:
                 state.conn_header = header

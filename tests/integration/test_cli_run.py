@@ -66,6 +66,8 @@ def test_two_plain_scripts_talk_dds_and_tcpros_with_stock_nodes(ros_master: harn
     assert set(transports(listener)) == {"DDS"}
     assert received(stock_listener)[:1000] == [f"hello {i}" for i in range(1000)]
     assert set(transports(stock_listener)) == {"TCPROS"}
+    # the connection header names the publishing node on both transports, as rospy's does
+    assert {e["callerid"] for e in listener.events("recv") + stock_listener.events("recv")} == {"/run_talker"}
 
     # the kernel's socket table: no TCP link between the two micros-rt run processes, one to the stock node
     dds_pair = tcp_links_between(talker.pid, listener.pid) + tcp_links_between(listener.pid, talker.pid)

@@ -78,10 +78,14 @@ def test_launch_prefix_runs_two_plain_nodes_over_dds_with_remap_param_namespace_
     assert talker["greeting"] == "hola"  # <param> (private ~greeting)
     assert harness.master_call(fresh_master, "getParam", "/robot/talker/greeting") == "hola"
 
-    def heard_from(uri: str, start: int = 0) -> Any:
-        return launch.wait_for(lambda e: e.get("event") == "recv" and e.get("callerid") == uri, 60, start=start)
+    def heard(start: int = 0) -> Any:
+        return launch.wait_for(lambda e: e.get("event") == "recv" and e.get("callerid") == "/robot/talker", 60,
+                               start=start)
 
-    first = heard_from(talker["uri"])
+    def sources() -> Dict[str, str]:  # the listener's links: publisher URI -> transport
+        return {str(c[1]): str(c[3]) for c in bus_info(fresh_master, "/robot/listener") if c[4] == "/robot/speech"}
+
+    first = heard()
     assert first["transport"] == "DDS" and first["data"].startswith("hola ")
     links = {str(c[1]): str(c[3]) for c in bus_info(fresh_master, "/robot/talker") if c[4] == "/robot/speech"}
     sockets = tcp_links_between(talker["pid"], listener["pid"]) + tcp_links_between(listener["pid"], talker["pid"])
@@ -94,8 +98,10 @@ def test_launch_prefix_runs_two_plain_nodes_over_dds_with_remap_param_namespace_
     mark = len(launch.events())
     os.kill(talker["pid"], signal.SIGKILL)
     again = launch.wait_for(lambda e: is_ready("/robot/talker")(e) and e.get("pid") != talker["pid"], 60, start=mark)
-    resumed = heard_from(again["uri"], start=mark)
+    resumed = heard(start=launch.events().index(again))
     assert resumed["transport"] == "DDS" and resumed["data"].startswith("hola ")
+    harness.wait_until(lambda: sources() == {again["uri"]: "DDS"}, 30, message="the listener's only link to be "
+                       f"the respawned talker's, over DDS (now {sources()})")
     sockets = tcp_links_between(again["pid"], listener["pid"]) + tcp_links_between(listener["pid"], again["pid"])
     links = {str(c[1]): str(c[3]) for c in bus_info(fresh_master, "/robot/talker") if c[4] == "/robot/speech"}
     print(f"respawned: talker pid {again['pid']} (was {talker['pid']}), getBusInfo {links}, TCP links {sockets}")
