@@ -387,5 +387,10 @@ class MqttConnection:
                         _log.warning("micros_rt mqtt: dropping buffered messages older than %.1f s "
                                      "(client/buffer/max_age)", self._buffer.max_age)
                     continue
-                self._client.publish(topic, payload, qos, retain)
+                try:
+                    self._client.publish(topic, payload, qos, retain)
+                except ValueError as exc:       # paho: above MQTT's 256 MB limit
+                    self._counters.dropped_too_large += 1
+                    _log.warning("micros_rt mqtt: dropping a buffered message on '%s': %s", topic, exc)
+                    continue
                 self._counters.flushed += 1
