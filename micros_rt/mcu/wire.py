@@ -328,7 +328,7 @@ def _unpack_all(data: bytes, at_most: int) -> List[Any]:
     except WireError:
         raise
     except (ValueError, msgpack.UnpackException) as exc:  # FormatError, StackError, bad UTF-8, ...
-        raise WireError("not_msgpack", f"not MessagePack ({exc or type(exc).__name__}; the datagram starts "
+        raise WireError("not_msgpack", f"not MessagePack ({str(exc) or type(exc).__name__}; the datagram starts "
                                        f"{data[:8].hex(' ')})") from exc
     if unpacker.tell() != len(data):
         raise WireError("not_msgpack", f"not MessagePack (truncated after byte {unpacker.tell()} of {len(data)})")
