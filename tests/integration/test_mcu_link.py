@@ -12,7 +12,6 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Any, List
 
 import msgpack
 import pytest
@@ -22,7 +21,7 @@ import harness
 
 sys.path.insert(0, str(harness.PEERS_DIR))
 import mcu_harness  # noqa: E402
-from mcu_harness import Ports, bridge_argv, mrt_peer_argv, wait_stats, write_config  # noqa: E402
+from mcu_harness import Ports, bridge_argv, mrt_peer_argv, standin_argv, wait_stats, write_config  # noqa: E402
 
 pytestmark = pytest.mark.integration
 
@@ -38,10 +37,6 @@ def start_bridge(spawn: harness.Spawner, tmp_path: Path, ports: Ports, body: str
     return bridge
 
 
-def board_argv(standin: Path, ports: Ports, *extra: Any) -> List[str]:
-    return [str(standin), *ports.standin_args(), *[str(a) for a in extra]]
-
-
 def test_imu_stream_at_100_hz_heard_by_micros_rt_listener_and_rostopic_echo(
         standin: Path, ros_master: harness.RosMaster, spawn: harness.Spawner, tmp_path: Path) -> None:
     ports = Ports.pick()
@@ -53,7 +48,7 @@ def test_imu_stream_at_100_hz_heard_by_micros_rt_listener_and_rostopic_echo(
     echo = spawn([harness.STOCK_PYTHON, harness.ROSTOPIC, "echo", "-n", "3", "/mcu_a/imu"], name="rostopic echo")
     harness.wait_until(lambda: mcu_harness.connections(ros_master, "/mcu_bridge_a", "/mcu_a/imu") >= 2, 60,
                        interval=0.2, message="the micros_rt listener and rostopic echo to connect to the bridge")
-    board = spawn(board_argv(standin, ports, "--rate", 100, "--count", 300, "--linger", 1, "--duration", 60))
+    board = spawn(standin_argv(standin, ports, "--rate", 100, "--count", 300, "--linger", 1, "--duration", 60))
     board.wait_for("sent", 60)
     stats = wait_stats(bridge, lambda s: s["from_microcontroller"]["imu"]["published"] >= 300, 30)
     harness.wait_until(lambda: listener.count("recv") >= 300, 30, message="300 Imu messages at the listener")
@@ -88,7 +83,7 @@ def test_twist_commands_reach_the_c_board_field_for_field_and_oversized_is_refus
                           "  - {topic: /mcu_b/cmd_vel, type: geometry_msgs/Twist, name: cmd_vel,"
                           " qos: {transport_priority: HIGH}}\n"
                           "  - {topic: /mcu_b/text, type: std_msgs/String, name: text}\n", "mcu_bridge_b")
-    board = spawn(board_argv(standin, ports, "--rate", 0, "--duration", 90))
+    board = spawn(standin_argv(standin, ports, "--rate", 0, "--duration", 90))
     board.wait_for("ready", 10)
     twist = {"linear": {"x": 0.25, "y": -1.5, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 3.0}}
     talker = spawn(mrt_peer_argv("talk", "--topic", "/mcu_b/cmd_vel", "--type", "geometry_msgs/Twist",
@@ -134,7 +129,7 @@ def test_services_both_ways_with_rosservice_and_the_c_board(
                           "  - {service: /mcu_c/slow, type: std_srvs/Trigger, name: slow, timeout: 0.5}\n"
                           "services_for_microcontroller:\n"
                           "  - {service: /mcu_c/set_mode, type: std_srvs/SetBool, name: set_mode}\n", "mcu_bridge_c")
-    board = spawn(board_argv(standin, ports, "--rate", 50, "--array-form", "--hang-name", "slow",
+    board = spawn(standin_argv(standin, ports, "--rate", 50, "--array-form", "--hang-name", "slow",
                              "--call", "set_mode", "--call-arg", "true", "--call-after", 0.5, "--duration", 90))
     result = board.wait_for("call_result", 30)
     called = server.wait_for("called", 10)
@@ -184,7 +179,7 @@ def test_1000_malformed_datagrams_and_bad_frames_bridge_keeps_serving(
                           " name: reset}\n"
                           "services_for_microcontroller:\n  - {service: /mcu_d/set_mode, type: std_srvs/SetBool}\n",
                           "mcu_bridge_d")
-    board = spawn(board_argv(standin, ports, "--rate", 50, "--duration", 120))
+    board = spawn(standin_argv(standin, ports, "--rate", 50, "--duration", 120))
     board.wait_for("ready", 10)
     wait_stats(bridge, lambda s: s["from_microcontroller"]["imu"]["published"] > 10, 30)
     kinds = ["not_msgpack", "bad_shape", "unknown_stream", "missing_field", "bad_field"]

@@ -20,7 +20,7 @@ from netns import Hosts
 
 sys.path.insert(0, str(harness.PEERS_DIR))
 import mcu_harness  # noqa: E402
-from mcu_harness import Ports, mrt_peer_argv, wait_stats  # noqa: E402
+from mcu_harness import Ports, mrt_peer_argv, standin_argv, wait_stats  # noqa: E402
 
 pytestmark = pytest.mark.integration
 
@@ -66,8 +66,9 @@ def test_best_effort_through_30_percent_loss_and_a_silent_board(lossy_link: Host
                                                                          "twist": {"linear": {"x": 0.5}}}),
                                               "--count", CMD_COUNT, "--rate", 100, "--wait-subscribers", 1,
                                               "--linger", 0.5)), env=env)
-    board = spawn(hosts.run(1, [str(standin), *ports.standin_args(), "--rate", 100, "--count", IMU_COUNT,
-                                "--pause-after", IMU_COUNT // 2, "--pause", 2.0, "--linger", 2, "--duration", 90]))
+    board = spawn(hosts.run(1, standin_argv(standin, ports, "--rate", 100, "--count", IMU_COUNT,
+                                            "--pause-after", IMU_COUNT // 2, "--pause", 2.0, "--linger", 2,
+                                            "--duration", 90)))
     paused = board.wait_for("paused", 60)
     resumed = board.wait_for("resumed", 30)
     board.wait_for("sent", 60)

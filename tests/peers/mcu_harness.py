@@ -75,6 +75,11 @@ def bridge_argv(config: Path, node_name: str) -> List[str]:
     return [harness.MICROS_RT_PYTHON, "-m", "micros_rt.mcu", "--config", str(config), "--name", node_name, "--json"]
 
 
+def standin_argv(binary: Path, ports: Ports, *extra: Any) -> List[str]:
+    """The C board with the link's ports and ``extra`` options."""
+    return [str(binary), *ports.standin_args(), *[str(a) for a in extra]]
+
+
 def mrt_peer_argv(*args: Any) -> List[str]:
     return [harness.MICROS_RT_PYTHON, str(MRT_PEER), *[str(a) for a in args]]
 
