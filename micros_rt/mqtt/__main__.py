@@ -13,7 +13,7 @@ import json
 import logging
 import sys
 import threading
-from typing import List, Optional
+from typing import List
 
 from ..cli import CommandError
 
@@ -90,13 +90,7 @@ def main(argv: List[str]) -> int:
     return code
 
 
-def _run(argv: Optional[List[str]] = None) -> int:
-    try:
-        return main(list(sys.argv[1:] if argv is None else argv))
-    except CommandError as exc:
-        print(f"micros-rt mqtt-bridge: {exc}", file=sys.stderr)
-        return exc.code
-
-
 if __name__ == "__main__":
-    sys.exit(_run())
+    from ..cli import main as _cli_main
+
+    sys.exit(_cli_main(["mqtt-bridge", *sys.argv[1:]]))   # the command's error handling: one line, no traceback

@@ -275,15 +275,22 @@ def _topic(r: _Reader, data: Mapping[str, Any], key: str, name: str) -> str:
     return str(value)
 
 
-def _ros2mqtt(r: _Reader, e: Mapping[str, Any], k: int) -> Ros2MqttParams:
-    name = f"bridge/ros2mqtt[{k}]"
-    r.check_keys(e, ("ros_topic", "mqtt_topic", "primitive", "json", "inject_timestamp", "advanced"), name)
+def _advanced(r: _Reader, e: Mapping[str, Any], name: str, ros_keys: Sequence[str],
+              mqtt_keys: Sequence[str]) -> Tuple[Mapping[str, Any], Mapping[str, Any]]:
+    """An entry's ``advanced.ros`` and ``advanced.mqtt`` sections, their keys checked."""
     adv = r.section(e, "advanced", f"{name}/advanced")
     r.check_keys(adv, ("ros", "mqtt"), f"{name}/advanced")
     ros = r.section(adv, "ros", f"{name}/advanced/ros")
-    r.check_keys(ros, ("queue_size",), f"{name}/advanced/ros")
+    r.check_keys(ros, ros_keys, f"{name}/advanced/ros")
     mqtt = r.section(adv, "mqtt", f"{name}/advanced/mqtt")
-    r.check_keys(mqtt, ("qos", "retained"), f"{name}/advanced/mqtt")
+    r.check_keys(mqtt, mqtt_keys, f"{name}/advanced/mqtt")
+    return ros, mqtt
+
+
+def _ros2mqtt(r: _Reader, e: Mapping[str, Any], k: int) -> Ros2MqttParams:
+    name = f"bridge/ros2mqtt[{k}]"
+    r.check_keys(e, ("ros_topic", "mqtt_topic", "primitive", "json", "inject_timestamp", "advanced"), name)
+    ros, mqtt = _advanced(r, e, name, ("queue_size",), ("qos", "retained"))
     entry = Ros2MqttParams(
         ros_topic=_topic(r, e, "ros_topic", name),
         mqtt_topic=_topic(r, e, "mqtt_topic", name),
@@ -302,12 +309,7 @@ def _ros2mqtt(r: _Reader, e: Mapping[str, Any], k: int) -> Ros2MqttParams:
 def _mqtt2ros(r: _Reader, e: Mapping[str, Any], k: int) -> Mqtt2RosParams:
     name = f"bridge/mqtt2ros[{k}]"
     r.check_keys(e, ("mqtt_topic", "ros_topic", "primitive", "json", "ros_type", "advanced"), name)
-    adv = r.section(e, "advanced", f"{name}/advanced")
-    r.check_keys(adv, ("ros", "mqtt"), f"{name}/advanced")
-    ros = r.section(adv, "ros", f"{name}/advanced/ros")
-    r.check_keys(ros, ("queue_size", "latched"), f"{name}/advanced/ros")
-    mqtt = r.section(adv, "mqtt", f"{name}/advanced/mqtt")
-    r.check_keys(mqtt, ("qos",), f"{name}/advanced/mqtt")
+    ros, mqtt = _advanced(r, e, name, ("queue_size", "latched"), ("qos",))
     entry = Mqtt2RosParams(
         mqtt_topic=_topic(r, e, "mqtt_topic", name),
         ros_topic=_topic(r, e, "ros_topic", name),
