@@ -17,6 +17,9 @@ import xmlrpc.client
 from dataclasses import asdict, dataclass, field
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
+from .._introspection import INFO_METHOD
+# the library's XML-RPC transport with a per-connection timeout (the micros_rt package imports rospy anyway)
+from .._rospy_compat import _TimeoutTransport
 from . import CommandError
 
 __all__ = [
@@ -35,7 +38,6 @@ __all__ = [
 ]
 
 CALLER_ID = "/micros_rt_cli"
-INFO_METHOD = "microsRtInfo"  # micros_rt._introspection.INFO_METHOD, without importing rospy
 NODE_TIMEOUT = 3.0
 MICROS_RT = "micros_rt"
 STOCK = "stock"
@@ -55,17 +57,6 @@ def resolve_topic(name: str, env: Mapping[str, str] = os.environ) -> str:
         return name
     ns = env.get("ROS_NAMESPACE", "/").strip() or "/"
     return "/" + "/".join(p for p in (ns.strip("/"), name.lstrip("~")) if p)
-
-
-class _TimeoutTransport(xmlrpc.client.Transport):
-    def __init__(self, timeout: float) -> None:
-        super().__init__()
-        self._timeout = timeout
-
-    def make_connection(self, host: Any) -> Any:
-        conn = super().make_connection(host)
-        conn.timeout = self._timeout
-        return conn
 
 
 def _proxy(uri: str, timeout: float) -> xmlrpc.client.ServerProxy:
