@@ -9,10 +9,11 @@ logs go to the master's tmp ROS_HOME/ROS_LOG_DIR.
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import signal
 from pathlib import Path
-from typing import Any, Dict
+from typing import Any, Dict, List, Tuple
 
 import harness
 from helpers import bus_info, tcp_links_between
@@ -112,3 +113,26 @@ def test_launch_prefix_runs_two_plain_nodes_over_dds_with_remap_param_namespace_
     # roslaunch's SIGINT stops both nodes (each prints its summary line on rospy's shutdown)
     launch.stop(timeout=20)
     assert launch.wait_for(lambda e: e.get("event") == "done" and "received" in e, 5)["received"] > 0
+
+
+def test_launch_example_runs_with_profile_and_absolute_prefix(fresh_master: harness.RosMaster,
+                                                              spawn: harness.Spawner) -> None:
+    """examples/launch/micros_rt_run_demo as documented: micros-rt by absolute path, a QoS profile."""
+    env: Dict[str, str] = dict(fresh_master.env)
+    env["ROS_PACKAGE_PATH"] = str(harness.REPO_ROOT / "examples" / "launch")
+    launch = spawn([harness.STOCK_PYTHON, ROSLAUNCH, "micros_rt_run_demo", "talker_listener.launch",
+                    f"micros_rt:={VENV_BIN / 'micros-rt'}"], env=env, name="roslaunch_example")
+    heard = re.compile(r"/demo/listener heard \[hello world (\d+)\] via (\w+)")
+
+    def lines() -> List[Tuple[int, str]]:
+        found = (heard.search(e["line"]) for e in launch.events("_raw"))
+        return [(int(m.group(1)), m.group(2)) for m in found if m]
+
+    got = harness.wait_until(lambda: len(lines()) >= 4 and lines(), 60, interval=0.2,
+                             message="four 'heard ... via' lines from the example's listener")
+    print("example listener:", got)
+    assert {t for _, t in got} == {"DDS"}
+    gaps = [b - a for (a, _), (b, _) in zip(got, got[1:])]
+    assert min(gaps) >= 5, gaps  # 20 Hz through the profile's 0.5 s time filter: ~10 apart
+    echo = harness.rostopic(fresh_master, "echo", "-n", "1", "/demo/speech", timeout=30).stdout
+    assert "hello world" in echo  # a stock subscriber gets TCPROS from the same talker
