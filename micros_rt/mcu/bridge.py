@@ -43,6 +43,7 @@ _PUBLISH_QUEUE = 100   # ROS-side publisher of a board stream: keeps the newest 
 _SUBSCRIBE_QUEUE = 10  # ROS-side subscriber of a topic for the board
 _POLL = 0.05           # seconds between deadline checks
 _DEADLINE_REMINDER = 10.0  # seconds between log lines while a stream stays silent
+_MAX_OUTSTANDING = 8   # board -> ROS calls whose ROS service has not answered yet
 
 
 @dataclass
@@ -78,6 +79,8 @@ class McuBridge:
         self._wake = threading.Event()
         self._subscribers: List[micros_rt.Subscriber] = []
         self._services: List[rospy.Service] = []
+        self._outstanding = 0
+        self._outstanding_lock = threading.Lock()
         self.link = McuLink(config, stats=self.stats)
         try:
             self._open()
@@ -114,7 +117,6 @@ class McuBridge:
             for service in self.config.services_for_microcontroller:
                 self.stats.declare("services_for_microcontroller", service.name, ("calls", "ok", "failed"))
             self.link.serve_calls(self._call_ros)
-        self.stats.declare("bad_input", "total", ())
         self._stats_pub = nh.advertise("~stats", String, 1, latch=True)
         self.stats_topic: str = self._stats_pub.resolved_name
         board, bind = self.config.microcontroller, self.config.bind
@@ -251,8 +253,22 @@ class McuBridge:
             except Exception as exc:  # handed to the waiting thread, which reports it in words
                 outcome["error"] = exc
 
-        # rospy's ServiceProxy has no timeout of its own: the call runs on a thread we stop waiting for.
-        worker = threading.Thread(target=call, name=f"mcu-bridge call {entry.service}", daemon=True)
+        # rospy's ServiceProxy has no timeout of its own: the call runs on a thread we stop waiting for,
+        # and at most _MAX_OUTSTANDING such threads may still be waiting on hung services.
+        with self._outstanding_lock:
+            if self._outstanding >= _MAX_OUTSTANDING:
+                raise McuServiceError(f"{self._outstanding} earlier calls to ROS services are still unanswered; "
+                                      f"refusing more until they return")
+            self._outstanding += 1
+
+        def run() -> None:
+            try:
+                call()
+            finally:
+                with self._outstanding_lock:
+                    self._outstanding -= 1
+
+        worker = threading.Thread(target=run, name=f"mcu-bridge call {entry.service}", daemon=True)
         worker.start()
         worker.join(entry.timeout)
         if worker.is_alive():

@@ -123,7 +123,8 @@ def test_services_both_ways_with_rosservice_and_the_c_board(
     server = spawn([harness.STOCK_PYTHON, str(mcu_harness.ROS_SERVICE_PEER), "--service", "/mcu_c/set_mode"])
     server.wait_for("ready", 60)
     bridge = start_bridge(spawn, tmp_path, ports, "stats_period: 0.5\n"
-                          "from_microcontroller:\n  - {topic: /mcu_c/imu, type: sensor_msgs/Imu, name: imu}\n"
+                          "from_microcontroller:\n  - {topic: /mcu_c/imu, type: sensor_msgs/Imu, name: imu,"
+                          " qos: {time_filter_duration: 0.1}}\n"
                           "services_on_microcontroller:\n"
                           "  - {service: /mcu_c/reset, type: std_srvs/Trigger, name: reset}\n"
                           "  - {service: /mcu_c/slow, type: std_srvs/Trigger, name: slow, timeout: 0.5}\n"
@@ -140,7 +141,7 @@ def test_services_both_ways_with_rosservice_and_the_c_board(
     print(f"\nC board calls the rospy service through the bridge: {result['response']} in {result['seconds']} s; "
           f"rosservice call /mcu_c/reset: {reset.stdout.strip()!r}; /mcu_c/slow: {slow.stderr.strip()[-140:]!r}; "
           f"counters {stats['services_on_microcontroller']} {stats['services_for_microcontroller']}; "
-          f"array-form Imu published {stats['from_microcontroller']['imu']['published']}")
+          f"array-form Imu at 50 Hz with time_filter_duration 0.1: {stats['from_microcontroller']['imu']}")
     assert result["response"] == {"success": True, "message": "mode on"} and called["data"] is True
     assert reset.returncode == 0 and "success: True" in reset.stdout and 'message: "reset done (1)"' in reset.stdout
     assert reset_again.returncode == 0 and "reset done (2)" in reset_again.stdout
@@ -148,7 +149,9 @@ def test_services_both_ways_with_rosservice_and_the_c_board(
     assert "did not answer /mcu_c/slow ('slow') within 0.5 s" in slow.stdout + slow.stderr
     assert stats["services_on_microcontroller"]["slow"]["timeout"] == 1
     assert stats["services_for_microcontroller"]["set_mode"] == {"calls": 1, "ok": 1, "failed": 0}
-    assert stats["from_microcontroller"]["imu"]["published"] > 0 and stats["bad_input"]["total"] == 0
+    imu = stats["from_microcontroller"]["imu"]  # array form, 50 Hz, at most one per 0.1 s published
+    assert imu["published"] > 0 and imu["filtered"] > 0 and imu["published"] <= imu["received"] / 3
+    assert stats["bad_input"]["total"] == 0
     served = board.events("served")
     assert [s["name"] for s in served] == ["reset", "slow", "reset"] and served[0]["params"] == []
 
