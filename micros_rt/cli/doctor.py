@@ -16,13 +16,13 @@ import socket
 import subprocess
 import urllib.parse
 from dataclasses import dataclass
-from typing import Callable, Dict, List, Mapping, Optional
+from typing import Dict, List, Mapping, Optional, Tuple
 
 from . import CommandError
 from ._args import ArgumentParser
 from ._graphinfo import MICROS_RT, Master, master_uri, probe_all
 
-__all__ = ["Check", "main", "run_checks", "interface_addresses"]
+__all__ = ["Check", "main", "run_checks", "interface_addresses", "judge_clocks"]
 
 OK, FAIL, SKIP = "OK", "FAIL", "SKIP"
 
@@ -260,31 +260,34 @@ def check_cyclone(env: Mapping[str, str]) -> Check:
     return Check("Cyclone DDS", OK, f"a participant started on domain {domain} (guid {guid})")
 
 
-def check_clocks(env: Mapping[str, str], *, probe: Optional[Callable[[Master], Dict[str, float]]] = None) -> Check:
+def check_clocks(env: Mapping[str, str]) -> Check:
     """Wall-clock offset of every micros_rt node of the graph against this host's."""
-    from ..qos import CLOCK_SKEW_WARN_SECONDS
-
     master = Master(master_uri(env), timeout=3.0)
     try:
-        offsets = (probe or _clock_offsets)(master)
+        pubs, subs = master.system_state()
     except CommandError as exc:
         return Check("clocks", SKIP, f"not checked: {exc}")
+    names = {n for nodes in list(pubs.values()) + list(subs.values()) for n in nodes}
+    return judge_clocks({r.name: (r.clock_offset, r.clock_error or 0.0) for r in probe_all(master, names).values()
+                         if r.kind == MICROS_RT and r.clock_offset is not None})
+
+
+def judge_clocks(offsets: Mapping[str, Tuple[float, float]]) -> Check:
+    """node -> (its clock minus ours, +- uncertainty) in seconds: fails when an offset is surely over
+    :data:`micros_rt.qos.CLOCK_SKEW_WARN_SECONDS`, where micros_rt subscribers start warning."""
+    from ..qos import CLOCK_SKEW_WARN_SECONDS
+
     if not offsets:
         return Check("clocks", OK, "no micros_rt nodes in the graph to compare with")
-    worst = max(offsets, key=lambda n: abs(offsets[n]))
-    text = f"{len(offsets)} micros_rt node(s); largest offset {offsets[worst] * 1e3:+.1f} ms ({worst})"
-    if abs(offsets[worst]) > CLOCK_SKEW_WARN_SECONDS:
+    worst = max(offsets, key=lambda n: abs(offsets[n][0]) - offsets[n][1])
+    offset, error = offsets[worst]
+    text = (f"{len(offsets)} micros_rt node(s); largest offset {offset * 1e3:+.1f} ms (+- {error * 1e3:.1f} ms, "
+            f"{worst})")
+    if abs(offset) - error > CLOCK_SKEW_WARN_SECONDS:
         return Check("clocks", FAIL, text + f", over {CLOCK_SKEW_WARN_SECONDS:g} s",
                      "synchronise the hosts' clocks (chrony or NTP); source-time ordering and msg_valid_period "
                      "depend on them")
     return Check("clocks", OK, text)
-
-
-def _clock_offsets(master: Master) -> Dict[str, float]:
-    pubs, subs = master.system_state()
-    names = {n for nodes in list(pubs.values()) + list(subs.values()) for n in nodes}
-    reports = probe_all(master, names)
-    return {r.name: r.clock_offset for r in reports.values() if r.kind == MICROS_RT and r.clock_offset is not None}
 
 
 def check_profile(env: Mapping[str, str]) -> Check:

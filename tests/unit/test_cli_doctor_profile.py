@@ -18,6 +18,7 @@ from micros_rt.cli.doctor import (
     check_dds_network,
     check_domain,
     check_profile,
+    judge_clocks,
 )
 from micros_rt.qos import QoSProfile
 
@@ -86,6 +87,15 @@ def test_profile_check_of_the_environment(tmp_path: Path) -> None:
     check = check_profile({"MICROS_RT_QOS_PROFILE": str(bad)})
     assert check.status == FAIL and f"{bad}:2:" in check.detail
     assert "micros-rt profile check" in check.fix
+
+
+def test_clock_offsets_fail_only_when_surely_over_the_skew_micros_rt_warns_about() -> None:
+    assert judge_clocks({}).status == OK
+    near = judge_clocks({"/a": (0.002, 0.001), "/b": (-0.4, 0.001)})
+    assert near.status == OK and "-400.0 ms" in near.detail and "/b" in near.detail
+    assert judge_clocks({"/slow_answer": (1.3, 0.5)}).status == OK  # could be the call's own delay
+    far = judge_clocks({"/a": (0.0, 0.001), "/lagging": (-2.5, 0.01)})
+    assert far.status == FAIL and "/lagging" in far.detail and "chrony" in far.fix
 
 
 PROFILE = textwrap.dedent("""\
