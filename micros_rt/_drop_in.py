@@ -49,6 +49,7 @@ class _Settings:
     hints: TransportHints = field(default_factory=TransportHints)
     initialized: bool = False  # init_node went through micros_rt
     starting: bool = False  # inside micros_rt.init_node, which calls rospy.init_node: the real one
+    early: List[str] = field(default_factory=list)  # topics of endpoints made before init_node (stock)
 
 
 _settings = _Settings()
@@ -85,14 +86,22 @@ def init_node(name: str, argv: Optional[List[str]] = None, anonymous: bool = Fal
     finally:
         _settings.starting = False
     _settings.initialized = True
+    if _settings.early:
+        _log.warning("micros_rt: the publishers/subscribers of %s were made before rospy.init_node and stay on "
+                     "stock rospy (TCPROS only); make them after init_node to use DDS",
+                     ", ".join(sorted(set(_settings.early))))
 
 
 init_node.__doc__ = (init_node.__doc__ or "") + "\n" + (getattr(_ROSPY_INIT_NODE, "__doc__", "") or "")
 
 
-def _on_micros_rt(data_class: Any) -> bool:
+def _on_micros_rt(name: Any, data_class: Any) -> bool:
     """Whether an endpoint of ``data_class`` made now can be micros_rt's (otherwise stock rospy's)."""
-    return _settings.initialized and getattr(data_class, "_md5sum", "*") != "*"
+    if not _settings.initialized:
+        if not _settings.starting:  # rospy's own /clock subscriber in init_node needs no word
+            _settings.early.append(str(name))
+        return False
+    return getattr(data_class, "_md5sum", "*") != "*"
 
 
 def _take_names(obj: Any, endpoint: Any, reg_type: str) -> None:
@@ -120,7 +129,7 @@ class Publisher(compat.ROSPY_PUBLISHER):  # type: ignore[misc]
                  queue_size: Optional[int] = None) -> None:
         self.micros_rt: Optional[_node.Publisher] = None
         self._listener: Optional[_Listener] = None
-        if not _on_micros_rt(data_class):
+        if not _on_micros_rt(name, data_class):
             super().__init__(name, data_class, subscriber_listener=subscriber_listener, tcp_nodelay=tcp_nodelay,
                              latch=latch, headers=headers, queue_size=queue_size)
             return
@@ -175,7 +184,7 @@ class Subscriber(compat.ROSPY_SUBSCRIBER):  # type: ignore[misc]
                  callback_args: Any = None, queue_size: Optional[int] = None, buff_size: int = _DEFAULT_BUFF_SIZE,
                  tcp_nodelay: bool = False) -> None:
         self.micros_rt: Optional[_node.Subscriber] = None
-        if not _on_micros_rt(data_class):
+        if not _on_micros_rt(name, data_class):
             super().__init__(name, data_class, callback=callback, callback_args=callback_args,
                              queue_size=queue_size, buff_size=buff_size, tcp_nodelay=tcp_nodelay)
             return

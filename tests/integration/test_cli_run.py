@@ -103,10 +103,12 @@ def test_profile_gives_an_unmodified_subscriber_a_time_filter(ros_master: harnes
                      name="run_filtered")
     unfiltered = spawn(run(PLAIN_LISTENER, "--topic", "/run_filtered", "__name:=run_unfiltered"),
                        name="run_unfiltered")
-    filtered.wait_for("ready", 60)
-    unfiltered.wait_for("ready", 60)
+    tcp_only = spawn(run(PLAIN_LISTENER, "--topic", "/run_filtered", "__name:=run_tcp_only", hints="tcp"),
+                     name="run_tcp_only")
+    for peer in (filtered, unfiltered, tcp_only):
+        peer.wait_for("ready", 60)
     talker = spawn(run(PLAIN_TALKER, "--topic", "/run_filtered", "--rate", "50", "--count", "200",
-                       "--wait-subscribers", "2"), name="run_filtered_talker")
+                       "--wait-subscribers", "3"), name="run_filtered_talker")
     assert talker.wait(60) == 0
     assert talker.events("done")[0]["sent"] == 200
     unfiltered.wait_for_count("recv", 200, timeout=30)
@@ -116,6 +118,9 @@ def test_profile_gives_an_unmodified_subscriber_a_time_filter(ros_master: harnes
     assert n_all == 200
     assert set(transports(filtered)) == {"DDS"}
     assert 2 <= n_filtered <= 7, n_filtered  # ~4 s of data at one message per second
+    # --hints tcp: that script's subscription never uses DDS, even from a micros_rt publisher
+    tcp_only.wait_for_count("recv", 200, timeout=30)
+    assert set(transports(tcp_only)) == {"TCPROS"}
 
 
 def test_services_params_timers_and_wait_for_message_under_run(ros_master: harness.RosMaster,
