@@ -172,7 +172,8 @@ def _measure(topic: str, type_name: str, args: argparse.Namespace) -> int:
         print()
     print(json.dumps(report, indent=2) if args.json else format_latency(report))
     if args.plot:
-        write_histogram(args.plot, samples, f"{topic} ({report['timestamps']}): {len(samples)} messages")
+        marks = {k: v for k, v in report["latency_ms"].items() if k in ("p50", "p99") and v is not None}
+        write_histogram(args.plot, samples, f"{topic} ({report['timestamps']}): {len(samples)} messages", marks)
     if args.count and report["messages"] < args.count:
         print(f"micros-rt topic latency: only {report['messages']} of {args.count} messages on {topic} within "
               f"{args.timeout:g} s", file=sys.stderr)
@@ -246,8 +247,8 @@ def format_latency(report: Dict[str, Any]) -> str:
     ])
 
 
-def write_histogram(path: str, samples_ms: List[float], title: str) -> None:
-    """A latency histogram (matplotlib, no display needed)."""
+def write_histogram(path: str, samples_ms: List[float], title: str, marks: Dict[str, float]) -> None:
+    """A latency histogram (matplotlib, no display needed) with vertical lines at ``marks`` (name -> ms)."""
     try:
         # through importlib: matplotlib has no type stubs (and is only needed here)
         matplotlib = importlib.import_module("matplotlib")
@@ -257,7 +258,11 @@ def write_histogram(path: str, samples_ms: List[float], title: str) -> None:
         raise CommandError(f"--plot needs matplotlib ({exc}); apt-get install python3-matplotlib") from None
     fig, ax = plt.subplots(figsize=(8, 4.5))
     if samples_ms:
-        ax.hist(samples_ms, bins=min(60, max(10, len(samples_ms) // 10)), color="#1f77b4")
+        ax.hist(samples_ms, bins=min(80, max(20, len(samples_ms) // 5)), color="#1f77b4")
+        for (name, value), style in zip(marks.items(), ("--", ":", "-.")):
+            ax.axvline(value, color="#e66100", linestyle=style, label=f"{name} {value:.3f} ms")
+        if marks:
+            ax.legend()
     else:
         ax.text(0.5, 0.5, "no latency samples", ha="center", va="center", transform=ax.transAxes)
     ax.set_xlabel("latency (ms)")
