@@ -163,7 +163,8 @@ def _event(cp: "subprocess.CompletedProcess[str]", kind: str) -> Dict[str, Any]:
 
 def test_argv_name_path_remappings_and_exit_code_are_the_scripts(ros_master: harness.RosMaster) -> None:
     env = ros_master.env
-    args = ["argv", "--exit", "3", "-h", "--profile", "x", "chatter:=/remapped", "__name:=probe_argv", "__ns:=/ns1"]
+    args = ["argv", "--exit", "3", "-h", "--profile", "x", "chatter:=/remapped", "__name:=probe_argv", "__ns:=/ns1",
+            "_answer:=7"]
     cp = _run_cli(run(PLAIN_PROBE, *args), env)
     assert cp.returncode == 3, cp.stderr
     got = _event(cp, "argv")
@@ -173,6 +174,7 @@ def test_argv_name_path_remappings_and_exit_code_are_the_scripts(ros_master: har
     assert got["name"] == "__main__"
     assert got["path0"] == str(harness.PEERS_DIR) and got["file"] == PLAIN_PROBE
     assert got["node"] == "/ns1/probe_argv" and got["namespace"] == "/ns1/" and got["chatter"] == "/remapped"
+    assert got["private_param"] == 7
 
     # the same through python -m micros_rt, with a relative script path (python makes __file__ absolute)
     cp = _run_cli([harness.MICROS_RT_PYTHON, "-m", "micros_rt", "run", "peers/plain_probe.py", "argv", "--exit", "0"],

@@ -5,7 +5,8 @@ Runs as a stock node and unchanged under ``micros-rt run``. First argument, the 
 
 * ``argv [--exit N] [ARGS...]``: prints ``{"event": "argv", "argv": sys.argv, "name": __name__,
   "path0": sys.path[0], "file": __file__, "node": ..., "chatter": resolve_name("chatter"), ...}`` after
-  ``init_node("plain_probe")`` (so ``__name:=``, ``__ns:=`` and ``chatter:=...`` show), then exits N.
+  ``init_node("plain_probe")`` (so ``__name:=``, ``__ns:=``, ``chatter:=...`` and ``_answer:=...`` show),
+  then exits N.
 * ``raise``: raises RuntimeError("boom from the script") (exit code 1 and a traceback, as python).
 * ``exit-message``: ``sys.exit("bye from the script")`` (message on stderr, exit code 1).
 * ``services --topic T``: parameters (set/get/has/delete/search, a private one), a std_srvs/Trigger
@@ -35,7 +36,8 @@ def mode_argv(args: List[str]) -> None:
     code = int(args[args.index("--exit") + 1]) if "--exit" in args else 0
     rospy.init_node("plain_probe")
     emit("argv", argv=sys.argv, myargv=rospy.myargv(), name=__name__, path0=sys.path[0], file=__file__,
-         node=rospy.get_name(), namespace=rospy.get_namespace(), chatter=rospy.resolve_name("chatter"))
+         node=rospy.get_name(), namespace=rospy.get_namespace(), chatter=rospy.resolve_name("chatter"),
+         private_param=rospy.get_param("~answer", None))
     sys.exit(code)
 
 
