@@ -149,6 +149,8 @@ class Ros1:
 
     def pub(self, topic, cls=None):
         cls = cls or self.msgs.cls
+        if self.impl == "mrt_budget":  # write batching: samples share datagrams, sent within 0.5 ms
+            return self.nh.advertise_with_qos(topic, cls, None, self.m.AdvertiseQoSOptions(latency_budget=0.001))
         if self.mrt:
             return self.nh.advertise(topic, cls, None)
         return self.m.Publisher(topic, cls, queue_size=None, tcp_nodelay=True)
@@ -161,7 +163,7 @@ class Ros1:
         return self.m.Subscriber(topic, cls, cb, queue_size=None, tcp_nodelay=True)
 
     def matched(self, p):
-        if self.impl == "mrt_dds":
+        if self.impl in ("mrt_dds", "mrt_budget"):
             return p.get_dds_connections()
         return p.get_num_connections()
 
@@ -550,7 +552,7 @@ def role_graph(a, tr, msgs):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("impl", choices=("mrt_dds", "mrt_tcpros", "rospy", "cyclone", "rclpy"))
+    ap.add_argument("impl", choices=("mrt_dds", "mrt_budget", "mrt_tcpros", "rospy", "cyclone", "rclpy"))
     ap.add_argument("role", choices=("echo", "ping", "send", "recv", "talker", "listener", "graph"))
     ap.add_argument("--topic", default="/bench")
     ap.add_argument("--kind", default="bytes", choices=KINDS)

@@ -7,6 +7,7 @@
 
 Transports (each endpoint its own process; see CONFIG for the configuration of each figure):
   micros_rt_dds     micros_rt NodeHandle, DDS link (.venv/bin/python, micros_rt's own loopback Cyclone config)
+  micros_rt_dds_budget  micros_rt DDS with latency_budget=1 ms on the publisher (write batching), throughput only
   micros_rt_tcpros  micros_rt, the subscriber asks TransportHints().tcp() (TCPROS fallback)
   rospy_tcpros      stock rospy under /usr/bin/python3 (no micros_rt)
   cyclonedds_python raw cyclonedds-python, struct {sequence<octet>}, pre-serialised ddspy_write / batched ddspy_take
@@ -40,12 +41,13 @@ PEER = str(HERE / "peer.py")
 RESULTS = HERE / "results"
 PY = {
     "micros_rt_dds": str(REPO / ".venv/bin/python"),
+    "micros_rt_dds_budget": str(REPO / ".venv/bin/python"),
     "micros_rt_tcpros": str(REPO / ".venv/bin/python"),
     "rospy_tcpros": "/usr/bin/python3",
     "cyclonedds_python": str(REPO / ".venv/bin/python"),
     "rclpy_fastdds": str(REPO / ".venv-ros2/bin/python"),
 }
-IMPL = {"micros_rt_dds": "mrt_dds", "micros_rt_tcpros": "mrt_tcpros", "rospy_tcpros": "rospy",
+IMPL = {"micros_rt_dds": "mrt_dds", "micros_rt_dds_budget": "mrt_budget", "micros_rt_tcpros": "mrt_tcpros", "rospy_tcpros": "rospy",
         "cyclonedds_python": "cyclone", "rclpy_fastdds": "rclpy"}
 TRANSPORTS = tuple(PY)
 BASE = "rospy_tcpros"
@@ -54,6 +56,8 @@ FASTDDS_XML = REPO / "tests/peers/fastdds_loopback.xml"
 CONFIG = {
     "micros_rt_dds": "advertise(queue_size=None) / subscribe(queue_size=None), default QoS (reliable); "
                      "no CYCLONEDDS_URI, ROS_IP=127.0.0.1 (micros_rt's own loopback Cyclone config)",
+    "micros_rt_dds_budget": "as micros_rt_dds, with advertise_with_qos(..., latency_budget=0.001): samples share "
+                            "datagrams, sent within 0.5 ms (half the budget; micros_rt.dds.batching); throughput figures only",
     "micros_rt_tcpros": "advertise(queue_size=None); subscribe(queue_size=None, TransportHints().tcp())",
     "rospy_tcpros": "Publisher(queue_size=None) (synchronous), Subscriber(queue_size=None, tcp_nodelay=True)",
     "cyclonedds_python": "reliable (max_blocking 10 s), KEEP_ALL; struct {sequence<octet> data} written "
@@ -455,6 +459,8 @@ def plan(args, P):
         for t in order:
             real = "realistic" in g and t != "cyclonedds_python"  # raw DDS: no ROS message types here
             lat = [x for x in ("lat64", "lat64k") if x in g] + (list(REALISTIC) if real else [])
+            if t == "micros_rt_dds_budget":  # a throughput configuration: batching trades latency for rate
+                lat = []
             thr = [x for x in ("thr64", "thr1m") if x in g] + (list(REALISTIC) if real else [])
             if lat:
                 steps.append((rnd, t, "latency", ("lat", lat)))
@@ -462,9 +468,9 @@ def plan(args, P):
                 steps.append((rnd, t, "throughput", ("thr", thr)))
             if "fanout4" in g:
                 steps.append((rnd, t, "fanout4", ("fanout4",)))
-            if "disc" in g:
+            if "disc" in g and t != "micros_rt_dds_budget":
                 steps.append((rnd, t, "disc", ("disc",)))
-            if "scale" in g and rnd == 0:
+            if "scale" in g and rnd == 0 and t != "micros_rt_dds_budget":
                 for n in P["scale_ns"]:
                     steps.append((rnd, t, f"scale N={n}", ("scale", n)))
     return steps
@@ -553,7 +559,7 @@ def fmt(v):
 
 def verdict(fig, figs, t):
     """'ok'/'MISS' for micros_rt_dds vs rospy, '' otherwise."""
-    if t != "micros_rt_dds" or fig not in TARGETS:
+    if t not in ("micros_rt_dds", "micros_rt_dds_budget") or fig not in TARGETS:
         return ""
     v, b = figs.get(t, {}).get(fig), figs.get(BASE, {}).get(fig)
     if v is None or not b:
@@ -571,12 +577,13 @@ def verdict(fig, figs, t):
 def table(figs, spread, transports, md=False):
     names = sorted({f for t in transports for f, v in figs.get(t, {}).items()
                     if not isinstance(v, dict) and not f.endswith("_sent")}, key=_fig_order)
-    short = {"micros_rt_dds": "mrt DDS", "micros_rt_tcpros": "mrt TCPROS", "rospy_tcpros": "rospy",
+    short = {"micros_rt_dds": "mrt DDS", "micros_rt_dds_budget": "mrt budget", "micros_rt_tcpros": "mrt TCPROS", "rospy_tcpros": "rospy",
              "cyclonedds_python": "cyclone-py", "rclpy_fastdds": "rclpy"}
     cols = [t for t in transports]
     head = ["figure"] + [short[t] for t in cols]
+    budget = "micros_rt_dds_budget" in cols
     if BASE in cols:
-        head += ["mrt/rospy", "target", ""]
+        head += ["mrt/rospy", "target", ""] + (["budget/rospy", ""] if budget else [])
     rows = []
     for f in names:
         row = [f]
@@ -593,6 +600,10 @@ def table(figs, spread, transports, md=False):
             tg = TARGETS.get(f)
             row.append(f"{tg[1]} {tg[0]}x" if tg else "")
             row.append(verdict(f, figs, "micros_rt_dds"))
+            if budget:
+                v = figs.get("micros_rt_dds_budget", {}).get(f)
+                row.append(f"{v / b:.2f}x" if v is not None and b and not f.endswith("lost") else "")
+                row.append(verdict(f, figs, "micros_rt_dds_budget"))
         rows.append(row)
     if md:
         out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -622,7 +633,7 @@ def plots(figs, samples, transports, outdir):
         import matplotlib.ticker
     except ImportError:
         return ["(matplotlib not installed: no plots; apt-get install python3-matplotlib)"]
-    colors = {"micros_rt_dds": "#1f77b4", "micros_rt_tcpros": "#aec7e8", "rospy_tcpros": "#d62728",
+    colors = {"micros_rt_dds": "#1f77b4", "micros_rt_dds_budget": "#17becf", "micros_rt_tcpros": "#aec7e8", "rospy_tcpros": "#d62728",
               "cyclonedds_python": "#2ca02c", "rclpy_fastdds": "#9467bd"}
     made = []
     # latency distributions

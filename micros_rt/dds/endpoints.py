@@ -18,7 +18,7 @@ from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 
 from ..exceptions import DDSUnavailableError
-from .batching import flush_writer, flusher
+from .batching import batch_window, flush_writer, flusher
 from .participant import DDSParticipant, delete_entity
 from .types import DDSType
 from .._logging import nonblocking_logger
@@ -54,7 +54,7 @@ class DDSWriter:
     def __init__(self, participant: DDSParticipant, topic_name: str, dds_type: DDSType, qos: Any,
                  on_matched: Optional[Callable[[int], None]] = None, *, latency_budget: float = 0.0) -> None:
         self.topic_name = topic_name
-        self.latency_budget = latency_budget
+        self.batch_window = batch_window(latency_budget)
         self.dds_type = dds_type
         self._matched = 0
         self._on_matched = on_matched
@@ -69,7 +69,7 @@ class DDSWriter:
         self._ref = self._writer._ref
         self.guid = str(self._writer.guid)
         self.closed = False
-        self.write_serialized = self._batched_write() if latency_budget > 0 else self._flushed_write()
+        self.write_serialized = self._batched_write() if self.batch_window > 0 else self._flushed_write()
 
     def _flushed_write(self) -> Callable[[bytes], int]:
         ref, write, flush = self._ref, ddspy_write, flush_writer
@@ -83,13 +83,13 @@ class DDSWriter:
         return write_serialized
 
     def _batched_write(self) -> Callable[[bytes], int]:
-        ref, write, budget = self._ref, ddspy_write, self.latency_budget
+        ref, write, window = self._ref, ddspy_write, self.batch_window
         pending = flusher().pending
 
         def write_serialized(data: bytes) -> int:
             ret: int = write(ref, data)
             if ret >= 0:
-                pending(ref, budget)  # sent with the next full datagram, or by the flusher within budget
+                pending(ref, window)  # sent with the next full datagram, or by the flusher within window
             return ret
         return write_serialized
 
@@ -112,7 +112,7 @@ class DDSWriter:
         return out
 
     #: ``write_serialized(data) -> int``: write one serialized sample (from the type's codec) and send
-    #: it now, or within ``latency_budget`` batched with the next ones; Cyclone's return code (< 0:
+    #: it now, or within the batch window of its ``latency_budget`` with the next ones; Cyclone's return code (< 0:
     #: failed, -10: timed out on back-pressure after the Reliability max_blocking_time).
     write_serialized: Callable[[bytes], int]
 
@@ -120,7 +120,7 @@ class DDSWriter:
         if self.closed:
             return
         self.closed = True
-        if self.latency_budget > 0:
+        if self.batch_window > 0:
             flusher().forget(self._ref)  # what waits in the datagram leaves before the writer goes
         delete_entity(self._writer)
         self._participant.release_topic(self.topic_name)

@@ -13,7 +13,8 @@ latch / transient_local        Durability TRANSIENT_LOCAL (depth >= 1), else VOL
 transport_priority             TransportPriority(level 0..6)
 latency_budget                 LatencyBudget 0 on the writer (readers request infinite, see below);
                                micros_rt batches the writer's samples into shared datagrams and
-                               sends them within the budget (:mod:`micros_rt.dds.batching`):
+                               sends them within half the budget, at most 2 ms
+                               (:mod:`micros_rt.dds.batching`):
                                Cyclone's own LatencyBudget > 0 mode hands every sample to a send
                                thread, which measured slower than not batching at all
 using_best_effort_protocol     Reliability BEST_EFFORT / RELIABLE

@@ -27,7 +27,7 @@ def stream(spawn: harness.Spawner, topic: str, count: int, size: int, *, recv_ar
     print(f"\n{topic}: {count} x {size} B: sent in {sent['seconds']:.2f} s (publish blocked "
           f"{sent['blocked_seconds']:.2f} s), received {summary['received']} distinct {summary['distinct']} "
           f"missing {summary['missing']} dup {summary['duplicates']} out-of-order {summary['out_of_order']} "
-          f"via {summary['transports']}; subscriber statistics {summary['stats']}")
+          f"via {summary['transports']}; subscriber statistics {summary['stats']}; latency {summary['latency']}")
     return summary
 
 
@@ -43,6 +43,21 @@ def test_queue_size_none_loses_nothing_over_dds(ros_master: harness.RosMaster, s
     summary = stream(spawn, f"/lossless_{size}", count, size)
     assert summary["transports"] == ["DDS"]
     assert_lossless(summary, count)
+
+
+def test_batched_writer_loses_nothing_and_sends_its_tail(ros_master: harness.RosMaster,
+                                                          spawn: harness.Spawner) -> None:
+    # latency_budget > 0: samples share datagrams (micros_rt.dds.batching). A burst must arrive whole
+    # with back-pressure (the writer blocks on a full history with samples still in its datagram) ...
+    summary = stream(spawn, "/batched_burst", 100_000, 64, send_args=("--latency-budget", "0.005"))
+    assert summary["transports"] == ["DDS"]
+    assert_lossless(summary, 100_000)
+    # ... and a trickle (one message per 100 ms, each alone in its datagram) must not wait for a next
+    # write that never comes: the flusher sends each within the 20 ms budget
+    summary = stream(spawn, "/batched_trickle", 15, 64, send_args=("--latency-budget", "0.02", "--rate", "10"),
+                     recv_args=("--idle", "3"), timeout=30.0)
+    assert_lossless(summary, 15)
+    assert summary["distinct"] == 15, summary
 
 
 def test_queue_size_none_loses_nothing_over_tcpros_fallback(ros_master: harness.RosMaster,

@@ -32,9 +32,10 @@ def queue_size(text: str) -> Optional[int]:
 
 
 def send(a: argparse.Namespace, nh: micros_rt.NodeHandle) -> int:
-    if a.best_effort:
+    if a.best_effort or a.latency_budget:
         pub = nh.advertise_with_qos(a.topic, UInt8MultiArray, a.queue_size,
-                                    micros_rt.AdvertiseQoSOptions(using_best_effort_protocol=True))
+                                    micros_rt.AdvertiseQoSOptions(using_best_effort_protocol=a.best_effort,
+                                                                  latency_budget=a.latency_budget))
     else:
         pub = nh.advertise(a.topic, UInt8MultiArray, a.queue_size)
     deadline = time.monotonic() + 30.0
@@ -102,7 +103,7 @@ def recv(a: argparse.Namespace, nh: micros_rt.NodeHandle) -> int:
     emit("summary", received=len(got), distinct=len(distinct), duplicates=len(got) - len(distinct),
          out_of_order=out_of_order, missing=a.count - len(distinct),
          transports=sorted(set(sub.connection_transports().values())),
-         stats={k: getattr(s, k) for k in s.__dataclass_fields__},
+         stats={k: getattr(s, k) for k in s.__dataclass_fields__}, latency=sub.latency.summary(),
          longest_gap=max((b - a for a, b in zip(arrivals, arrivals[1:])), default=0.0),
          seconds=(last_change - first) if first is not None else None)
     return 0
@@ -124,6 +125,7 @@ def main() -> int:
     ap.add_argument("--rate", type=float, default=0.0, help="send: messages per second (0: as fast as possible)")
     ap.add_argument("--progress", type=int, default=0, help="send: a progress event every N messages")
     ap.add_argument("--best-effort", action="store_true")
+    ap.add_argument("--latency-budget", type=float, default=0.0, help="send: batch writes within this budget (s)")
     ap.add_argument("--deadline", type=float, default=0.0, help="recv: deadline (s), misses printed as events")
     a = ap.parse_args()
     micros_rt.init_node(f"mrt_seq_{a.mode}", anonymous=True, disable_signals=False)

@@ -1,0 +1,106 @@
+"""The write-batching flusher (micros_rt.dds.batching): a writer with a latency budget is flushed once
+per budget however often it writes, never before its budget, and everything pending leaves at close.
+
+The flush function is a recorder: these test the scheduling, the integration tests the wire."""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import List, Tuple
+
+import pytest
+
+from micros_rt.dds.batching import MAX_BATCH_WINDOW, WRITE_BATCH_CONFIG, Flusher, batch_window
+from micros_rt.dds.participant import micros_rt_defaults
+
+
+class Recorder:
+    def __init__(self) -> None:
+        self.calls: List[Tuple[int, float]] = []
+        self.event = threading.Event()
+
+    def __call__(self, ref: int) -> int:
+        self.calls.append((ref, time.monotonic()))
+        self.event.set()
+        return 0
+
+    def wait_calls(self, n: int, timeout: float = 5.0) -> None:
+        deadline = time.monotonic() + timeout
+        while len(self.calls) < n and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert len(self.calls) >= n, f"{len(self.calls)} flushes, expected {n}: {self.calls}"
+
+
+def test_many_writes_within_a_budget_make_one_flush_not_before_the_budget() -> None:
+    rec = Recorder()
+    with Flusher(rec) as f:
+        t0 = time.monotonic()
+        for _ in range(1000):
+            f.pending(7, 0.05)
+        rec.wait_calls(1)
+        time.sleep(0.1)  # a second flush would come within this if every write scheduled one
+        assert [r for r, _ in rec.calls] == [7]
+        assert rec.calls[0][1] - t0 >= 0.05
+
+
+def test_writers_are_flushed_in_order_of_their_deadlines() -> None:
+    rec = Recorder()
+    with Flusher(rec) as f:
+        f.pending(1, 0.30)
+        f.pending(2, 0.02)  # due first although scheduled second: the sleeping thread must wake for it
+        rec.wait_calls(2)
+        assert [r for r, _ in rec.calls] == [2, 1]
+
+
+def test_a_writer_is_scheduled_again_after_its_flush() -> None:
+    rec = Recorder()
+    with Flusher(rec) as f:
+        f.pending(3, 0.01)
+        rec.wait_calls(1)
+        f.pending(3, 0.01)
+        rec.wait_calls(2)
+        assert [r for r, _ in rec.calls] == [3, 3]
+
+
+def test_close_and_forget_flush_what_is_pending_at_once() -> None:
+    rec = Recorder()
+    f = Flusher(rec)
+    f.pending(4, 60.0)
+    f.pending(5, 60.0)
+    f.forget(4)  # a writer about to be deleted
+    assert [r for r, _ in rec.calls] == [4]
+    f.close()
+    assert sorted(r for r, _ in rec.calls) == [4, 5]
+    f.close()  # harmless twice
+    f.pending(6, 0.0)  # after close: nothing scheduled, no thread started
+    assert sorted(r for r, _ in rec.calls) == [4, 5]
+
+
+def test_a_failing_flush_is_logged_and_the_thread_goes_on() -> None:
+    rec = Recorder()
+    failed: List[int] = []
+
+    def flaky(ref: int) -> int:
+        if ref == 8 and not failed:
+            failed.append(ref)
+            raise OSError("boom")
+        return rec(ref)
+
+    with Flusher(flaky) as f:
+        f.pending(8, 0.01)
+        time.sleep(0.05)
+        f.pending(9, 0.01)
+        rec.wait_calls(1)
+        assert failed == [8] and [r for r, _ in rec.calls] == [9]
+
+
+@pytest.mark.parametrize("env", [{"ROS_IP": "127.0.0.1"}, {"ROS_IP": "10.1.2.3"}])
+def test_write_batching_is_in_micros_rt_defaults(env: dict[str, str]) -> None:
+    assert WRITE_BATCH_CONFIG in micros_rt_defaults(env)
+
+
+def test_batch_window_is_half_the_budget_and_at_most_two_ms() -> None:
+    assert batch_window(0.0) == 0.0  # no budget: each sample is sent at once
+    assert batch_window(0.001) == 0.0005
+    assert batch_window(0.25) == MAX_BATCH_WINDOW == 0.002  # a 30 Hz topic with a generous budget is not delayed
