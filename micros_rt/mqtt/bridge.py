@@ -168,7 +168,7 @@ class _Mqtt2Ros:
 
     # -- MQTT side (paho's network thread)
 
-    def on_type(self, topic: str, payload: bytes) -> None:
+    def on_type(self, topic: str, payload: bytes, properties: Any = None) -> None:
         problems = self.bridge.problems
         try:
             announced = codec.decode_msg_type(payload)
@@ -195,7 +195,7 @@ class _Mqtt2Ros:
         for data in pending:
             self.on_data(self.p.mqtt_topic, data)
 
-    def on_data(self, topic: str, payload: bytes) -> None:
+    def on_data(self, topic: str, payload: bytes, properties: Any = None) -> None:
         p = self.p
         if p.primitive or p.json:
             self._on_text(topic, payload)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import socket
 import ssl
 import threading
 import time
@@ -25,17 +26,20 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import paho.mqtt.client as paho
 from paho.mqtt.enums import CallbackAPIVersion, MQTTErrorCode
+from paho.mqtt.packettypes import PacketTypes
+from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
 from .._logging import nonblocking_logger
 from .params import MqttParams, resolve_path
 
-__all__ = ["ConnectionCounters", "DiskBuffer", "MqttConfigError", "MqttConnection", "MessageHandler"]
+__all__ = ["ConnectionCounters", "DiskBuffer", "MqttConfigError", "MqttConnection", "MessageHandler",
+           "properties_from_dict", "properties_to_dict"]
 
 _log = nonblocking_logger("rosout.micros_rt.mqtt")
 
-#: ``handler(topic, payload)``, called on paho's network thread.
-MessageHandler = Callable[[str, bytes], None]
+#: ``handler(topic, payload, properties)``, called on paho's network thread (properties: MQTT 5 only).
+MessageHandler = Callable[[str, bytes, Optional[Properties]], None]
 
 #: Reconnect back-off (seconds): paho doubles the delay between these bounds.
 RECONNECT_MIN_DELAY = 1
@@ -82,11 +86,14 @@ class DiskBuffer:
     def __len__(self) -> int:
         return len(self._files)
 
-    def put(self, topic: str, payload: bytes, qos: int, retain: bool) -> bool:
-        """Store one message; False when the buffer is full (the message is not stored)."""
+    def put(self, topic: str, payload: bytes, qos: int, retain: bool,
+            properties: Optional[Dict[str, Any]] = None) -> bool:
+        """Store one message (``properties``: MQTT 5 ones as :func:`properties_to_dict` gives them);
+        False when the buffer is full (the message is not stored)."""
         if len(self._files) >= self.size:
             return False
-        header = json.dumps({"topic": topic, "qos": qos, "retain": retain, "time": time.time()})
+        header = json.dumps({"topic": topic, "qos": qos, "retain": retain, "time": time.time(),
+                             "properties": properties})
         path = self.directory / f"{self._next:012d}.mqtt"
         tmp = path.with_suffix(".tmp")
         with open(tmp, "wb") as f:
@@ -96,8 +103,9 @@ class DiskBuffer:
         self._files.append(path)
         return True
 
-    def pop(self) -> Optional[Tuple[str, bytes, int, bool, float]]:
-        """The oldest message (topic, payload, qos, retain, age in seconds), removed; None when empty."""
+    def pop(self) -> Optional[Tuple[str, bytes, int, bool, float, Optional[Dict[str, Any]]]]:
+        """The oldest message (topic, payload, qos, retain, age in seconds, properties), removed; None when
+        empty."""
         while self._files:
             path = self._files.pop(0)
             try:
@@ -106,7 +114,7 @@ class DiskBuffer:
                 head, _, payload = raw.partition(b"\n")
                 meta = json.loads(head)
                 return (str(meta["topic"]), payload, int(meta["qos"]), bool(meta["retain"]),
-                        time.time() - float(meta["time"]))
+                        time.time() - float(meta["time"]), meta.get("properties"))
             except (OSError, ValueError, KeyError) as exc:
                 _log.warning("micros_rt mqtt: skipping unreadable buffered message %s: %s", path, exc)
         return None
@@ -123,6 +131,26 @@ class _PahoClient(paho.Client):
         except OSError as exc:
             self.last_error = exc
             raise
+
+
+def properties_to_dict(props: Optional[Properties]) -> Optional[Dict[str, Any]]:
+    """The MQTT 5 publish properties micros_rt uses (user properties, message expiry), as JSON values."""
+    if props is None:
+        return None
+    return {"user": [list(p) for p in getattr(props, "UserProperty", [])],
+            "expiry": getattr(props, "MessageExpiryInterval", None)}
+
+
+def properties_from_dict(data: Optional[Dict[str, Any]], *, age: float = 0.0) -> Optional[Properties]:
+    """Inverse of :func:`properties_to_dict`; the expiry shortened by ``age`` seconds spent in a buffer."""
+    if not data:
+        return None
+    props = Properties(PacketTypes.PUBLISH)  # type: ignore[no-untyped-call]
+    if data.get("user"):
+        props.UserProperty = [tuple(p) for p in data["user"]]
+    if data.get("expiry") is not None:
+        props.MessageExpiryInterval = max(1, int(data["expiry"] - age))
+    return props
 
 
 def _reason_text(rc: Any) -> str:
@@ -142,7 +170,7 @@ class MqttConnection:
     the broker refuses the credentials.
     """
 
-    def __init__(self, params: MqttParams, *, on_fatal: Optional[Callable[[str], None]] = None,
+    def __init__(self, params: MqttParams, *, mqtt5: bool = False, on_fatal: Optional[Callable[[str], None]] = None,
                  on_connection_change: Optional[Callable[[bool], None]] = None) -> None:
         self.params = params
         self.uri = f"{'ssl' if params.broker.tls_enabled else 'tcp'}://{params.broker.host}:{params.broker.port}"
@@ -162,8 +190,13 @@ class MqttConnection:
         if c.buffer_enabled:
             self._buffer = DiskBuffer(os.path.join(resolve_path(c.buffer_directory), c.id), c.buffer_size,
                                       max_age=c.buffer_max_age)
-        self._client = _PahoClient(CallbackAPIVersion.VERSION2, client_id=c.id, clean_session=c.clean_session,
-                                   protocol=paho.MQTTv311)
+        self.mqtt5 = mqtt5
+        self.tos = 0
+        if mqtt5:   # MQTT 5: user properties, message expiry, shared subscriptions
+            self._client = _PahoClient(CallbackAPIVersion.VERSION2, client_id=c.id, protocol=paho.MQTTv5)
+        else:       # mqtt_client's protocol
+            self._client = _PahoClient(CallbackAPIVersion.VERSION2, client_id=c.id, clean_session=c.clean_session,
+                                       protocol=paho.MQTTv311)
         self._client.max_inflight_messages_set(c.max_inflight)
         self._client.reconnect_delay_set(RECONNECT_MIN_DELAY, RECONNECT_MAX_DELAY)
         if params.broker.user:
@@ -202,8 +235,12 @@ class MqttConnection:
         """Connect in the background (retried until :meth:`close`)."""
         as_client = f" as '{self.params.client.id}'" if self.params.client.id else ""
         _log.info("Connecting to broker at '%s'%s ...", self.uri, as_client)
-        self._client.connect_async(self.params.broker.host, self.params.broker.port,
-                                   keepalive=max(1, int(round(self.params.client.keep_alive_interval))))
+        keepalive = max(1, int(round(self.params.client.keep_alive_interval)))
+        if self.mqtt5:
+            self._client.connect_async(self.params.broker.host, self.params.broker.port, keepalive=keepalive,
+                                       clean_start=self.params.client.clean_session)
+        else:
+            self._client.connect_async(self.params.broker.host, self.params.broker.port, keepalive=keepalive)
         self._client.loop_start()
         self._flusher.start()
 
@@ -249,13 +286,14 @@ class MqttConnection:
         if connected:
             self._client.subscribe(topic, qos)
 
-    def publish(self, topic: str, payload: bytes, *, qos: int = 0, retain: bool = False) -> bool:
+    def publish(self, topic: str, payload: bytes, *, qos: int = 0, retain: bool = False,
+                properties: Optional[Properties] = None) -> bool:
         """Send (or buffer on disk while disconnected); False when the message was dropped (counted)."""
         with self._lock:
             if self._closed:
                 return False
             if self._live:
-                info = self._client.publish(topic, payload, qos, retain)
+                info = self._client.publish(topic, payload, qos, retain, properties)
                 if info.rc == MQTTErrorCode.MQTT_ERR_SUCCESS or (info.rc == MQTTErrorCode.MQTT_ERR_NO_CONN
                                                                   and qos > 0):
                     # NO_CONN with QoS > 0: paho keeps the message and sends it after reconnecting
@@ -272,7 +310,7 @@ class MqttConnection:
                     _log.warning("micros_rt mqtt: not connected to %s: dropping messages until the connection is "
                                  "back (set client/id and client/buffer/size to buffer them on disk)", self.uri)
                 return False
-            if not self._buffer.put(topic, payload, qos, retain):
+            if not self._buffer.put(topic, payload, qos, retain, properties_to_dict(properties)):
                 self._counters.dropped_buffer_full += 1
                 if self._counters.dropped_buffer_full == 1:
                     _log.warning("micros_rt mqtt: disk buffer full (client/buffer/size = %d): dropping newer "
@@ -296,9 +334,26 @@ class MqttConnection:
             subscriptions = [(t, q) for t, (q, _) in self._subscriptions.items()]
         if subscriptions:
             client.subscribe(subscriptions)
+        if self.tos:
+            self._mark_socket()
         self._flush_wanted.set()
         if self._on_connection_change is not None:
             self._on_connection_change(True)
+
+    def set_tos(self, tos: int) -> None:
+        """IP TOS (DSCP) of the connection's socket, now and after every reconnect."""
+        self.tos = tos
+        if self._connected:
+            self._mark_socket()
+
+    def _mark_socket(self) -> None:
+        sock = self._client.socket()
+        try:
+            if isinstance(sock, socket.socket) and sock.family == socket.AF_INET:
+                sock.setsockopt(socket.IPPROTO_IP, socket.IP_TOS, self.tos)
+        except OSError as exc:
+            _log.warning("micros_rt mqtt: cannot set IP TOS 0x%02x on the connection to %s: %s", self.tos, self.uri,
+                         exc)
 
     def _connect_refused(self, rc: ReasonCode) -> None:
         name = _reason_text(rc)
@@ -356,7 +411,7 @@ class MqttConnection:
                     entry = candidate
                     break
         if entry is not None:
-            entry[1](message.topic, bytes(message.payload))
+            entry[1](message.topic, bytes(message.payload), getattr(message, "properties", None))
 
     # ------------------------------------------------------------------ disk buffer flush
 
@@ -379,7 +434,7 @@ class MqttConnection:
                 if item is None:
                     self._live = True
                     return
-                topic, payload, qos, retain, age = item
+                topic, payload, qos, retain, age, props = item
                 assert self._buffer is not None
                 if self._buffer.max_age > 0 and age > self._buffer.max_age:
                     self._counters.dropped_expired += 1
@@ -388,7 +443,7 @@ class MqttConnection:
                                      "(client/buffer/max_age)", self._buffer.max_age)
                     continue
                 try:
-                    self._client.publish(topic, payload, qos, retain)
+                    self._client.publish(topic, payload, qos, retain, properties_from_dict(props, age=age))
                 except ValueError as exc:       # paho: above MQTT's 256 MB limit
                     self._counters.dropped_too_large += 1
                     _log.warning("micros_rt mqtt: dropping a buffered message on '%s': %s", topic, exc)

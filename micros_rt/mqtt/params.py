@@ -183,13 +183,8 @@ def _qos(r: _Reader, data: Mapping[str, Any], name: str) -> int:
     return value
 
 
-def parse_params(data: Any, *, source: str = "params") -> Tuple[MqttParams, List[str]]:
-    """Validate a parsed YAML document; return the parameters and mqtt_client's default warnings."""
-    r = _Reader(source)
-    if not isinstance(data, Mapping):
-        raise ParamsError(f"{source}: must be a mapping with 'broker', 'client' and 'bridge', got {data!r}")
-    r.check_keys(data, ("broker", "client", "bridge"), "")
-
+def parse_connection(r: "_Reader", data: Mapping[str, Any]) -> Tuple[BrokerParams, ClientParams]:
+    """The ``broker`` and ``client`` sections (shared by the bridge and the MQTT back end)."""
     b = r.section(data, "broker", "broker")
     r.check_keys(b, ("host", "port", "user", "pass", "tls"), "broker")
     btls = r.section(b, "tls", "broker/tls")
@@ -241,6 +236,16 @@ def parse_params(data: Any, *, source: str = "params") -> Tuple[MqttParams, List
                      "must be given together with the other of 'client/tls/certificate' and 'client/tls/key'")
     if client.buffer_size > 0 and not client.id:
         raise r.fail("client/buffer/size", "needs 'client/id': mqtt_client buffers only for a named client")
+    return broker, client
+
+
+def parse_params(data: Any, *, source: str = "params") -> Tuple[MqttParams, List[str]]:
+    """Validate a parsed YAML document; return the parameters and mqtt_client's default warnings."""
+    r = _Reader(source)
+    if not isinstance(data, Mapping):
+        raise ParamsError(f"{source}: must be a mapping with 'broker', 'client' and 'bridge', got {data!r}")
+    r.check_keys(data, ("broker", "client", "bridge"), "")
+    broker, client = parse_connection(r, data)
 
     bridge = data.get("bridge")
     if bridge is None:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from micros_rt.mqtt import codec
 from micros_rt.mqtt.bridge import _message_class, is_connected_service_class
-from micros_rt.mqtt.client import DiskBuffer
+from micros_rt.mqtt.client import DiskBuffer, properties_from_dict, properties_to_dict
 
 
 def test_disk_buffer_keeps_order_and_size(tmp_path: Path) -> None:
@@ -24,9 +24,12 @@ def test_disk_buffer_keeps_order_and_size(tmp_path: Path) -> None:
 
 def test_disk_buffer_reports_age(tmp_path: Path) -> None:
     buf = DiskBuffer(str(tmp_path), 10, max_age=1.0)
-    buf.put("a/b", b"payload\nwith newline", 2, True)
-    topic, payload, qos, retain, age = buf.pop()  # type: ignore[misc]
+    buf.put("a/b", b"payload\nwith newline", 2, True, {"user": [["micros_rt", "g|/n"]], "expiry": 9})
+    topic, payload, qos, retain, age, props = buf.pop()  # type: ignore[misc]
     assert (topic, payload, qos, retain) == ("a/b", b"payload\nwith newline", 2, True) and 0 <= age < 5
+    restored = properties_from_dict(props, age=2.5)
+    assert properties_to_dict(restored) == {
+        "user": [["micros_rt", "g|/n"]], "expiry": 6}
 
 
 def test_type_not_installed_is_built_from_the_announced_definition() -> None:
