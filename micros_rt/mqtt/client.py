@@ -286,6 +286,14 @@ class MqttConnection:
         if connected:
             self._client.subscribe(topic, qos)
 
+    def unsubscribe(self, topic: str) -> None:
+        """Stop delivering ``topic`` (and restoring it after reconnects)."""
+        with self._lock:
+            known = self._subscriptions.pop(topic, None) is not None
+            connected = self._connected
+        if known and connected:
+            self._client.unsubscribe(topic)
+
     def publish(self, topic: str, payload: bytes, *, qos: int = 0, retain: bool = False,
                 properties: Optional[Properties] = None) -> bool:
         """Send (or buffer on disk while disconnected); False when the message was dropped (counted)."""

@@ -71,6 +71,8 @@ class QoSProfile:
         self.source = source
         self._publishers: dict[str, AdvertiseQoSOptions] = dict(publishers or {})
         self._subscribers: dict[str, SubscribeQoSOptions] = dict(subscribers or {})
+        # the raw ``mqtt`` section (broker and per-topic MQTT rules), validated by micros_rt.mqtt.backend
+        self.mqtt: Any = None
 
     def __repr__(self) -> str:
         return (
@@ -111,8 +113,12 @@ class QoSProfile:
         if root is None:  # empty file: an empty profile
             return cls(publishers, subscribers, source=source)
         _expect_mapping(root, source, "the top level", "a mapping with 'publishers'/'subscribers'")
+        mqtt: Any = None
         for section_node, body in _pairs(root, source, ""):
             section = section_node.value
+            if section == "mqtt":
+                mqtt = _construct(body)
+                continue
             if section not in _SECTIONS:
                 raise ProfileError(
                     f"{_where(source, section_node)}: unknown section {section!r}; "
@@ -134,7 +140,9 @@ class QoSProfile:
                     subscribers[topic] = _parse_options(
                         SubscribeQoSOptions, options_node, source, path
                     )
-        return cls(publishers, subscribers, source=source)
+        profile = cls(publishers, subscribers, source=source)
+        profile.mqtt = mqtt
+        return profile
 
     def advertise_options(self, topic: str) -> AdvertiseQoSOptions | None:
         """Options the profile gives for publishing on the resolved ``topic``, or None."""
