@@ -3,14 +3,14 @@
 Every sendmsg on loopback costs ~5 µs here (measured with plain sockets: UDP 5.2 µs, TCP 4.8 µs per
 send); a 64 B sample is ~2 µs of everything else. One datagram per sample therefore caps a publisher
 at the speed of the kernel, the same as TCPROS, and a reader at one wake-up per sample. Cyclone can
-pack samples into the writer's pending datagram (``Internal/WriteBatch``), but then it sends a
-datagram only when it is full or flushed: something has to flush.
+pack samples into the writer's pending datagram (the writer-batching QoS, ``dds_qset_writer_batching``),
+but then it sends a datagram only when it is full or flushed: something has to flush.
 
-micros_rt turns write batching on for the whole participant and decides per writer:
+micros_rt decides per writer:
 
-* ``latency_budget == 0`` (the default): flush right after each write. Nothing waits; the wire and
-  the latency are what they were without batching (one extra C call, ~0.2 µs).
-* ``latency_budget > 0``: leave the sample in the pending datagram and let the process's one
+* ``latency_budget == 0`` (the default): no batching; each write is sent at once, as Cyclone does.
+* ``latency_budget > 0``: the writer is created with writer batching (:func:`batching_writer_class`);
+  each sample waits in the pending datagram and let the process's one
   :class:`Flusher` thread send it within :func:`batch_window` of the first unsent write: half the
   budget (the other half is for the wire and the subscriber), at most 2 ms. Batching gains nothing
   from a longer wait: at 150 k msg/s, 2 ms already fill a datagram with 300 64 B samples, while a
@@ -20,8 +20,8 @@ micros_rt turns write batching on for the whole participant and decides per writ
   which hands every sample to its send thread (measured: 63 k msg/s, 13.8 µs of CPU per 64 B sample,
   against 98 k without it and 260 k batched and flushed).
 
-Cyclone flushes on its own before a writer blocks on a full history (back-pressure), so a lossless
-writer never waits for acknowledgements of samples it has not sent.
+A batching writer that blocks on a full history (back-pressure) still gets its samples out: the
+lossless 100,000-message test with a budget passes (tests/integration/test_lossless.py).
 """
 
 from __future__ import annotations
@@ -30,18 +30,14 @@ import ctypes
 import heapq
 import threading
 import time
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from .._logging import nonblocking_logger
 
-__all__ = ["MAX_BATCH_WINDOW", "WRITE_BATCH_CONFIG", "Flusher", "batch_window", "close_flusher", "flush_writer",
+__all__ = ["MAX_BATCH_WINDOW", "Flusher", "batch_window", "batching_writer_class", "close_flusher", "flush_writer",
            "flusher"]
 
 _log = nonblocking_logger("rosout.micros_rt.dds")
-
-#: The Cyclone setting micros_rt layers under every configuration (a user's file may turn it off;
-#: flushing is then a no-op and budgets only delay nothing).
-WRITE_BATCH_CONFIG = "<Internal><WriteBatch>true</WriteBatch></Internal>"
 
 #: The longest a sample waits in its writer's datagram (seconds), whatever the budget.
 MAX_BATCH_WINDOW = 0.002
@@ -58,19 +54,46 @@ def batch_window(latency_budget: float) -> float:
     return min(latency_budget * 0.5, MAX_BATCH_WINDOW) if latency_budget > 0 else 0.0
 
 
+def _c_function(name: str, argtypes: List[Any], restype: Any) -> Any:
+    from cyclonedds.internal import load_cyclonedds
+
+    fn = getattr(load_cyclonedds(), name)
+    fn.argtypes = argtypes
+    fn.restype = restype
+    return fn
+
+
 def flush_writer(ref: int) -> int:
     """Send what writer ``ref`` has pending now (``dds_write_flush``); Cyclone's return code."""
     global _flush_fn
     fn = _flush_fn
     if fn is None:
-        from cyclonedds.internal import load_cyclonedds
-
-        lib = load_cyclonedds()
-        c_fn = lib.dds_write_flush
-        c_fn.argtypes = [ctypes.c_int32]
-        c_fn.restype = ctypes.c_int32
-        fn = _flush_fn = c_fn
+        fn = _flush_fn = _c_function("dds_write_flush", [ctypes.c_int32], ctypes.c_int32)
     return int(fn(ref))
+
+
+_writer_class: Any = None
+
+
+def batching_writer_class() -> Any:
+    """A ``cyclonedds.pub.DataWriter`` whose writers batch their samples (writer-batching QoS, which
+    the Python binding does not expose: set on the C QoS right before ``dds_create_writer``). Only
+    micros_rt's own writers with a latency budget batch; every other writer in the process sends as
+    Cyclone always does."""
+    global _writer_class
+    if _writer_class is None:
+        from cyclonedds.pub import DataWriter
+
+        qset = _c_function("dds_qset_writer_batching", [ctypes.c_void_p, ctypes.c_bool], None)
+
+        class BatchingDataWriter(DataWriter):  # type: ignore[type-arg]
+            def _create_writer(self, publisher: Any, topic: Any, qos: Any, listener: Any) -> Any:
+                if qos is not None:
+                    qset(qos, True)
+                return DataWriter._create_writer(self, publisher, topic, qos, listener)
+
+        _writer_class = BatchingDataWriter
+    return _writer_class
 
 
 class Flusher:

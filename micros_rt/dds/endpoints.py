@@ -18,7 +18,7 @@ from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 
 from ..exceptions import DDSUnavailableError
-from .batching import batch_window, flush_writer, flusher
+from .batching import batch_window, batching_writer_class, flusher
 from .participant import DDSParticipant, delete_entity
 from .types import DDSType
 from .._logging import nonblocking_logger
@@ -62,24 +62,21 @@ class DDSWriter:
         topic = participant.topic(topic_name, dds_type.idl_class)
         listener = Listener(on_publication_matched=self._matched_changed)  # type: ignore[no-untyped-call]
         try:
-            self._writer = DataWriter(participant.dp, topic, qos, listener)
+            writer_class = batching_writer_class() if self.batch_window > 0 else DataWriter
+            self._writer = writer_class(participant.dp, topic, qos, listener)
         except DDSException as exc:
             participant.release_topic(topic_name)
             raise DDSUnavailableError(f"cannot create a DDS writer for {topic_name}: {exc}") from exc
         self._ref = self._writer._ref
         self.guid = str(self._writer.guid)
         self.closed = False
-        self.write_serialized = self._batched_write() if self.batch_window > 0 else self._flushed_write()
+        self.write_serialized = self._batched_write() if self.batch_window > 0 else self._plain_write()
 
-    def _flushed_write(self) -> Callable[[bytes], int]:
-        ref, write, flush = self._ref, ddspy_write, flush_writer
-        flush(ref)  # binds the C function now, not on the first publish()
+    def _plain_write(self) -> Callable[[bytes], int]:
+        ref, write = self._ref, ddspy_write
 
         def write_serialized(data: bytes) -> int:
-            ret: int = write(ref, data)
-            if ret >= 0:
-                flush(ref)  # the participant batches writes (dds.batching): send this one now
-            return ret
+            return int(write(ref, data))
         return write_serialized
 
     def _batched_write(self) -> Callable[[bytes], int]:

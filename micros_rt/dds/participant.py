@@ -19,7 +19,7 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 
 from ..exceptions import DDSUnavailableError
 from .._logging import nonblocking_logger
-from .batching import WRITE_BATCH_CONFIG, close_flusher
+from .batching import close_flusher
 
 __all__ = [
     "LOOPBACK_CONFIG",
@@ -105,12 +105,11 @@ LOOPBACK_TRANSPORT = "<General><MaxMessageSize>65500B</MaxMessageSize><FragmentS
 
 def micros_rt_defaults(env: Mapping[str, str] = os.environ) -> str:
     """Settings micros_rt applies under any configuration (a user's ``CYCLONEDDS_URI`` overrides them):
-    the participant lease, write batching (each writer flushes after its write unless it has a latency
-    budget: :mod:`micros_rt.dds.batching`), and on a loopback node large fragments."""
+    the participant lease, and on a loopback node large fragments."""
     transport = LOOPBACK_TRANSPORT if _is_loopback(env) else ""
     return (f'<CycloneDDS><Domain id="any">{transport}<Discovery>'
             f"<LeaseDuration>{lease_duration(env):g}s</LeaseDuration>"
-            f"</Discovery>{WRITE_BATCH_CONFIG}</Domain></CycloneDDS>")
+            "</Discovery></Domain></CycloneDDS>")
 
 
 def cyclone_config(env: Mapping[str, str] = os.environ) -> str:

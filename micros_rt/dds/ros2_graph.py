@@ -17,7 +17,6 @@ from typing import Any, Set, Tuple
 from cyclonedds.idl import make_idl_struct
 from cyclonedds.idl import types as _t
 from .._logging import nonblocking_logger
-from .batching import flush_writer
 
 __all__ = ["Ros2GraphAnnouncer", "split_node_name"]
 
@@ -78,7 +77,6 @@ class Ros2GraphAnnouncer:
             sample = ParticipantEntitiesInfo(gid=self._participant_gid, node_entities_info_seq=[node])
             try:
                 self._writer.write(sample)
-                flush_writer(self._writer._ref)  # the participant batches writes (dds.batching)
             except Exception as exc:  # the ROS 2 graph view is a courtesy; data must flow regardless
                 _log.debug("micros_rt: cannot announce the node to ROS 2 (%s)", exc)
 

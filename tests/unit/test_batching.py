@@ -11,8 +11,7 @@ from typing import List, Tuple
 
 import pytest
 
-from micros_rt.dds.batching import MAX_BATCH_WINDOW, WRITE_BATCH_CONFIG, Flusher, batch_window
-from micros_rt.dds.participant import micros_rt_defaults
+from micros_rt.dds.batching import MAX_BATCH_WINDOW, Flusher, batch_window
 
 
 class Recorder:
@@ -95,12 +94,48 @@ def test_a_failing_flush_is_logged_and_the_thread_goes_on() -> None:
         assert failed == [8] and [r for r, _ in rec.calls] == [9]
 
 
-@pytest.mark.parametrize("env", [{"ROS_IP": "127.0.0.1"}, {"ROS_IP": "10.1.2.3"}])
-def test_write_batching_is_in_micros_rt_defaults(env: dict[str, str]) -> None:
-    assert WRITE_BATCH_CONFIG in micros_rt_defaults(env)
-
-
 def test_batch_window_is_half_the_budget_and_at_most_two_ms() -> None:
     assert batch_window(0.0) == 0.0  # no budget: each sample is sent at once
     assert batch_window(0.001) == 0.0005
     assert batch_window(0.25) == MAX_BATCH_WINDOW == 0.002  # a 30 Hz topic with a generous budget is not delayed
+
+
+def _writer_batching(writer: object) -> bool:
+    """Read the writer-batching QoS back from a live Cyclone writer (the binding does not expose it)."""
+    import ctypes
+
+    from cyclonedds.internal import load_cyclonedds
+    from cyclonedds.qos import _CQos
+
+    lib = load_cyclonedds()
+    lib.dds_qget_writer_batching.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_bool)]
+    lib.dds_qget_writer_batching.restype = ctypes.c_bool
+    cqos = _CQos.cqos_create()  # type: ignore[no-untyped-call]
+    try:
+        assert lib.dds_get_qos(writer._ref, cqos) == 0  # type: ignore[attr-defined]
+        flag = ctypes.c_bool(False)
+        lib.dds_qget_writer_batching(cqos, ctypes.byref(flag))
+        return bool(flag.value)
+    finally:
+        _CQos.cqos_destroy(cqos)  # type: ignore[no-untyped-call]
+
+
+def test_only_writers_with_a_budget_batch() -> None:
+    # in-process Cyclone (loopback config from conftest): the QoS is set on micros_rt's batching
+    # writers only; a plain DataWriter in the same process (a user's own cyclonedds code) is untouched
+    import os
+
+    from cyclonedds.domain import DomainParticipant
+    from cyclonedds.pub import DataWriter
+    from cyclonedds.qos import Policy, Qos
+    from cyclonedds.topic import Topic
+    from std_msgs.msg import String
+
+    from micros_rt.dds.batching import batching_writer_class
+    from micros_rt.dds.types import dds_type_for
+
+    dp = DomainParticipant(int(os.environ.get("ROS_DOMAIN_ID", "0")))
+    topic = Topic(dp, "rt/micros_rt_test_batched", dds_type_for(String).idl_class)
+    qos = Qos(Policy.Reliability.Reliable(max_blocking_time=0))
+    assert _writer_batching(batching_writer_class()(dp, topic, qos)) is True
+    assert _writer_batching(DataWriter(dp, topic, qos)) is False
