@@ -20,6 +20,7 @@ from ._introspection import remember_verdict
 from ._registry import EndpointRegistry
 from ._rospy_compat import short
 from ._stats import PublisherStatistics
+from . import mqtt as _mqtt
 from .backends import EndpointSpec
 from .exceptions import MicrosRtError
 from .negotiation import (
@@ -70,6 +71,8 @@ class _Publication:
                 self.dds = dds.open_writer(EndpointSpec(topic, data_class, queue_size, latch, tag), options)
             except MicrosRtError as exc:
                 _log.warning("micros_rt: topic %s will use TCPROS only: %s", topic, exc)
+        # MQTT mirror when the YAML profile has an mqtt rule for the topic (micros_rt.mqtt.backend)
+        self.mqtt = _mqtt.open_writer(EndpointSpec(topic, data_class, queue_size, latch, tag), options)
 
     def start(self) -> None:
         self.tcpros = compat.TcprosWriter(self.topic, self.data_class, self.queue_size, self.latch)
@@ -220,6 +223,8 @@ class _Publication:
                         waited = time.monotonic() - t0
                         if waited > 0.001:
                             self.blocked_seconds += waited
+                if self.mqtt is not None:
+                    self.mqtt.send(msg)
                 self.published += 1
             except (genpy.SerializationError, struct.error, TypeError, ValueError, AttributeError, OverflowError,
                     UnicodeError) as exc:
@@ -236,6 +241,9 @@ class _Publication:
         for conn in conns:
             conn.close()
         dds, self.dds = self.dds, None
+        mqtt, self.mqtt = self.mqtt, None
+        if mqtt is not None:
+            mqtt.close()
         if dds is not None:
             dds.close()
         if self.tcpros is not None:

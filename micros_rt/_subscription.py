@@ -23,6 +23,7 @@ from ._delivery import Inbox
 from ._registry import EndpointRegistry
 from ._stats import LatencyStats, SubscriberStatistics
 from ._writers import DELIVER, HOLD, Accepted, WriterState, WriterTable
+from . import mqtt as _mqtt
 from .backends import EndpointSpec
 from .exceptions import MicrosRtError
 from .negotiation import DDS, TCPROS, DDSAnswer, DDSOffer, TransportHints
@@ -95,11 +96,16 @@ class _Subscription:
                          "nothing will be received", topic)
         self.thread = threading.Thread(target=self._run, name=f"micros_rt delivery {topic}", daemon=True)
         self.tcpros: Optional[compat.TcprosReader] = None
+        self.mqtt: Any = None
 
     def start(self) -> None:
         """Start delivering and register with rospy (which triggers the negotiation: the reader exists)."""
         self.thread.start()
         self.tcpros = compat.TcprosReader(self.topic, self.data_class, self._on_tcpros, self.queue_size)
+        # fed from MQTT when the YAML profile has an mqtt rule for the topic: the TCPROS delivery path
+        # (time filter, deadline, latency, counters) with transport 'MQTT' (micros_rt.mqtt.backend)
+        self.mqtt = _mqtt.open_reader(EndpointSpec(self.topic, self.data_class, self.queue_size, False, self.tag),
+                                      self.options, self._on_tcpros)
 
     def _open_reader(self, *, latched: bool) -> DDSTopicReader:
         assert self._dds is not None
@@ -403,6 +409,8 @@ class _Subscription:
                 self.tcpros.close()
             except Exception as exc:  # rospy at shutdown; the rest is released regardless
                 _log.warning("micros_rt: topic %s: rospy could not unregister the subscriber: %s", self.topic, exc)
+        if self.mqtt is not None:
+            self.mqtt.close()
         with self._tcp_space:
             self._tcp_space.notify_all()
         self.inbox.wake()
@@ -449,9 +457,12 @@ class Subscriber:
         return len(self.connection_transports())
 
     def connection_transports(self) -> Dict[str, str]:
-        """Publisher URI -> 'DDS' or 'TCPROS' for every current connection."""
+        """Publisher URI -> 'DDS' or 'TCPROS' for every current connection (and the MQTT link's URI -> 'MQTT')."""
         sub = self._sub
-        return {} if sub is None or sub.tcpros is None else sub.tcpros.transports()
+        links = {} if sub is None or sub.tcpros is None else sub.tcpros.transports()
+        if sub is not None and sub.mqtt is not None:
+            links.update(sub.mqtt.transports())
+        return links
 
     @property
     def latency(self) -> LatencyStats:
