@@ -42,15 +42,18 @@ def test_failed_registration_leaks_nothing(ros_master: harness.RosMaster) -> Non
     # delivery thread or a findable endpoint behind (they were created before rospy was asked)
     report = run_script(ros_master, """
 import rospy
+import micros_rt._rospy_compat as compat
 from std_msgs.msg import String
 micros_rt.init_node("leaky")
 nh = micros_rt.NodeHandle()
 base = state()
-real_sub, real_pub = rospy.Subscriber, rospy.Publisher
+# the rospy classes the compat module registers with (captured at import: `micros-rt run` replaces
+# rospy's public names with drop-in classes)
+real_sub, real_pub = compat.ROSPY_SUBSCRIBER, compat.ROSPY_PUBLISHER
 def refuse(*a, **k):
     raise rospy.ROSException("registration refused (test)")
 errors = []
-rospy.Subscriber = rospy.Publisher = refuse
+compat.ROSPY_SUBSCRIBER = compat.ROSPY_PUBLISHER = refuse
 for i in range(20):
     for make in (lambda: nh.subscribe("leak%d" % i, String, lambda m: None, 10),
                  lambda: nh.advertise("leak%d" % i, String, 10)):
@@ -58,7 +61,7 @@ for i in range(20):
             make()
         except rospy.ROSException as exc:
             errors.append(str(exc))
-rospy.Subscriber, rospy.Publisher = real_sub, real_pub
+compat.ROSPY_SUBSCRIBER, compat.ROSPY_PUBLISHER = real_sub, real_pub
 after = state()
 # and the same topics work afterwards
 sub = nh.subscribe("leak0", String, lambda m: None, 10)
