@@ -60,6 +60,7 @@ __all__ = [
     "ROSPY_PUBLISHER",
     "ROSPY_SUBSCRIBER",
     "dds_connections",
+    "latched_messages",
     "set_publisher_tcp_nodelay",
     "topic_impl",
     "TcprosReader",
@@ -197,6 +198,13 @@ def set_publisher_tcp_nodelay(topic: str) -> None:
     from rospy.impl.tcpros import get_tcpros_handler
 
     get_tcpros_handler().set_tcp_nodelay(topic, True)
+
+
+def latched_messages(topic: str) -> List[Any]:
+    """The last message of each latching TCPROS publisher connected to subscribed ``topic`` (rospy keeps
+    it on the connection for callbacks added later)."""
+    impl = topic_impl(topic, publisher=False)
+    return [] if impl is None else [c.latch for c in list(impl.connections) if getattr(c, "latch", None) is not None]
 
 
 def dds_connections(topic: str, *, publisher: bool) -> List[DDSConnection]:

@@ -296,6 +296,8 @@ class _Subscription:
             if acc is not None:
                 state.conn_header = header
         msg._connection_header = header
+        if state.accepted is not None and state.accepted.latch:
+            state.latched = msg
         self._deliver(msg, info.source_timestamp, qos.latency_budget if qos is not None else 0.0)
 
     def _malformed(self, state: WriterState, exc: Exception) -> None:
@@ -392,6 +394,20 @@ class _Subscription:
         if self.queue or self.tcp_inbox:
             return  # samples of a gone writer still to deliver: prune next time
         self.writers.prune(matched)
+
+    def replay_latched(self, callback: Callable[..., None], callback_args: Any) -> None:
+        """Hand a callback added to this subscription the last message of each connected latching publisher,
+        as rospy's ``add_callback`` does (#1852), in the caller's thread as there: DDS writers' from their
+        state, TCPROS links' from rospy's connections."""
+        msgs = [s.latched for s in self.writers.accepted_states() if s.latched is not None]
+        for msg in msgs + compat.latched_messages(self.topic):
+            try:
+                if callback_args is None:
+                    callback(msg)
+                else:
+                    callback(msg, callback_args)
+            except Exception:
+                _log.exception("micros_rt: topic %s: callback raised on a latched message (continuing)", self.topic)
 
     def statistics(self) -> SubscriberStatistics:
         return SubscriberStatistics(

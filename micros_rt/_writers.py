@@ -48,6 +48,7 @@ class WriterState:
     last_ts: int = -1                          # dedupe between the volatile and the latched reader
     header_seq: int = 0                        # Header.seq is not on the DDS wire: counted per writer
     conn_header: Optional[Dict[str, str]] = None
+    latched: Any = None                        # a latching publisher's last message, for callbacks added later
     skew: ClockSkewCheck = field(default_factory=ClockSkewCheck)
     malformed: int = 0
     handles: Set[Tuple[int, Any]] = field(default_factory=set)  # (reader id, back-end handle)

@@ -271,6 +271,7 @@ class NodeHandle:
         if not created:
             with sub.lock:
                 sub.callbacks = sub.callbacks + ((callback, callback_args),)
+            sub.replay_latched(callback, callback_args)  # a new subscriber of a latched topic gets its message
         return Subscriber(sub, _node.subscriptions, callback, callback_args)
 
 

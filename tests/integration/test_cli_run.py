@@ -240,3 +240,21 @@ def test_subscriber_listener_and_headers_under_run(ros_master: harness.RosMaster
     # the DDS subscriber leaves: rospy's remove_connection tells the listener
     dds_listener.stop()
     announcer.wait_for("peer_unsubscribe", 30)
+
+
+def test_second_subscriber_of_a_latched_topic_gets_the_latched_message(ros_master: harness.RosMaster,
+                                                                       spawn: harness.Spawner) -> None:
+    # one message at start, the next 10 s later: only the latched copy can answer within the probe's 3 s
+    latched = ("--latch", "--rate", "0.1")
+    dds_talker = spawn(run(PLAIN_TALKER, "--topic", "/run_latched_dds", *latched, "__name:=run_latched_talker"),
+                       name="run_latched_talker")
+    tcp_talker = spawn(stock(PLAIN_TALKER, "--topic", "/run_latched_tcp", *latched, "__name:=stock_latched_talker"),
+                       name="stock_latched_talker")
+    dds_talker.wait_for("ready", 60)
+    tcp_talker.wait_for("ready", 60)
+    probe = spawn(run(PLAIN_PROBE, "latched", "--topics", "/run_latched_dds,/run_latched_tcp",
+                      "__name:=run_latched_probe"), name="run_latched_probe")
+    assert probe.wait(60) == 0, probe.stderr_tail()
+    got = {e["topic"]: (e["data"], e["transport"]) for e in probe.events("latched")}
+    print("wait_for_message on subscribed latched topics:", got)
+    assert got == {"/run_latched_dds": ("hello 0", "DDS"), "/run_latched_tcp": ("hello 0", "TCPROS")}

@@ -12,6 +12,8 @@ Runs as a stock node and unchanged under ``micros-rt run``. First argument, the 
 * ``services --topic T``: parameters (set/get/has/delete/search, a private one), a std_srvs/Trigger
   service called through a ServiceProxy, a rospy.Timer, rospy.get_time/get_rostime, rospy.loginfo (to
   /rosout), rospy.wait_for_message on T, on_shutdown and signal_shutdown. One JSON line per check.
+* ``latched --topics T1,T2``: subscribes to each latched topic, and once its message came asks
+  ``wait_for_message`` (3 s timeout) on it, which rospy answers at once with the latched message.
 * ``announce --topic T``: a Publisher with a ``subscriber_listener`` that greets each new subscriber with
   ``peer_publish("welcome N")`` (prints ``peer_subscribe``/``peer_unsubscribe``), ``headers`` and
   ``tcp_nodelay``; spins.
@@ -122,6 +124,20 @@ def mode_announce(args: List[str]) -> None:
     rospy.spin()
 
 
+def mode_latched(args: List[str]) -> None:
+    from std_msgs.msg import String
+
+    rospy.init_node("plain_probe")
+    for topic in args[args.index("--topics") + 1].split(","):
+        first = threading.Event()
+        rospy.Subscriber(topic, String, lambda _msg: first.set())
+        first.wait(30)
+        # the topic is subscribed already: rospy hands the new subscriber the latched message at once
+        msg = rospy.wait_for_message(topic, String, timeout=3)
+        header = getattr(msg, "_connection_header", None) or {}
+        emit("latched", topic=topic, data=msg.data, transport=header.get("transport", "TCPROS"))
+
+
 def main() -> None:
     mode, args = sys.argv[1], sys.argv[2:]
     if mode == "argv":
@@ -130,6 +146,8 @@ def main() -> None:
         raise RuntimeError("boom from the script")
     elif mode == "exit-message":
         sys.exit("bye from the script")
+    elif mode == "latched":
+        mode_latched(args)
     elif mode == "announce":
         mode_announce(args)
     elif mode == "services":
