@@ -54,6 +54,8 @@ _problems = RateLimitedLog(_log, interval=30.0)
 #: MQTT 5 user property naming the publishing graph and node: ``<graph>|<node>``.
 SOURCE_PROPERTY = "micros_rt"
 CODECS = ("ros1", "json", "primitive")
+#: How long the first topic with an MQTT rule waits for the broker (seconds).
+CONNECT_WAIT = 5.0
 DIRECTIONS = ("both", "out", "in")
 
 
@@ -162,6 +164,10 @@ class MqttBackend:
         self._lock = threading.Lock()
         self.connection = MqttConnection(settings.params, mqtt5=True, on_connection_change=self._changed)
         self.connection.start()
+        # the first messages of a process's topics must not be dropped for a connection still being made
+        if not self.connection.wait_connected(CONNECT_WAIT):
+            _log.warning("micros_rt: MQTT broker %s not reached within %.0f s; messages are dropped (or buffered "
+                         "with client/id and client/buffer/size) until it is", self.connection.uri, CONNECT_WAIT)
 
     def _changed(self, connected: bool) -> None:
         if connected:

@@ -184,6 +184,7 @@ class MqttConnection:
         self._on_fatal = on_fatal
         self._on_connection_change = on_connection_change
         self._flush_wanted = threading.Event()
+        self._live_event = threading.Event()
         self._last_failure = ""
         c = params.client
         self._buffer: Optional[DiskBuffer] = None
@@ -265,6 +266,10 @@ class MqttConnection:
         self.close()
 
     # ------------------------------------------------------------------ state
+
+    def wait_connected(self, timeout: float) -> bool:
+        """Wait (bounded) until connected with the disk buffer flushed; True when so."""
+        return self._live_event.wait(timeout)
 
     @property
     def is_connected(self) -> bool:
@@ -375,6 +380,7 @@ class MqttConnection:
             was = self._connected
             self._connected = False
             self._live = False
+            self._live_event.clear()
             if was and not self._closed:
                 self._counters.disconnects += 1
         if was and not self._closed:
@@ -441,6 +447,7 @@ class MqttConnection:
                 item = self._buffer.pop() if self._buffer is not None else None
                 if item is None:
                     self._live = True
+                    self._live_event.set()
                     return
                 topic, payload, qos, retain, age, props = item
                 assert self._buffer is not None
