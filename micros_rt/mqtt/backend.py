@@ -113,8 +113,8 @@ def parse_mqtt_section(data: Any, *, source: str) -> MqttSettings:
             raise ParamsError(f"{source}: mqtt: expected a mapping with 'broker', 'client' and 'topics'")
         r.check_keys(data, ("broker", "client", "topics"), "")
         broker, client = parse_connection(r, data)
-        topics = data.get("topics")
-        if not isinstance(topics, dict) or not topics:
+        topics = data.get("topics") or {}         # none: only services over MQTT
+        if not isinstance(topics, dict):
             raise ParamsError(f"{source}: mqtt: 'topics' must map topic names/patterns to MQTT options")
         rules = tuple(_rule(r, str(key), value or {}, k) for k, (key, value) in enumerate(topics.items()))
     except ParamsError as exc:

@@ -421,6 +421,8 @@ class MqttConnection:
             entry = self._subscriptions.get(message.topic)
         if entry is None:
             for pattern, candidate in list(self._subscriptions.items()):
+                if pattern.startswith("$share/"):      # MQTT 5 shared subscription: $share/<group>/<filter>
+                    pattern = pattern.split("/", 2)[2] if pattern.count("/") >= 2 else pattern
                 if paho.topic_matches_sub(pattern, message.topic):
                     entry = candidate
                     break

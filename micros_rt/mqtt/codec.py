@@ -36,6 +36,13 @@ __all__ = [
     "msg_to_text",
     "probe_primitive",
     "text_to_msg",
+    "RPC_REQUEST_PREFIX",
+    "RPC_RESPONSE_PREFIX",
+    "RPC_SHARE_GROUP",
+    "decode_rpc_request",
+    "decode_rpc_response",
+    "encode_rpc_request",
+    "encode_rpc_response",
 ]
 
 #: mqtt_client's prefix of the retained topic that carries a data topic's ROS type.
@@ -320,3 +327,63 @@ def _scalar(base: str, value: Any, where: str) -> Any:
         except ValueError:
             raise CodecError(f"{where}: {value!r} is not a number") from None
     return value
+
+
+# ----------------------------------------------------------------------------- RPC (AimRT's mqtt RPC back end)
+
+#: AimRT's topic prefixes: requests on ``aimrt_rpc_req/<service>`` (servers share ``$share/aimrt/...``),
+#: responses on ``aimrt_rpc_rsp/<client id>/<service>``; ``<service>`` URL-encoded.
+RPC_REQUEST_PREFIX = "aimrt_rpc_req/"
+RPC_RESPONSE_PREFIX = "aimrt_rpc_rsp/"
+RPC_SHARE_GROUP = "$share/aimrt/"
+_ID = struct.Struct("<I")          # AimRT writes its uint32s in host (little-endian) order
+_STATUS = struct.Struct("<I")
+
+
+def _short_field(data: bytes, pos: int, what: str) -> Tuple[str, int]:
+    if pos >= len(data):
+        raise CodecError(f"RPC packet ends before its {what}")
+    n = data[pos]
+    if pos + 1 + n > len(data):
+        raise CodecError(f"RPC packet's {what} claims {n} bytes, only {len(data) - pos - 1} remain")
+    try:
+        return data[pos + 1:pos + 1 + n].decode("utf-8"), pos + 1 + n
+    except UnicodeDecodeError:
+        raise CodecError(f"RPC packet's {what} is not UTF-8") from None
+
+
+def _counted(text: str, what: str) -> bytes:
+    raw = text.encode("utf-8")
+    if len(raw) > 255:
+        raise CodecError(f"{what} {text[:40]!r}... is longer than 255 bytes")
+    return bytes([len(raw)]) + raw
+
+
+def encode_rpc_request(content_type: str, response_topic: str, msg_id: int, data: bytes) -> bytes:
+    """AimRT's request: ``| n | content type | m | response topic | msg id (4) | data |``."""
+    return (_counted(content_type, "content type") + _counted(response_topic, "response topic") + _ID.pack(msg_id)
+            + data)
+
+
+def decode_rpc_request(payload: bytes) -> Tuple[str, str, int, bytes]:
+    """(content type, response topic, msg id, data) of a request."""
+    content_type, pos = _short_field(payload, 0, "content type")
+    response_topic, pos = _short_field(payload, pos, "response topic")
+    if pos + 4 > len(payload):
+        raise CodecError("RPC request ends before its 4-byte msg id")
+    return content_type, response_topic, _ID.unpack_from(payload, pos)[0], payload[pos + 4:]
+
+
+def encode_rpc_response(content_type: str, msg_id: int, status: int, data: bytes) -> bytes:
+    """AimRT's response: ``| n | content type | msg id (4) | status code (4) | data |``."""
+    return _counted(content_type, "content type") + _ID.pack(msg_id) + _STATUS.pack(status) + data
+
+
+def decode_rpc_response(payload: bytes) -> Tuple[str, int, int, bytes]:
+    """(content type, msg id, status code, data) of a response."""
+    content_type, pos = _short_field(payload, 0, "content type")
+    if pos + 8 > len(payload):
+        raise CodecError("RPC response ends before its msg id and status code")
+    msg_id, status = _ID.unpack_from(payload, pos)[0], _STATUS.unpack_from(payload, pos + 4)[0]
+    return content_type, msg_id, status, payload[pos + 8:]
+

@@ -142,3 +142,26 @@ def test_json_non_finite_floats_survive() -> None:
 def test_bad_json(text: str, words: str) -> None:
     with pytest.raises(codec.CodecError, match=words):
         codec.json_to_msg(text, Int32)
+
+
+# ------------------------------------------------------------------ RPC (AimRT's packets)
+
+
+def test_rpc_request_and_response_layout() -> None:
+    req = codec.encode_rpc_request("ros1", "aimrt_rpc_rsp/c1/%2Fadd", 7, b"\x01\x02")
+    assert req == b"\x04ros1" + b"\x17aimrt_rpc_rsp/c1/%2Fadd" + bytes.fromhex("07000000") + b"\x01\x02"
+    assert codec.decode_rpc_request(req) == ("ros1", "aimrt_rpc_rsp/c1/%2Fadd", 7, b"\x01\x02")
+    rsp = codec.encode_rpc_response("ros1", 7, 0, b"ok")
+    assert rsp == b"\x04ros1" + bytes.fromhex("07000000" "00000000") + b"ok"
+    assert codec.decode_rpc_response(rsp) == ("ros1", 7, 0, b"ok")
+
+
+@pytest.mark.parametrize("payload", [b"", b"\x09ros1", b"\x04ros1\x03ab", b"\x04ros1\x00\x01\x02"])
+def test_bad_rpc_request(payload: bytes) -> None:
+    with pytest.raises(codec.CodecError):
+        codec.decode_rpc_request(payload)
+
+
+def test_bad_rpc_response() -> None:
+    with pytest.raises(codec.CodecError, match="msg id and status"):
+        codec.decode_rpc_response(b"\x04ros1\x01\x00")
