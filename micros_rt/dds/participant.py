@@ -20,6 +20,7 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 from ..exceptions import DDSUnavailableError
 from .._logging import nonblocking_logger
 from .batching import close_flusher
+from .typecache import forget_type_data, load_type_data, save_type_data
 
 __all__ = [
     "LOOPBACK_CONFIG",
@@ -196,8 +197,6 @@ class DDSParticipant:
     def topic(self, name: str, idl_class: Any) -> Any:
         """The Topic ``name`` with type ``idl_class``, shared by the process's readers and writers of it:
         each call takes a reference that :meth:`release_topic` gives back (the last one deletes it)."""
-        from cyclonedds.topic import Topic
-
         with self._lock:
             found = self._topics.get(name)
             if found is not None:
@@ -208,9 +207,24 @@ class DDSParticipant:
                         f"{topic.data_type.__idl_typename__}, not {idl_class.__idl_typename__}")
                 self._topics[name] = (topic, refs + 1)
                 return topic
-            topic = Topic(self.dp, name, idl_class)
+            topic = self._new_topic(name, idl_class)
             self._topics[name] = (topic, 1)
             return topic
+
+    def _new_topic(self, name: str, idl_class: Any) -> Any:
+        from cyclonedds.core import DDSException
+        from cyclonedds.topic import Topic
+
+        if load_type_data(idl_class):
+            try:
+                return Topic(self.dp, name, idl_class)
+            except DDSException as exc:  # bytes Cyclone refuses: build them as if never cached
+                _log.warning("micros_rt: cached DDS type data for %s refused (%s); rebuilding it",
+                             idl_class.__idl_typename__, exc)
+                forget_type_data(idl_class)
+        topic = Topic(self.dp, name, idl_class)
+        save_type_data(idl_class)
+        return topic
 
     def release_topic(self, name: str) -> None:
         """Give back a reference taken by :meth:`topic`; the Topic entity goes with the last one."""

@@ -29,6 +29,7 @@ import genpy
 import roslib.message
 
 from ..exceptions import MicrosRtError, TypeMappingError
+from .typecache import type_key
 
 __all__ = ["DDSType", "MalformedSampleError", "dds_type_for", "dds_topic_name", "dds_type_name"]
 
@@ -146,6 +147,9 @@ def _idl_class(ros_type: str) -> Any:
         typename = dds_type_name(ros_type)
         cls_name = typename.replace("::", "_")
         idl = make_idl_struct(cls_name, typename, fields)
+        # what the XTypes bytes of this class depend on (dds.typecache): the mapping and the definition
+        definition = "" if ros_type in _TIME_TYPES else f"{cls._md5sum}\n{getattr(cls, '_full_text', '')}"
+        setattr(idl, "__micros_rt_xtypes_key__", type_key(idl, f"{ros_type}\n{fields!r}\n{definition}"))
         _idl_cache[ros_type] = idl
         return idl
 
