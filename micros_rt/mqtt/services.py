@@ -63,6 +63,16 @@ def _func_name(name: str) -> str:
     return urllib.parse.quote(rospy.resolve_name(name), safe="")
 
 
+def _decoded(decode: Callable[[bytes], Any], payload: bytes, service: str, what: str, topic: str) -> Any:
+    """``decode(payload)``, or None after a warning (once per service and kind, then counted)."""
+    try:
+        return decode(payload)
+    except codec.CodecError as exc:
+        _problems.warning((service, what), f"service {service}: a {what} on '{topic}' does not decode ({exc}); "
+                                           "ignored")
+        return None
+
+
 def _serialize(msg: Any) -> bytes:
     buf = io.BytesIO()
     msg.serialize(buf)
@@ -88,13 +98,9 @@ class Service:
         _log.info("micros_rt: service %s is also served over MQTT ('%s')", self.name, self.request_topic)
 
     def _on_request(self, topic: str, payload: bytes, properties: Any) -> None:
-        try:
-            content_type, reply_to, msg_id, data = codec.decode_rpc_request(payload)
-        except codec.CodecError as exc:
-            _problems.warning((self.name, "malformed"), f"service {self.name}: a request on '{topic}' does not "
-                                                        f"decode ({exc}); ignored")
-            return
-        self._pool.submit(self._serve, content_type, reply_to, msg_id, data)
+        fields = _decoded(codec.decode_rpc_request, payload, self.name, "request", topic)
+        if fields is not None:
+            self._pool.submit(self._serve, *fields)
 
     def _serve(self, content_type: str, reply_to: str, msg_id: int, data: bytes) -> None:
         if content_type != CONTENT_TYPE:
@@ -158,12 +164,10 @@ class ServiceProxy:
         self._conn.subscribe(self.response_topic, QOS, self._on_response)
 
     def _on_response(self, topic: str, payload: bytes, properties: Any) -> None:
-        try:
-            _, msg_id, status, data = codec.decode_rpc_response(payload)
-        except codec.CodecError as exc:
-            _problems.warning((self.name, "malformed"), f"service {self.name}: a response on '{topic}' does not "
-                                                        f"decode ({exc}); ignored")
+        fields = _decoded(codec.decode_rpc_response, payload, self.name, "response", topic)
+        if fields is None:
             return
+        _, msg_id, status, data = fields
         with self._lock:
             waiting = self._pending.pop(msg_id, None)
         if waiting is not None:           # None: it came after its call timed out
