@@ -91,8 +91,10 @@ class _Ros2Mqtt:
     def __init__(self, bridge: "MqttBridge", p: Ros2MqttParams) -> None:
         self.bridge, self.p = bridge, p
         self.subscriber: Optional[micros_rt.Subscriber] = None
+        self.raw_subscriber: Optional[rospy.Subscriber] = None
         self.data_class: Optional[Type[genpy.Message]] = None
-        self.type_sent = False
+        self.announced_md5 = ""        # reset on reconnect: the retained announcement may be gone
+        self._built: Dict[str, Type[genpy.Message]] = {}
         self.sent = 0
 
     def attach(self, data_class: Type[genpy.Message]) -> None:
@@ -100,22 +102,52 @@ class _Ros2Mqtt:
         self.subscriber = self.bridge.nh.subscribe(self.p.ros_topic, data_class, self.on_ros, self.p.queue_size)
         _log.info("micros_rt mqtt: ROS topic '%s' (%s) subscribed", self.p.ros_topic, data_class._type)
 
+    def attach_raw(self, type_name: str) -> None:
+        """A type whose package is not installed: take the serialized bytes (stock rospy's AnyMsg over
+        TCPROS, as mqtt_client's ShapeShifter) and the type from the connection header."""
+        self.raw_subscriber = rospy.Subscriber(self.p.ros_topic, rospy.AnyMsg, self.on_raw,
+                                               queue_size=self.p.queue_size)
+        _log.info("micros_rt mqtt: ROS topic '%s' (%s, not installed here: bridged as bytes) subscribed",
+                  self.p.ros_topic, type_name)
+
+    def on_raw(self, raw: Any) -> None:
+        header = getattr(raw, "_connection_header", None) or {}
+        t = codec.RosMsgType(header.get("md5sum", ""), header.get("type", ""), header.get("message_definition", ""))
+        msg = None
+        if self.p.primitive or self.p.json:
+            try:
+                cls = self._built.get(t.md5) or _message_class(t)
+                self._built[t.md5] = cls
+                msg = cls()
+                msg.deserialize(raw._buff)
+            except Exception as exc:  # genmsg/genpy: a definition or payload that does not parse
+                self.bridge.problems.report(self.p.ros_topic, "unknown_type", f"ROS topic {self.p.ros_topic}: "
+                                            f"cannot decode {t.name} from its connection header: {exc}")
+                return
+        self._send(t, raw._buff, msg)
+
     def on_ros(self, msg: genpy.Message) -> None:
+        self._send(codec.RosMsgType.of(type(msg)), None, msg)
+
+    def _send(self, t: codec.RosMsgType, serialized: Optional[bytes], msg: Optional[genpy.Message]) -> None:
         p = self.p
         conn = self.bridge.connection
-        if p.primitive:
+        if p.primitive and msg is not None:
             payload = codec.msg_to_text(msg).encode("utf-8")
-        elif p.json:
+        elif p.json and msg is not None:
             payload = codec.msg_to_json(msg).encode("utf-8")
         else:
-            if not self.type_sent:
-                announcement = codec.encode_msg_type(codec.RosMsgType.of(type(msg)))
-                conn.publish(codec.ROS_MSG_TYPE_PREFIX + p.mqtt_topic, announcement, qos=p.qos, retain=True)
-                self.type_sent = True
-            buf = io.BytesIO()
-            msg.serialize(buf)
+            if self.announced_md5 != t.md5:
+                conn.publish(codec.ROS_MSG_TYPE_PREFIX + p.mqtt_topic, codec.encode_msg_type(t), qos=p.qos,
+                             retain=True)
+                self.announced_md5 = t.md5
+            if serialized is None:
+                assert msg is not None
+                buf = io.BytesIO()
+                msg.serialize(buf)
+                serialized = buf.getvalue()
             stamp = genpy.Time.from_sec(time.time()) if p.inject_timestamp else None
-            payload = codec.encode_ros_payload(buf.getvalue(), stamp=stamp)
+            payload = codec.encode_ros_payload(serialized, stamp=stamp)
         try:
             if conn.publish(p.mqtt_topic, payload, qos=p.qos, retain=p.retained):
                 self.sent += 1
@@ -319,12 +351,11 @@ class MqttBridge:
     def _connection_changed(self, connected: bool) -> None:
         if connected:
             for r in self.ros2mqtt:
-                r.type_sent = False     # the retained announcement may be gone with a restarted broker
+                r.announced_md5 = ""    # the retained announcement may be gone with a restarted broker
 
     def _resolve_loop(self) -> None:
-        warned: Dict[str, str] = {}
         while not self._closed.wait(RESOLVE_INTERVAL):
-            waiting = [r for r in self.ros2mqtt if r.subscriber is None]
+            waiting = [r for r in self.ros2mqtt if r.subscriber is None and r.raw_subscriber is None]
             if not waiting:
                 return
             try:
@@ -339,12 +370,9 @@ class MqttBridge:
                     continue
                 cls = roslib.message.get_message_class(type_name)
                 if cls is None:
-                    if warned.get(name) != type_name:
-                        warned[name] = type_name
-                        self.problems.report(name, "unknown_type", f"ROS topic {name} has type {type_name}, whose "
-                                             "Python package is not installed here: it cannot be bridged")
-                    continue
-                r.attach(cls)
+                    r.attach_raw(type_name)
+                else:
+                    r.attach(cls)
 
     def counters(self) -> Dict[str, Any]:
         """Counts: messages sent and delivered, each kind of bad input, the connection's counters."""
@@ -362,8 +390,9 @@ class MqttBridge:
         self.connection.close()
         self._service.shutdown()
         for r in self.ros2mqtt:
-            if r.subscriber is not None:
-                r.subscriber.unregister()
+            for sub in (r.subscriber, r.raw_subscriber):
+                if sub is not None:
+                    sub.unregister()
         for m in self.mqtt2ros:
             for pub in (m.publisher, m.latency_pub):
                 if pub is not None:

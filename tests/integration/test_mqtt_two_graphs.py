@@ -101,3 +101,30 @@ def test_two_graphs_both_ways_image_and_pose_field_for_field(
         print(f"graph A -> B: {N} sensor_msgs/Image 64x48 rgb8 and {N} geometry_msgs/PoseStamped field for field "
               f"(first: {images[0]['msg']['header']['frame_id']!r}); graph B -> A: {N} std_msgs/String; "
               f"latencies (s): {[round(v, 4) for v in latencies]}")
+
+
+def test_type_installed_on_neither_side(ros_master: harness.RosMaster, fresh_master: harness.RosMaster,
+                                        spawn: harness.Spawner, tmp_path: Path) -> None:
+    """robot_extra_msgs/Reading exists only in the talker's and listener's code (genpy.dynamic): bridge A
+    takes its bytes and connection header, bridge B builds the class from the announced definition."""
+    peer = [harness.STOCK_PYTHON, str(harness.PEERS_DIR / "mqtt_dynamic_peer.py")]
+    n = 10
+    with MosquittoBroker(tmp_path / "broker") as broker:
+        broker_params = {"host": broker.host, "port": broker.port}
+        qos1 = {"ros": {"queue_size": 100}, "mqtt": {"qos": 1}}
+        params_a = write_params(tmp_path / "a.yaml", {"broker": broker_params, "bridge": {"ros2mqtt": [
+            {"ros_topic": "/extra/reading", "mqtt_topic": "extra/reading", "advanced": qos1}]}})
+        params_b = write_params(tmp_path / "b.yaml", {"broker": broker_params, "bridge": {"mqtt2ros": [
+            {"mqtt_topic": "extra/reading", "ros_topic": "/extra/reading", "advanced": qos1}]}})
+        graph_b = fresh_master.env
+        listener = spawn([*peer, "listen", "--duration", "90"], graph_b, name="dyn_listener")
+        listener.wait_for("ready", timeout=30)
+        spawn(bridge_argv(params_a, name="dyn_bridge_a"), ros_master.env, name="dyn_bridge_a")
+        spawn(bridge_argv(params_b, name="dyn_bridge_b"), graph_b, name="dyn_bridge_b")
+        talker = spawn([*peer, "talk", "--count", str(n)], ros_master.env, name="dyn_talker")
+        md5 = talker.wait_for("ready", timeout=30)["md5"]
+        got = listener.wait_for_count("recv", n, timeout=90)
+        assert [(e["name"], e["values"], e["level"], e["frame_id"]) for e in got] == [
+            (f"reading {i}", [float(i), i + 0.5], i, "battery") for i in range(n)]
+        assert {(e["type"], e["md5"]) for e in got} == {("robot_extra_msgs/Reading", md5)}
+        print(f"robot_extra_msgs/Reading (installed nowhere) graph A -> B: {len(got)} of {n}, md5 {md5}")
