@@ -31,12 +31,17 @@ from paho.mqtt.properties import Properties
 from paho.mqtt.reasoncodes import ReasonCode
 
 from .._logging import nonblocking_logger
+from ..negotiation.ratelimit import RateLimitedLog
 from .params import MqttParams, resolve_path
 
 __all__ = ["ConnectionCounters", "DiskBuffer", "MqttConfigError", "MqttConnection", "MessageHandler",
            "properties_from_dict", "properties_to_dict"]
 
 _log = nonblocking_logger("rosout.micros_rt.mqtt")
+_too_large = RateLimitedLog(_log, interval=30.0)
+
+#: MQTT PUBLISH header bytes besides topic and payload (fixed header, lengths, packet id, properties).
+PUBLISH_OVERHEAD = 16
 
 #: ``handler(topic, payload, properties)``, called on paho's network thread (properties: MQTT 5 only).
 MessageHandler = Callable[[str, bytes, Optional[Properties]], None]
@@ -302,6 +307,13 @@ class MqttConnection:
     def publish(self, topic: str, payload: bytes, *, qos: int = 0, retain: bool = False,
                 properties: Optional[Properties] = None) -> bool:
         """Send (or buffer on disk while disconnected); False when the message was dropped (counted)."""
+        limit = self.params.client.max_packet_size
+        if limit and len(payload) + len(topic.encode("utf-8")) + PUBLISH_OVERHEAD > limit:
+            with self._lock:
+                self._counters.dropped_too_large += 1
+            _too_large.warning(topic, f"a {len(payload)}-byte message on MQTT topic '{topic}' is over "
+                                      f"client/max_packet_size ({limit} bytes): dropped (further ones are counted)")
+            return False
         with self._lock:
             if self._closed:
                 return False

@@ -6,7 +6,8 @@ set, defaulting to ''``). Unknown keys and bad values are errors naming the para
 would ignore or misread them.
 
 micros_rt additions (never needed by an mqtt_client params file): ``client.buffer.max_age`` (seconds a
-buffered message stays valid, 0 = forever), ``bridge.ros2mqtt[].json`` / ``bridge.mqtt2ros[].json``
+buffered message stays valid, 0 = forever), ``client.max_packet_size`` (bytes; larger messages are dropped
+and counted instead of making the broker close the connection, as AimRT's ``max_pkg_size_k``), ``bridge.ros2mqtt[].json`` / ``bridge.mqtt2ros[].json``
 (every field as JSON, for non-ROS clients) and ``bridge.mqtt2ros[].ros_type`` (fix the ROS type, as in
 mqtt_client's ROS 2 version).
 
@@ -68,6 +69,7 @@ class ClientParams:
     clean_session: bool = True
     keep_alive_interval: float = 60.0
     max_inflight: int = 65535
+    max_packet_size: int = 0
     tls_certificate: str = ""
     tls_key: str = ""
     tls_password: str = ""
@@ -202,8 +204,8 @@ def parse_connection(r: "_Reader", data: Mapping[str, Any]) -> Tuple[BrokerParam
     )
 
     c = r.section(data, "client", "client")
-    r.check_keys(c, ("id", "buffer", "last_will", "clean_session", "keep_alive_interval", "max_inflight", "tls"),
-                 "client")
+    r.check_keys(c, ("id", "buffer", "last_will", "clean_session", "keep_alive_interval", "max_inflight",
+                     "max_packet_size", "tls"), "client")
     cbuf = r.section(c, "buffer", "client/buffer")
     r.check_keys(cbuf, ("size", "directory", "max_age"), "client/buffer")
     will = r.section(c, "last_will", "client/last_will")
@@ -227,6 +229,8 @@ def parse_connection(r: "_Reader", data: Mapping[str, Any]) -> Tuple[BrokerParam
         keep_alive_interval=r.get(c, "keep_alive_interval", "client/keep_alive_interval", float, 60.0,
                                   lo=0, hi=65535),
         max_inflight=r.get(c, "max_inflight", "client/max_inflight", int, 65535, lo=1, hi=65535),
+        max_packet_size=r.get(c, "max_packet_size", "client/max_packet_size", int, 0, warn=False, lo=0,
+                              hi=268435455),
         tls_certificate=r.get(ctls, "certificate", "client/tls/certificate", str, "", warn=False),
         tls_key=r.get(ctls, "key", "client/tls/key", str, "", warn=False),
         tls_password=r.get(ctls, "password", "client/tls/password", str, "", warn=False),

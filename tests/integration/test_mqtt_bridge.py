@@ -100,11 +100,18 @@ def test_first_message_bad_input_and_is_connected(
         ros_master: harness.RosMaster, spawn: harness.Spawner, broker: MosquittoBroker, tmp_path: Path) -> None:
     params = write_params(tmp_path / "params.yaml", {
         "broker": {"host": broker.host, "port": broker.port},
-        "bridge": {"mqtt2ros": [
-            {"mqtt_topic": "mq2/data", "ros_topic": "/mq2/data", "advanced": {"mqtt": {"qos": 1},
-                                                                              "ros": {"queue_size": 100}}},
-            {"mqtt_topic": "mq2/level", "ros_topic": "/mq2/level", "primitive": True, "ros_type": "std_msgs/UInt8"},
-        ]},
+        "client": {"max_packet_size": 400},
+        "bridge": {
+            "mqtt2ros": [
+                {"mqtt_topic": "mq2/data", "ros_topic": "/mq2/data", "advanced": {"mqtt": {"qos": 1},
+                                                                                  "ros": {"queue_size": 100}}},
+                {"mqtt_topic": "mq2/level", "ros_topic": "/mq2/level", "primitive": True,
+                 "ros_type": "std_msgs/UInt8"},
+            ],
+            # and back out, as text: a message over client/max_packet_size is dropped and counted
+            "ros2mqtt": [{"ros_topic": "/mq2/data", "mqtt_topic": "mq2/echo", "primitive": True,
+                          "advanced": {"ros": {"queue_size": 100}}}],
+        },
     })
     bridge = spawn(bridge_argv(params, name="mq2_bridge"), name="bridge")
     wait_connected(bridge)
@@ -126,11 +133,16 @@ def test_first_message_bad_input_and_is_connected(
                          ("mqtt_client/ros_msg_type/mq2/data", announcement, 1, True)])
     first = listener.wait_for("recv", timeout=30)
     assert first["data"] == "first"
+    harness.wait_until(lambda: any("'/mq2/data' (std_msgs/String) subscribed" in e.get("line", "")
+                                   for e in bridge.events("_raw")), 30)
+    echo = spawn(broker.sub_argv("mq2/echo", count=1, timeout=60), name="echo")
+    time.sleep(0.5)
 
     malformed = [b"", b"\x07not mqtt_client", b"\x01\x00", b"\x00\xff\xff\xff\x7fshort"]
     bad = [("mq2/data", malformed[i % len(malformed)], 1, False) for i in range(1000)]
     bad += [("mq2/level", b"300", 1, False), ("mq2/level", b"abc", 1, False)]
-    publish_all(broker, bad + [("mq2/data", ros1("after 1000 bad"), 1, False), ("mq2/level", b"7", 1, False)])
+    big = [("mq2/data", ros1("x" * 1000), 1, False)]
+    publish_all(broker, bad + big + [("mq2/data", ros1("after 1000 bad"), 1, False), ("mq2/level", b"7", 1, False)])
     after = listener.wait_for(lambda e: e.get("event") == "recv" and e.get("data") == "after 1000 bad", timeout=60)
     assert after["data"] == "after 1000 bad"
 
@@ -142,8 +154,11 @@ def test_first_message_bad_input_and_is_connected(
         harness.wait_until(counted, 30)
     except AssertionError:
         raise AssertionError(f"counters: {last_counters(bridge)}") from None
+    assert echo.wait(timeout=60) == 0
+    assert [e.get("line") for e in echo.events()] == ["after 1000 bad"]      # the 1000-char one was too large
+    harness.wait_until(lambda: last_counters(bridge).get("dropped_too_large") == 1, 30)
     counters: Dict[str, Any] = last_counters(bridge)
-    assert counters["delivered"]["/mq2/data"] == 2 and counters["delivered"]["/mq2/level"] == 1
+    assert counters["delivered"]["/mq2/data"] == 3 and counters["delivered"]["/mq2/level"] == 1
 
     call = subprocess.run([harness.MICROS_RT_PYTHON, "-c", (
         "import rospy; from micros_rt.mqtt.bridge import is_connected_service_class as c; "
@@ -155,5 +170,6 @@ def test_first_message_bad_input_and_is_connected(
     bridge.stop()
     warnings = [line for line in bridge.stderr_tail(200).splitlines() if "does not decode" in line]
     assert len(warnings) == 1, warnings
+    assert any("over client/max_packet_size (400 bytes)" in line for line in bridge.stderr_tail(200).splitlines())
     print(f"1000 malformed payloads: counted {counters['bad_input']}, one warning: {warnings[0]}\n"
           f"is_connected: {call.stdout.strip()}")

@@ -37,7 +37,7 @@ def test_every_parameter() -> None:
                    "tls": {"enabled": True, "ca_certificate": "ca.crt"}},
         "client": {"id": "r1", "buffer": {"size": 100, "directory": "/tmp/buf", "max_age": 5},
                    "last_will": {"topic": "r1/status", "message": "gone", "qos": 1, "retained": True},
-                   "clean_session": False, "keep_alive_interval": 2, "max_inflight": 10,
+                   "clean_session": False, "keep_alive_interval": 2, "max_inflight": 10, "max_packet_size": 2048,
                    "tls": {"certificate": "c.crt", "key": "c.key", "password": "pw"}},
         "bridge": {
             "ros2mqtt": [{"ros_topic": "/a", "mqtt_topic": "a", "primitive": True, "inject_timestamp": True,
@@ -50,6 +50,7 @@ def test_every_parameter() -> None:
     assert warnings == []
     assert params.broker.password == "1234" and params.client.buffer_enabled
     assert params.client.keep_alive_interval == 2.0 and params.client.buffer_max_age == 5.0
+    assert params.client.max_packet_size == 2048
     assert params.ros2mqtt[0].qos == 2 and params.mqtt2ros[0].latched and params.mqtt2ros[0].queue_size == 3
 
 
