@@ -180,9 +180,14 @@ class McuBridge:
                 continue
             try:
                 stream.publisher.publish(msg)
-            except (rospy.ROSSerializationException, micros_rt.MicrosRtError) as exc:
+            except rospy.ROSSerializationException as exc:
                 self.link.bad_input(info["source"], WireError("bad_field", f"{stream.entry.topic}: {exc}"),
                                     "a datagram")
+                continue
+            except (rospy.ROSException, micros_rt.MicrosRtError) as exc:
+                if not rospy.is_shutdown():  # at shutdown the topic closes under us: nothing to say
+                    self.link.warn(("publish", stream.entry.topic), f"mcu-bridge: cannot publish on "
+                                   f"{stream.entry.topic}: {exc}", group="publish")
                 continue
             self.stats.add("from_microcontroller", "published", entry=stream.entry.name)
 
@@ -212,8 +217,10 @@ class McuBridge:
         snapshot = self.snapshot()
         try:
             self._stats_pub.publish(String(data=json.dumps(snapshot, sort_keys=True)))
-        except micros_rt.MicrosRtError as exc:
-            _log.warning("micros_rt: mcu-bridge: cannot publish ~stats: %s", exc)
+        except (rospy.ROSException, micros_rt.MicrosRtError) as exc:
+            if not rospy.is_shutdown():
+                self.link.warn(("publish", self.stats_topic), f"mcu-bridge: cannot publish {self.stats_topic}: {exc}",
+                               group="publish")
         if self._stats_cb is not None:
             self._stats_cb(snapshot)
 
