@@ -88,7 +88,9 @@ class MosquittoBroker:
         else:
             lines.append("allow_anonymous true")
         if persistence:
-            lines += ["persistence true", f"persistence_location {self.workdir}/", "autosave_interval 1"]
+            # saved after every change, so that even a SIGKILLed broker keeps its queued QoS 1/2 messages
+            lines += ["persistence true", f"persistence_location {self.workdir}/", "autosave_interval 1",
+                      "autosave_on_changes true"]
         if tls is not None:
             lines += [f"cafile {tls.ca}", f"certfile {tls.server_cert}", f"keyfile {tls.server_key}",
                       "require_certificate true"]

@@ -159,7 +159,7 @@ def test_broker_restart_with_500_qos1_messages_in_flight(ros_master: harness.Ros
                            "--queue-size", 1000, "--wait-subscribers", 1, "--node-name", "rs_talker"),
                        name="rs_talker")
         listener.wait_for_count("recv", 100, timeout=60)
-        broker.stop()                                   # mid-stream: messages in flight and queued
+        broker.stop(kill=True)        # SIGKILL mid-stream: messages in flight both ways and queued at the broker
         down_at = len(listener.events("recv"))
         time.sleep(1.0)
         broker.start()
@@ -174,5 +174,5 @@ def test_broker_restart_with_500_qos1_messages_in_flight(ros_master: harness.Ros
                 seen.append(e["data"])
         assert seen == list(range(n)), seen[:20]
         duplicates = len(listener.events("recv")) - n
-        print(f"broker stopped after {down_at} of {n} received, restarted 1 s later: {len(seen)} of {n} delivered in "
+        print(f"broker SIGKILLed after {down_at} of {n} received, restarted 1 s later: {len(seen)} of {n} delivered in "
               f"order ({duplicates} QoS 1 duplicates); sender {last_counters(a)}")
