@@ -312,7 +312,8 @@ def codec_for(data_class: Type[genpy.Message]) -> MessageCodec:
 
 def encode_datagram(name: str, fields: Dict[str, Any]) -> bytes:
     """One topic datagram in the seed's map form: the stream name, then the map of fields."""
-    return msgpack.packb(name, use_bin_type=True) + msgpack.packb(fields, use_bin_type=True)  # type: ignore[no-any-return]
+    packed: bytes = msgpack.packb(name, use_bin_type=True) + msgpack.packb(fields, use_bin_type=True)
+    return packed
 
 
 def _unpack_all(data: bytes, at_most: int) -> List[Any]:

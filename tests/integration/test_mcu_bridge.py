@@ -88,13 +88,16 @@ def test_twist_commands_reach_the_c_board_field_for_field_and_oversized_is_refus
     twist = {"linear": {"x": 0.25, "y": -1.5, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 3.0}}
     talker = spawn(mrt_peer_argv("talk", "--topic", "/mcu_b/cmd_vel", "--type", "geometry_msgs/Twist",
                                  "--data-json", json.dumps(twist), "--count", 20, "--rate", 20,
-                                 "--wait-subscribers", 1, "--linger", 0.5, "--node-name", "mcu_b_talker"))
+                                 "--wait-subscribers", 1, "--wait-dds-readers", 1, "--linger", 0.5,
+                                 "--node-name", "mcu_b_talker"))
     big = spawn(mrt_peer_argv("talk", "--topic", "/mcu_b/text", "--data-json", json.dumps({"data": "x" * 2000}),
-                              "--count", 2, "--rate", 5, "--wait-subscribers", 1, "--linger", 0.5,
+                              "--count", 2, "--rate", 5, "--wait-subscribers", 1, "--wait-dds-readers", 1,
+                              "--linger", 0.5,
                               "--node-name", "mcu_b_big"))
     assert talker.wait(60) == 0 and big.wait(60) == 0
     small = spawn(mrt_peer_argv("talk", "--topic", "/mcu_b/text", "--data-json", json.dumps({"data": "small {i}"}),
-                                "--count", 2, "--rate", 5, "--wait-subscribers", 1, "--linger", 0.5,
+                                "--count", 2, "--rate", 5, "--wait-subscribers", 1, "--wait-dds-readers", 1,
+                              "--linger", 0.5,
                                 "--node-name", "mcu_b_small"))
     assert small.wait(60) == 0
     harness.wait_until(lambda: len([e for e in board.events("recv") if e["name"] == "text"]) >= 2, 20,
@@ -106,7 +109,8 @@ def test_twist_commands_reach_the_c_board_field_for_field_and_oversized_is_refus
     refusal = [line for line in bridge.stderr_tail(200).splitlines() if "/mcu_b/text: the message encodes" in line]
     print(f"\nmicros_rt talker -> bridge -> C board: {len(commands)}/20 Twist, e.g. {commands[0]['fields']} "
           f"with IP TOS {commands[0]['tos']}; texts at the board {[t['fields']['data'] for t in texts]}; "
-          f"bridge counters {stats['to_microcontroller']}; the bridge said: {refusal[0].split('micros_rt: ')[-1][:160]}")
+          f"bridge counters {stats['to_microcontroller']}; "
+          f"the bridge said: {refusal[0].split('micros_rt: ')[-1][:160]}")
     assert len(commands) == 20
     assert all(c["fields"] == twist and c["tos"] == 34 << 2 for c in commands)  # HIGH = DSCP AF41
     assert [t["fields"] for t in texts] == [{"data": "small 0"}, {"data": "small 1"}]

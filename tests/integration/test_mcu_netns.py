@@ -59,13 +59,15 @@ def test_best_effort_through_30_percent_loss_and_a_silent_board(lossy_link: Host
     bridge = spawn(hosts.run(0, mcu_harness.bridge_argv(config, "mcu_bridge")), env=env)
     bridge.wait_for("ready", 60)
     listener = spawn(hosts.run(0, mrt_peer_argv("listen", "--topic", "/imu", "--type", "sensor_msgs/Imu",
-                                                "--full-msg", "--queue-size", 1000, "--duration", 90)), env=env)
+                                                "--full-msg", "--queue-size", 1000, "--duration", 90,
+                                                "--hints", "tcp")), env=env)  # connected once it says so
     listener.wait_for(lambda e: e.get("event") == "status" and e["transports"], 60)
     talker = spawn(hosts.run(0, mrt_peer_argv("talk", "--topic", "/cmd", "--type", "geometry_msgs/TwistStamped",
                                               "--data-json", json.dumps({"header": {"frame_id": "cmd {i}"},
                                                                          "twist": {"linear": {"x": 0.5}}}),
                                               "--count", CMD_COUNT, "--rate", 100, "--wait-subscribers", 1,
-                                              "--linger", 0.5)), env=env)
+                                              "--wait-dds-readers", 1, "--linger", 0.5)), env=env)
+    talker.wait_for("dds_matched", 60)  # the bridge's DDS reader matched: nothing is lost before the link
     board = spawn(hosts.run(1, standin_argv(standin, ports, "--rate", 100, "--count", IMU_COUNT,
                                             "--pause-after", IMU_COUNT // 2, "--pause", 2.0, "--linger", 2,
                                             "--duration", 90)))
