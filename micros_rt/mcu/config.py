@@ -26,7 +26,7 @@ import ipaddress
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Tuple, Type
+from typing import Any, Callable, Dict, List, Optional, Tuple, Type
 
 import genpy
 import roslib.message
@@ -257,23 +257,35 @@ class _Parser:
             raise self.error(node, path, f"{what} {value!r} is already used by the entry on line {seen[value]}")
         seen[value] = node.start_mark.line + 1
 
+    def head(self, item: yaml.MappingNode, path: str, key: str, known: Tuple[str, ...], seen_ros: Dict[str, int],
+             seen_names: Dict[str, int], what: str) -> Tuple[Dict[str, Tuple[yaml.Node, yaml.Node]], str, str, str]:
+        """What topic and service entries share: the fields, the ROS name, the type and the wire name."""
+        got = self.fields(item, path, known, (key, "type"))
+        ros = self.ros_name(got[key][1], f"{path}.{key}")
+        self.unique(seen_ros, ros, got[key][1], f"{path}.{key}", key)
+        type_name = self.text(got["type"][1], f"{path}.type")
+        name = self.text(got["name"][1], f"{path}.name") if "name" in got else type_name
+        self.unique(seen_names, name, got["name"][1] if "name" in got else item, f"{path}.name", f"{what} name")
+        return got, ros, type_name, name
+
+    def resolve(self, node: yaml.Node, path: str, type_name: str, lookup: Callable[[str], Any], what: str,
+                example: str) -> Any:
+        found = lookup(type_name) if "/" in type_name else None
+        if found is None:
+            raise self.error(node, path, f"unknown {what} type {type_name!r}: expected 'package/Type' of an "
+                                         f"installed package (e.g. {example})")
+        return found
+
     def topics(self, node: yaml.Node, section: str) -> Tuple[TopicEntry, ...]:
         out: List[TopicEntry] = []
         names: Dict[str, int] = {}
         topics: Dict[str, int] = {}
         for i, item in self.entries(node, section):
             path = f"{section}[{i}]"
-            got = self.fields(item, path, ("topic", "type", "name", "qos"), ("topic", "type"))
-            topic = self.ros_name(got["topic"][1], f"{path}.topic")
-            self.unique(topics, topic, got["topic"][1], f"{path}.topic", "topic")
-            type_name = self.text(got["type"][1], f"{path}.type")
-            data_class = roslib.message.get_message_class(type_name) if "/" in type_name else None
-            if data_class is None:
-                raise self.error(got["type"][1], f"{path}.type",
-                                 f"unknown message type {type_name!r}: expected 'package/Type' of an installed "
-                                 f"message package (e.g. geometry_msgs/Twist from Debian's python3-geometry-msgs)")
-            name = self.text(got["name"][1], f"{path}.name") if "name" in got else type_name
-            self.unique(names, name, got["name"][1] if "name" in got else item, f"{path}.name", "stream name")
+            got, topic, type_name, name = self.head(item, path, "topic", ("topic", "type", "name", "qos"), topics,
+                                                    names, "stream")
+            data_class = self.resolve(got["type"][1], f"{path}.type", type_name, roslib.message.get_message_class,
+                                      "message", "geometry_msgs/Twist from Debian's python3-geometry-msgs")
             allowed = _TO_QOS if section == "to_microcontroller" else _FROM_QOS
             advertise, subscribe = self.qos(got.get("qos"), f"{path}.qos", allowed, section)
             out.append(TopicEntry(topic, type_name, name, data_class, advertise, subscribe, item.start_mark.line + 1))
@@ -285,17 +297,12 @@ class _Parser:
         services: Dict[str, int] = {}
         for i, item in self.entries(node, section):
             path = f"{section}[{i}]"
-            got = self.fields(item, path, ("service", "type", "name", "timeout", "qos"), ("service", "type"))
-            service = self.ros_name(got["service"][1], f"{path}.service")
-            self.unique(services, service, got["service"][1], f"{path}.service", "service")
-            type_name = self.text(got["type"][1], f"{path}.type")
-            service_class = roslib.message.get_service_class(type_name) if "/" in type_name else None
-            if service_class is None:
-                raise self.error(got["type"][1], f"{path}.type",
-                                 f"unknown service type {type_name!r}: expected 'package/Type' of an installed "
-                                 f"package (e.g. std_srvs/Trigger from Debian's python3-std-srvs)")
-            name = self.text(got["name"][1], f"{path}.name") if "name" in got else type_name
-            self.unique(names, name, got["name"][1] if "name" in got else item, f"{path}.name", "service name")
+            got, service, type_name, name = self.head(item, path, "service",
+                                                      ("service", "type", "name", "timeout", "qos"), services,
+                                                      names, "service")
+            service_class = self.resolve(got["type"][1], f"{path}.type", type_name,
+                                         roslib.message.get_service_class, "service",
+                                         "std_srvs/Trigger from Debian's python3-std-srvs")
             timeout = self.seconds(got["timeout"][1], f"{path}.timeout") if "timeout" in got \
                 else DEFAULT_SERVICE_TIMEOUT
             advertise, _ = self.qos(got.get("qos"), f"{path}.qos", _SERVICE_QOS, section)

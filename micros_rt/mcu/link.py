@@ -352,9 +352,7 @@ class McuLink:
             return
         reader = self._readers.get(name)
         if reader is None:
-            known = ", ".join(repr(n) for n in self._readers) or "none"
-            self.bad_input(peer, WireError("unknown_stream", f"no from_microcontroller entry is named {name[:60]!r} "
-                                                             f"(configured: {known})"), "a datagram")
+            self.bad_input(peer, _unknown("unknown_stream", "from_microcontroller", name, self._readers), "a datagram")
             return
         reader.put(data, peer)
 
@@ -405,10 +403,8 @@ class McuLink:
                     return
                 entry = self._services.get(name)
                 if entry is None:
-                    known = ", ".join(repr(n) for n in self._services) or "none"
-                    self.bad_input(peer, WireError("unknown_service", f"no services_for_microcontroller entry is "
-                                                                      f"named {name[:60]!r} (configured: {known})"),
-                                   "a service call")
+                    self.bad_input(peer, _unknown("unknown_service", "services_for_microcontroller", name,
+                                                  self._services), "a service call")
                     return
                 assert self._handler is not None
                 self.stats.add("services_for_microcontroller", "calls", entry=entry.name)
@@ -480,6 +476,11 @@ class McuLink:
             raise McuServiceError(f"cannot call {entry.service} ({entry.name!r}) on {where}: "
                                   f"{exc.strerror or exc}") from exc
         return answer
+
+
+def _unknown(kind: str, section: str, name: str, known: Dict[str, Any]) -> WireError:
+    configured = ", ".join(repr(n) for n in known) or "none"
+    return WireError(kind, f"no {section} entry is named {name[:60]!r} (configured: {configured})")
 
 
 def _set_tos(sock: socket.socket, priority: TransportPriority, family: int) -> None:
