@@ -326,11 +326,11 @@ class McuLink:
         except OSError as exc:
             raise TransportError(f"cannot send to {board.address}:{board.topic_port}: {exc.strerror}") from exc
 
-    def _receive_loop(self) -> None:
-        sock = self._udp
+    def _socket_loop(self, receive: Callable[[], Tuple[Any, Any]], handle: Callable[[Any, Any], None]) -> None:
+        """Until closed: ``handle(*receive())``; the socket's 0.2 s timeout lets it notice ``close()``."""
         while not self._closed.is_set():
             try:
-                data, addr = sock.recvfrom(65536)
+                item, addr = receive()
             except socket.timeout:
                 continue
             except OSError:
@@ -338,7 +338,11 @@ class McuLink:
                     return
                 time.sleep(0.05)
                 continue
-            self._datagram(data, f"{addr[0]}:{addr[1]}", addr[0])
+            handle(item, addr)
+
+    def _receive_loop(self) -> None:
+        self._socket_loop(lambda: self._udp.recvfrom(65536),
+                          lambda data, addr: self._datagram(data, f"{addr[0]}:{addr[1]}", addr[0]))
 
     def _datagram(self, data: bytes, peer: str, ip: str) -> None:
         if ip != self._board_ip:
@@ -367,30 +371,23 @@ class McuLink:
 
     def _accept_loop(self) -> None:
         assert self._tcp is not None
-        while not self._closed.is_set():
-            try:
-                conn, addr = self._tcp.accept()
-            except socket.timeout:
-                continue
-            except OSError:
-                if self._closed.is_set():
-                    return
-                time.sleep(0.05)
-                continue
-            peer = f"{addr[0]}:{addr[1]}"
-            if addr[0] != self._board_ip:
-                conn.close()
-                self.bad_input(peer, WireError("foreign_sender", f"only {self._board_ip} (microcontroller.address) "
-                                                                 f"may call services through the bridge"),
-                               "a service call")
-                continue
-            if not self._slots.acquire(blocking=False):
-                conn.close()
-                self.stats.add("bad_input", "busy")
-                self.warn((addr[0], "busy"), f"microcontroller link: a service call from {peer} was refused: "
-                          f"{MAX_CONCURRENT_CALLS} calls are already in progress", group="busy")
-                continue
-            threading.Thread(target=self._serve_one, args=(conn, peer), name="mcu-link call", daemon=True).start()
+        self._socket_loop(self._tcp.accept, self._accepted)
+
+    def _accepted(self, conn: socket.socket, addr: Any) -> None:
+        peer = f"{addr[0]}:{addr[1]}"
+        if addr[0] != self._board_ip:
+            conn.close()
+            self.bad_input(peer, WireError("foreign_sender", f"only {self._board_ip} (microcontroller.address) "
+                                                             f"may call services through the bridge"),
+                           "a service call")
+            return
+        if not self._slots.acquire(blocking=False):
+            conn.close()
+            self.stats.add("bad_input", "busy")
+            self.warn((addr[0], "busy"), f"microcontroller link: a service call from {peer} was refused: "
+                      f"{MAX_CONCURRENT_CALLS} calls are already in progress", group="busy")
+            return
+        threading.Thread(target=self._serve_one, args=(conn, peer), name="mcu-link call", daemon=True).start()
 
     def _serve_one(self, conn: socket.socket, peer: str) -> None:
         try:
