@@ -155,12 +155,15 @@ class McuBridge:
         while not self._closed.is_set():
             self._wake.wait(_POLL)
             self._wake.clear()
-            for stream in self._streams:
-                self._deliver(stream)
-                self._check_deadline(stream)
-            if time.monotonic() >= next_stats:
-                next_stats = time.monotonic() + self.config.stats_period
-                self._publish_stats()
+            try:
+                for stream in self._streams:
+                    self._deliver(stream)
+                    self._check_deadline(stream)
+                if time.monotonic() >= next_stats:
+                    next_stats = time.monotonic() + self.config.stats_period
+                    self._publish_stats()
+            except Exception as exc:  # a bug (or a stats_cb) must not end the delivery: counted, logged
+                self.link.internal_error(exc, "in the bridge's delivery thread")
 
     def _deliver(self, stream: _FromStream) -> None:
         for payload, info in stream.reader.take(256):

@@ -305,6 +305,12 @@ class McuLink:
                   f"microcontroller link: {what} from {peer} dropped ({err.kind}): {err}. The bridge goes on; "
                   f"further ones from this peer are counted in ~stats bad_input.{err.kind}", group=err.kind)
 
+    def internal_error(self, exc: BaseException, what: str) -> None:
+        """An unexpected exception on one of the link's threads: counted (``link.internal_errors``), logged."""
+        self.stats.add("link", "internal_errors")
+        self.warn(("internal", type(exc).__name__), f"microcontroller link: internal error {what}: "
+                  f"{type(exc).__name__}: {exc} (please report it; the link goes on)", group="internal")
+
     # -- topics
     def open_writer(self, entry: TopicEntry) -> UdpWriter:
         return UdpWriter(self, entry)
@@ -338,7 +344,10 @@ class McuLink:
                     return
                 time.sleep(0.05)
                 continue
-            handle(item, addr)
+            try:
+                handle(item, addr)
+            except Exception as exc:  # a bug must not end the loop: say it (once a kind), count it, go on
+                self.internal_error(exc, f"handling input from {addr}")
 
     def _receive_loop(self) -> None:
         self._socket_loop(lambda: self._udp.recvfrom(65536),

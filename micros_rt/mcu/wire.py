@@ -328,7 +328,8 @@ def _unpack_all(data: bytes, at_most: int) -> List[Any]:
                 raise WireError("bad_shape", f"more than {at_most} MessagePack objects in one datagram")
     except WireError:
         raise
-    except (ValueError, msgpack.UnpackException) as exc:  # FormatError, StackError, bad UTF-8, ...
+    except (ValueError, TypeError, msgpack.UnpackException) as exc:  # FormatError, StackError, bad UTF-8,
+        # an array or map used as a map key (unhashable), ...
         raise WireError("not_msgpack", f"not MessagePack ({str(exc) or type(exc).__name__}; the datagram starts "
                                        f"{data[:8].hex(' ')})") from exc
     if unpacker.tell() != len(data):

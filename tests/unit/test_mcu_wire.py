@@ -8,6 +8,9 @@ from __future__ import annotations
 
 from typing import Any
 
+import os
+import random
+
 import genpy
 import msgpack
 import pytest
@@ -174,3 +177,26 @@ def test_frame_reader_waits_for_end_and_bounds_the_size() -> None:
     with pytest.raises(WireError) as info:
         wire.FrameReader(16).feed(b"x" * 17)
     assert info.value.kind == "frame_too_long"
+
+
+def test_fuzzed_datagrams_and_frames_only_ever_raise_wire_error() -> None:
+    rnd = random.Random(12)
+    imu = wire.codec_for(Imu)
+    request = wire.codec_for(SetBool._request_class)
+    seeds = [wire.encode_datagram("imu", imu.to_wire(Imu())), bytes(msgpack.packb(["imu", *imu.to_wire_list(Imu())])),
+             wire.encode_request("set_mode", [True]), bytes.fromhex("a3696d7581910102")]  # a map key that is an array
+    kinds: dict[str, int] = {}
+    for i in range(20_000):
+        data = bytearray(os.urandom(rnd.randint(0, 40)) if i % 5 == 0 else rnd.choice(seeds))
+        for _ in range(rnd.randint(0, 3) if i % 5 else 0):
+            data[rnd.randrange(len(data))] = rnd.randrange(256)
+        try:
+            if data.endswith(b"\xc0"):
+                name, params = wire.decode_request(bytes(data[:-1]))
+                request.from_wire(params)
+            else:
+                name, body = wire.split_datagram(bytes(data))
+                imu.from_wire(body)
+        except WireError as exc:
+            kinds[exc.kind] = kinds.get(exc.kind, 0) + 1
+    assert {"not_msgpack", "bad_shape", "bad_crc"} <= set(kinds)
