@@ -432,6 +432,8 @@ class McuLink:
         except OSError as exc:
             self.warn((peer.rsplit(":", 1)[0], "socket"), f"microcontroller link: service connection from {peer}: "
                       f"{exc}", group="socket")
+        except Exception as exc:  # e.g. a ROS service answering a value its own type cannot carry
+            self.internal_error(exc, f"serving a call from {peer}")
         finally:
             self._slots.release()
 
