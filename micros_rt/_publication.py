@@ -20,8 +20,7 @@ from ._introspection import remember_verdict
 from ._registry import EndpointRegistry
 from ._rospy_compat import short
 from ._stats import PublisherStatistics
-from . import mqtt as _mqtt
-from .backends import EndpointSpec
+from .backends import EndpointSpec, MirrorWriter, ProfileBackend
 from .exceptions import MicrosRtError
 from .negotiation import (
     MAX_PENDING_DDS_OFFERS,
@@ -49,7 +48,8 @@ class _Publication:
     """Per topic and process: the rospy publisher and the DDS writer. Owned by the registry."""
 
     def __init__(self, topic: str, data_class: Type[genpy.Message], queue_size: Optional[int], latch: bool,
-                 options: AdvertiseQoSOptions, *, dds: "Optional[DDSBackend]", tag: Dict[str, str]) -> None:
+                 options: AdvertiseQoSOptions, *, dds: "Optional[DDSBackend]", tag: Dict[str, str],
+                 extra: Tuple[ProfileBackend, ...] = ()) -> None:
         self.topic = topic
         self.data_class = data_class
         self.latch = latch
@@ -71,8 +71,10 @@ class _Publication:
                 self.dds = dds.open_writer(EndpointSpec(topic, data_class, queue_size, latch, tag), options)
             except MicrosRtError as exc:
                 _log.warning("micros_rt: topic %s will use TCPROS only: %s", topic, exc)
-        # MQTT mirror when the YAML profile has an mqtt rule for the topic (micros_rt.mqtt.backend)
-        self.mqtt = _mqtt.open_writer(EndpointSpec(topic, data_class, queue_size, latch, tag), options)
+        # writers of the back ends the YAML profile attaches to this topic (MQTT): every message is mirrored
+        spec = EndpointSpec(topic, data_class, queue_size, latch, tag)
+        self.mirrors: Tuple[MirrorWriter, ...] = tuple(
+            w for w in (b.open_writer(spec, options) for b in extra) if w is not None)
 
     def start(self) -> None:
         self.tcpros = compat.TcprosWriter(self.topic, self.data_class, self.queue_size, self.latch)
@@ -213,6 +215,7 @@ class _Publication:
             try:
                 dds = self.dds
                 prepared = dds.prepare(msg) if dds is not None and (dds.matched_count or self.latch) else None
+                mirrored = [(m, m.prepare(msg)) for m in self.mirrors] if self.mirrors else ()
                 tcpros.send(msg, len(self.connections))  # serializes (and may raise) before it writes anything
                 if prepared is not None:
                     assert dds is not None
@@ -223,8 +226,8 @@ class _Publication:
                         waited = time.monotonic() - t0
                         if waited > 0.001:
                             self.blocked_seconds += waited
-                if self.mqtt is not None:
-                    self.mqtt.send(msg)
+                for mirror, data in mirrored:
+                    mirror.send(data)
                 self.published += 1
             except (genpy.SerializationError, struct.error, TypeError, ValueError, AttributeError, OverflowError,
                     UnicodeError) as exc:
@@ -241,9 +244,9 @@ class _Publication:
         for conn in conns:
             conn.close()
         dds, self.dds = self.dds, None
-        mqtt, self.mqtt = self.mqtt, None
-        if mqtt is not None:
-            mqtt.close()
+        mirrors, self.mirrors = self.mirrors, ()
+        for mirror in mirrors:
+            mirror.close()
         if dds is not None:
             dds.close()
         if self.tcpros is not None:

@@ -23,8 +23,7 @@ from ._delivery import Inbox
 from ._registry import EndpointRegistry
 from ._stats import LatencyStats, SubscriberStatistics
 from ._writers import DELIVER, HOLD, Accepted, WriterState, WriterTable
-from . import mqtt as _mqtt
-from .backends import EndpointSpec
+from .backends import EndpointSpec, Feed, ProfileBackend
 from .exceptions import MicrosRtError
 from .negotiation import DDS, TCPROS, DDSAnswer, DDSOffer, TransportHints
 from .qos import (
@@ -54,7 +53,8 @@ class _Subscription:
 
     def __init__(self, topic: str, data_class: Type[genpy.Message], queue_size: Optional[int],
                  options: Optional[SubscribeQoSOptions], hints: TransportHints, *,
-                 dds: Optional[DDSBackend], tag: Dict[str, str], graph: str) -> None:
+                 dds: Optional[DDSBackend], tag: Dict[str, str], graph: str,
+                 extra: Tuple[ProfileBackend, ...] = ()) -> None:
         self.topic = topic
         self.data_class = data_class
         self.queue_size = queue_size
@@ -96,16 +96,18 @@ class _Subscription:
                          "nothing will be received", topic)
         self.thread = threading.Thread(target=self._run, name=f"micros_rt delivery {topic}", daemon=True)
         self.tcpros: Optional[compat.TcprosReader] = None
-        self.mqtt: Any = None
+        self._extra = extra
+        self.feeds: Tuple[Feed, ...] = ()
 
     def start(self) -> None:
         """Start delivering and register with rospy (which triggers the negotiation: the reader exists)."""
         self.thread.start()
         self.tcpros = compat.TcprosReader(self.topic, self.data_class, self._on_tcpros, self.queue_size)
-        # fed from MQTT when the YAML profile has an mqtt rule for the topic: the TCPROS delivery path
-        # (time filter, deadline, latency, counters) with transport 'MQTT' (micros_rt.mqtt.backend)
-        self.mqtt = _mqtt.open_reader(EndpointSpec(self.topic, self.data_class, self.queue_size, False, self.tag),
-                                      self.options, self._on_tcpros)
+        # fed by the back ends the YAML profile attaches to this topic (MQTT), through the TCPROS delivery
+        # path (time filter, deadline, latency, counters)
+        spec = EndpointSpec(self.topic, self.data_class, self.queue_size, False, self.tag)
+        self.feeds = tuple(f for f in (b.open_feed(spec, self.options, self._on_tcpros) for b in self._extra)
+                           if f is not None)
 
     def _open_reader(self, *, latched: bool) -> DDSTopicReader:
         assert self._dds is not None
@@ -425,8 +427,9 @@ class _Subscription:
                 self.tcpros.close()
             except Exception as exc:  # rospy at shutdown; the rest is released regardless
                 _log.warning("micros_rt: topic %s: rospy could not unregister the subscriber: %s", self.topic, exc)
-        if self.mqtt is not None:
-            self.mqtt.close()
+        feeds, self.feeds = self.feeds, ()
+        for feed in feeds:
+            feed.close()
         with self._tcp_space:
             self._tcp_space.notify_all()
         self.inbox.wake()
@@ -476,8 +479,9 @@ class Subscriber:
         """Publisher URI -> 'DDS' or 'TCPROS' for every current connection (and the MQTT link's URI -> 'MQTT')."""
         sub = self._sub
         links = {} if sub is None or sub.tcpros is None else sub.tcpros.transports()
-        if sub is not None and sub.mqtt is not None:
-            links.update(sub.mqtt.transports())
+        if sub is not None:
+            for feed in sub.feeds:
+                links.update(feed.transports())
         return links
 
     @property

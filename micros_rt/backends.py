@@ -14,13 +14,15 @@ every writer ``prepare()``s (serializes, raising ``genpy.SerializationError``), 
 from __future__ import annotations
 
 from dataclasses import dataclass
+import importlib
 from typing import Any, Callable, Dict, List, Optional, Protocol, Sequence, Set, Tuple, Type
 
 import genpy
 
 from .qos import AdvertiseQoSOptions, SubscribeQoSOptions
 
-__all__ = ["Backend", "EndpointSpec", "ReaderBackend", "WriterBackend", "RemoteWriter", "Sample"]
+__all__ = ["Backend", "EndpointSpec", "Feed", "MirrorWriter", "PROFILE_BACKENDS", "ProfileBackend", "ReaderBackend", "WriterBackend",
+           "RemoteWriter", "Sample", "profile_backends"]
 
 
 @dataclass(frozen=True)
@@ -96,3 +98,59 @@ class Backend(Protocol):
 
     def describe(self) -> List[str]:
         """Words for ``rosnode info`` and logs (domain, interface)."""
+
+
+# ---------------------------------------------------------------------------------------------------
+# Back ends a YAML profile attaches to topics beside the negotiated DDS/TCPROS link (MQTT today).
+# A publication mirrors its messages to each writer they open; a subscription is fed by each feed,
+# through the same delivery path as its TCPROS links (time filter, deadline, statistics).
+
+
+class MirrorWriter(Protocol):
+    """A profile back end's writer: two-phase like :class:`WriterBackend` (prepare raises on a bad value
+    before anything is sent anywhere; send does not raise for a peer or broker that is away)."""
+
+    protocol: str
+
+    def prepare(self, msg: Any) -> Any: ...
+
+    def send(self, prepared: Any) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class Feed(Protocol):
+    """Messages from a profile back end into a subscription (``deliver(msg)`` per message)."""
+
+    protocol: str
+
+    def transports(self) -> Dict[str, str]:
+        """Link id -> protocol name, for ``Subscriber.connection_transports()``."""
+
+    def close(self) -> None: ...
+
+
+class ProfileBackend(Protocol):
+    """A back end chosen per topic by the YAML profile: opens a writer or a feed when one of its rules
+    names the topic, else returns None."""
+
+    def open_writer(self, spec: EndpointSpec, options: AdvertiseQoSOptions) -> Optional[MirrorWriter]: ...
+
+    def open_feed(self, spec: EndpointSpec, options: Optional[SubscribeQoSOptions],
+                  deliver: Callable[[Any], None]) -> Optional[Feed]: ...
+
+
+#: profile section -> module whose ``profile_backend(profile, graph=..., node=...)`` returns the
+#: :class:`ProfileBackend` for it. Imported only when a node's profile has that section.
+PROFILE_BACKENDS: Dict[str, str] = {"mqtt": "micros_rt.mqtt"}
+
+
+def profile_backends(profile: Any, *, graph: str, node: str) -> Tuple[ProfileBackend, ...]:
+    """The profile back ends ``profile`` (a :class:`micros_rt.QoSProfile` or None) asks for."""
+    if profile is None:
+        return ()
+    found: List[ProfileBackend] = []
+    for section, module in PROFILE_BACKENDS.items():
+        if getattr(profile, section, None):
+            found.append(importlib.import_module(module).profile_backend(profile, graph=graph, node=node))
+    return tuple(found)

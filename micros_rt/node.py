@@ -15,7 +15,7 @@ import ctypes.util
 import os
 import threading
 import time
-from typing import Any, Callable, Dict, List, Optional, Type, Union
+from typing import Any, Callable, Dict, List, Optional, Tuple, Type, Union
 
 import genpy
 import rospy
@@ -26,6 +26,7 @@ from ._publication import Publisher, _Publication
 from ._runtime import _graph_id, _log, _node, _require_node, dds_backend
 from ._subscription import DeadlineMissed, Subscriber, _Subscription
 from ._logging import flush as flush_logs
+from .backends import ProfileBackend, profile_backends
 from .dds.participant import close_participant
 from .exceptions import QoSTypeError
 from .negotiation.hints import TransportHints
@@ -218,7 +219,7 @@ class NodeHandle:
 
         pub = _node.publications.acquire(
             resolved, lambda: _Publication(resolved, data_class, queue_size, latch, effective, dds=dds_backend(),
-                                           tag=_tag()), reuse)
+                                           tag=_tag(), extra=_profile_backends()), reuse)
         return Publisher(pub, _node.publications)
 
     # subscribers ----------------------------------------------------------
@@ -262,7 +263,7 @@ class NodeHandle:
 
         def create() -> _Subscription:
             new = _Subscription(resolved, data_class, queue_size, effective, hints, dds=dds_backend(), tag=_tag(),
-                                graph=_node.graph)
+                                graph=_node.graph, extra=_profile_backends())
             new.callbacks = ((callback, callback_args),)  # before start(): a latched message may come at once
             created.append(new)
             return new
@@ -273,6 +274,11 @@ class NodeHandle:
                 sub.callbacks = sub.callbacks + ((callback, callback_args),)
             sub.replay_latched(callback, callback_args)  # a new subscriber of a latched topic gets its message
         return Subscriber(sub, _node.subscriptions, callback, callback_args)
+
+
+def _profile_backends() -> Tuple[ProfileBackend, ...]:
+    """The back ends (MQTT) the node's YAML profile attaches to topics beside DDS/TCPROS."""
+    return profile_backends(_node.profile, graph=_node.graph, node=compat.caller_id())
 
 
 def _tag() -> Dict[str, str]:

@@ -217,13 +217,15 @@ class DDSParticipant:
 
         if load_type_data(idl_class):
             try:
-                return Topic(self.dp, name, idl_class)
+                topic = Topic(self.dp, name, idl_class)
             except DDSException as exc:  # bytes Cyclone refuses: build them as if never cached
                 _log.warning("micros_rt: cached DDS type data for %s refused (%s); rebuilding it",
                              idl_class.__idl_typename__, exc)
                 forget_type_data(idl_class)
-        topic = Topic(self.dp, name, idl_class)
-        save_type_data(idl_class)
+                topic = Topic(self.dp, name, idl_class)
+        else:
+            topic = Topic(self.dp, name, idl_class)
+        save_type_data(idl_class)  # a no-op when its file exists
         return topic
 
     def release_topic(self, name: str) -> None:

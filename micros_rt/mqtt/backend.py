@@ -184,8 +184,8 @@ class MqttBackend:
             self.connection.set_tos(priority_tos(top))
         return MqttTopicWriter(self, rule, spec, options)
 
-    def open_reader(self, spec: EndpointSpec, options: Optional[SubscribeQoSOptions],
-                    deliver: Callable[[Any], None]) -> "Optional[MqttTopicReader]":
+    def open_feed(self, spec: EndpointSpec, options: Optional[SubscribeQoSOptions],
+                  deliver: Callable[[Any], None]) -> "Optional[MqttTopicReader]":
         rule = self.settings.rule_for(spec.topic, "in")
         if rule is None:
             return None
@@ -223,21 +223,24 @@ class MqttTopicWriter:
             props.MessageExpiryInterval = self.expiry
         return props
 
-    def send(self, msg: genpy.Message) -> None:
-        """Encode with the rule's codec and publish (buffered on disk while disconnected, if configured)."""
-        conn = self.backend.connection
+    def prepare(self, msg: genpy.Message) -> Tuple[bytes, Any]:
+        """Encode with the rule's codec (raises on a bad value, before the publication sends anything)."""
         if self.rule.codec == "json":
-            payload = codec.msg_to_json(msg).encode("utf-8")
-        elif self.rule.codec == "primitive":
-            payload = codec.msg_to_text(msg).encode("utf-8")
-        else:
-            if self._announced != self.backend.generation:
-                self._announced = self.backend.generation
-                conn.publish(codec.ROS_MSG_TYPE_PREFIX + self.mqtt_topic,
-                             codec.encode_msg_type(codec.RosMsgType.of(type(msg))), qos=self.qos, retain=True)
-            buf = io.BytesIO()
-            msg.serialize(buf)
-            payload = codec.encode_ros_payload(buf.getvalue())
+            return codec.msg_to_json(msg).encode("utf-8"), None
+        if self.rule.codec == "primitive":
+            return codec.msg_to_text(msg).encode("utf-8"), None
+        buf = io.BytesIO()
+        msg.serialize(buf)
+        return codec.encode_ros_payload(buf.getvalue()), type(msg)
+
+    def send(self, prepared: Tuple[bytes, Any]) -> None:
+        """Publish what :meth:`prepare` made (buffered on disk while disconnected, if configured)."""
+        payload, msg_class = prepared
+        conn = self.backend.connection
+        if msg_class is not None and self._announced != self.backend.generation:
+            self._announced = self.backend.generation  # mqtt_client's type announcement, once per connection
+            conn.publish(codec.ROS_MSG_TYPE_PREFIX + self.mqtt_topic,
+                         codec.encode_msg_type(codec.RosMsgType.of(msg_class)), qos=self.qos, retain=True)
         try:
             if conn.publish(self.mqtt_topic, payload, qos=self.qos, retain=self.retain, properties=self._properties()):
                 self.sent += 1
