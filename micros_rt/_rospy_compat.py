@@ -116,6 +116,11 @@ class DDSConnection:
     """
 
     transport_type = "DDS"
+    #: rospy's connection interface: ``Subscriber.add_callback`` replays each connection's ``latch`` (#1852).
+    #: A second rospy Subscriber of a topic made while DDS links are being added read it and raised
+    #: AttributeError (a 30-node graph lost a node to it). The latched DDS message is replayed by the
+    #: subscription itself (``_Subscription.replay_latched``), from its writer's state.
+    latch = None
 
     def __init__(self, topic: str, endpoint_id: str, direction: str, info: str, peer_guid: str = "",
                  on_close: Optional[Callable[["DDSConnection"], None]] = None) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from typing import Any, Callable, List, Optional, Sequence, Set, Tuple, TypeVar
 
 from cyclonedds.core import DDSException, Listener
@@ -164,11 +165,18 @@ class DDSBackend:
     def _start_announcer(self) -> None:
         from .ros2_graph import Ros2GraphAnnouncer
 
-        try:
-            announcer: Any = Ros2GraphAnnouncer(self.participant, self.node_name)
-        except (MicrosRtError, DDSException) as exc:
-            _log.warning("micros_rt: ROS 2 tools will not name this node (ros_discovery_info: %s)", exc)
-            announcer = False
+        announcer: Any = False
+        for attempt in range(3):
+            try:
+                announcer = Ros2GraphAnnouncer(self.participant, self.node_name)
+                break
+            except (MicrosRtError, DDSException) as exc:
+                # seen once in 84 processes of a 30-node graph start: Cyclone refused the Topic
+                # (BAD_PARAMETER) while the main thread created its own topics; a second try succeeds
+                if attempt == 2:
+                    _log.warning("micros_rt: ROS 2 tools will not name this node (ros_discovery_info: %s)", exc)
+                else:
+                    time.sleep(0.2)
         with self._lock:
             self._announcer = announcer
             pending, self._pending = self._pending, []
