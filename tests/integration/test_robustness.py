@@ -89,21 +89,27 @@ def test_fake_dds_offers_leave_no_phantom_connections(ros_master: harness.RosMas
         assert accepted <= MAX_PENDING, \
             f"{accepted} of 300 fake offers accepted in {flood_s:.2f} s (cap {MAX_PENDING})"
     slowest = 0.0
-    for i in range(20):  # a megabyte in a field: refused, fast
-        t0 = time.monotonic()
-        code, _msg, proto = harness.node_call_raw(uri, "requestTopic", "/phantom",
-                                                  [offer(dds_domain, "/phantom", "f" * 1_000_000), ["TCPROS"]],
-                                                  caller_id=f"/huge_{i}", timeout=10)
-        slowest = max(slowest, time.monotonic() - t0)
-        assert code == 1 and proto[0] == "TCPROS", f"an offer with a 1 MB reader string got {proto[0]!r}: {_msg}"
+    rss_rounds = [rss0]
+    for rnd in range(2):
+        for i in range(20):  # a megabyte in a field: refused, fast
+            t0 = time.monotonic()
+            code, _msg, proto = harness.node_call_raw(uri, "requestTopic", "/phantom",
+                                                      [offer(dds_domain, "/phantom", "f" * 1_000_000), ["TCPROS"]],
+                                                      caller_id=f"/huge_{rnd}_{i}", timeout=10)
+            slowest = max(slowest, time.monotonic() - t0)
+            assert code == 1 and proto[0] == "TCPROS", f"an offer with a 1 MB reader string got {proto[0]!r}: {_msg}"
+        rss_rounds.append(rss_kb(talker.pid))
     no_phantoms(uri, "/phantom")
-    rss1 = rss_kb(talker.pid)
+    rss1, rss2 = rss_rounds[1], rss_rounds[2]
     print(f"\n300 fake offers in {flood_s:.2f} s: {accepted} accepted ({most_at_once} DDS links at once), "
-          f"all dropped within {UNMATCHED_READER_TIMEOUT:.0f} s; 20 offers with a 1 MB reader string: "
-          f"slowest answer {slowest:.3f} s; "
-          f"talker RSS {rss0} -> {rss1} kB")
+          f"all dropped within {UNMATCHED_READER_TIMEOUT:.0f} s; 2 x 20 offers with a 1 MB reader string: "
+          f"slowest answer {slowest:.3f} s; talker RSS {rss0} -> {rss1} -> {rss2} kB")
     assert slowest < 1.0, f"an offer with a 1 MB reader string took {slowest:.2f} s to answer"
-    assert rss1 - rss0 < 5 * 1024, f"talker RSS grew {rss0} -> {rss1} kB"
+    # micros_rt keeps freed large blocks in its heap for the next big message (node.py, _tune_malloc), so the
+    # first round may leave the XML-RPC parser's peak resident; kept offers would be 20 MB a round, and a
+    # leak grows again on the second round
+    assert rss1 - rss0 < 12 * 1024, f"talker RSS grew {rss0} -> {rss1} kB on 20 offers with 1 MB strings"
+    assert rss2 - rss1 < 2 * 1024, f"talker RSS grew again {rss1} -> {rss2} kB on 20 more: a leak"
     warnings = [w for w in logs(talker) if "never appeared" in w or "DDS" in w]
     assert 0 < len(warnings) <= 15, warnings  # 5 lines per kind of problem, then counted
 
