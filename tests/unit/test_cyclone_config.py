@@ -71,3 +71,12 @@ def test_cyclone_accepts_the_layered_configuration() -> None:
 def test_loopback_nodes_use_large_fragments_and_network_nodes_do_not() -> None:
     assert "<FragmentSize>63000B</FragmentSize>" in micros_rt_defaults({"ROS_IP": "127.0.0.1"})
     assert "FragmentSize" not in micros_rt_defaults({"ROS_IP": "10.1.2.3"})  # 1,500 B MTUs: Cyclone's default
+
+
+def test_large_samples_get_a_receive_buffer_to_land_in() -> None:
+    # a 1920x1080 Image is ~100 fragments in one burst: the kernel's default UDP buffer dropped them
+    from micros_rt.dds.participant import RECEIVE_BUFFER_CONFIG, micros_rt_defaults
+
+    for env in ({"ROS_IP": "127.0.0.1"}, {"ROS_IP": "10.1.2.3"}):
+        assert RECEIVE_BUFFER_CONFIG in micros_rt_defaults(env)
+    assert 'max="8MB"' in RECEIVE_BUFFER_CONFIG and "min=" not in RECEIVE_BUFFER_CONFIG  # never fails to start
