@@ -17,6 +17,7 @@ Pseudo-connections live in rospy's own connection lists, so ``getBusInfo``
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import itertools
 import socket
@@ -25,10 +26,11 @@ import logging
 import threading
 import time
 import xmlrpc.client
-from typing import Any, Callable, List, Optional, Protocol, Tuple
+from typing import Any, Callable, Iterator, List, Optional, Protocol, Tuple
 
 import rospy
 import rospy.core
+import rospy.impl.init
 import rospy.impl.masterslave as masterslave
 import rospy.names
 import rospy.topics
@@ -53,6 +55,7 @@ __all__ = [
     "caller_id",
     "add_pseudo_connection",
     "add_node_api_method",
+    "prompt_registration_poll",
     "bus_info",
     "remove_pseudo_connection",
     "short",
@@ -464,6 +467,41 @@ def reregister_all() -> Tuple[int, int, int]:
     for name, uri in srvs:
         reg.reg_added(name, uri, Registration.SRV)
     return len(pubs), len(subs), len(srvs)
+
+
+class _PromptPoll:
+    """``time`` as ``rospy.impl.init`` sees it while a node starts, with a finer registration poll.
+
+    ``start_node`` checks whether the master registration is done, and if not sleeps 0.1 s. The
+    registration takes a few milliseconds on a local master, so whenever the first check came too
+    early a node's start lost ~95 ms (measured: ``init_node`` 10 ms or 110 ms, run to run). Here the
+    sleeps start at 2 ms and double up to rospy's 0.1 s, so a master that is down costs no more
+    wake-ups than before."""
+
+    def __init__(self) -> None:
+        self._step = 0.002
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(time, name)
+
+    def sleep(self, seconds: float) -> None:
+        if seconds < self._step:
+            time.sleep(seconds)
+            return
+        time.sleep(self._step)
+        self._step = min(self._step * 2, seconds)
+
+
+@contextlib.contextmanager
+def prompt_registration_poll() -> Iterator[None]:
+    """Within this block, ``rospy.init_node`` notices its master registration within milliseconds."""
+    module: Any = rospy.impl.init
+    original = module.time
+    module.time = _PromptPoll()
+    try:
+        yield
+    finally:
+        module.time = original
 
 
 def install(find_publication: Callable[[str], Optional[PublicationHook]],

@@ -35,6 +35,7 @@ class _NodeState:
         default_factory=lambda: EndpointRegistry("subscription"))
     lock: threading.RLock = field(default_factory=threading.RLock)
     dds: "Optional[DDSBackend]" = None
+    dds_start: Optional[threading.Thread] = None
 
 
 _node = _NodeState()
@@ -54,6 +55,36 @@ def _graph_id() -> str:
 def _require_node() -> None:
     if not _node.initialized:
         raise NodeNotInitializedError("call micros_rt.init_node(name) before advertising or subscribing")
+
+
+def start_dds_early() -> None:
+    """Import the DDS back end on a background thread while rospy registers the node with the master.
+
+    Importing cyclonedds and micros_rt's DDS modules takes 80-200 ms of a node's start, and the node's
+    first ``advertise`` or ``subscribe`` waited for it; ``init_node`` spends a good part of that waiting
+    on the master's answers. The participant itself (~3 ms) is still created by the first topic, after
+    rospy's logging is set up, so a DDS that cannot start is reported as before."""
+    if os.environ.get("MICROS_RT_DISABLE_DDS", "") not in ("", "0"):
+        return
+
+    def start() -> None:
+        try:
+            import cyclonedds.domain  # noqa: F401
+            from .dds import backend  # noqa: F401
+        except Exception:  # the first topic imports them again and reports what is wrong, in words
+            pass
+
+    thread = threading.Thread(target=start, name="micros_rt DDS import", daemon=True)
+    with _node.lock:
+        _node.dds_start = thread
+    thread.start()
+
+
+def wait_dds_started(timeout: float = 10.0) -> None:
+    """Let the early import finish (before the participant is closed, at shutdown)."""
+    thread = _node.dds_start
+    if thread is not None and thread is not threading.current_thread():
+        thread.join(timeout)
 
 
 def dds_backend() -> "Optional[DDSBackend]":

@@ -23,7 +23,7 @@ import rospy
 from . import _introspection
 from . import _rospy_compat as compat
 from ._publication import Publisher, _Publication
-from ._runtime import _graph_id, _log, _node, _require_node, dds_backend
+from ._runtime import _graph_id, _log, _node, _require_node, dds_backend, start_dds_early, wait_dds_started
 from ._subscription import DeadlineMissed, Subscriber, _Subscription
 from ._logging import flush as flush_logs
 from .backends import ProfileBackend, profile_backends
@@ -67,7 +67,9 @@ def init_node(name: str, argv: Optional[List[str]] = None, anonymous: bool = Fal
     path = qos_profile or os.environ.get("MICROS_RT_QOS_PROFILE") or None
     profile = QoSProfile.load(path) if path else None
     _tune_malloc()
-    rospy.init_node(name, argv=argv, anonymous=anonymous, **kwargs)
+    start_dds_early()
+    with compat.prompt_registration_poll():
+        rospy.init_node(name, argv=argv, anonymous=anonymous, **kwargs)
     with _node.lock:
         _node.initialized = True
         _node.profile = profile
@@ -149,6 +151,7 @@ def shutdown(reason: str = "micros_rt.shutdown() called") -> None:
 
 
 def _close_all() -> None:
+    wait_dds_started()
     _node.publications.close_all()
     _node.subscriptions.close_all()
     with _node.lock:

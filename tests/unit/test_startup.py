@@ -1,0 +1,34 @@
+"""Start-up pieces of a node (no master, no DDS): rospy's registration poll made prompt, and restored."""
+
+from __future__ import annotations
+
+import time
+from typing import List
+
+import pytest
+import rospy.impl.init
+
+from micros_rt import _rospy_compat as compat
+
+
+def test_registration_poll_starts_fine_and_backs_off_to_rospys_step(monkeypatch: pytest.MonkeyPatch) -> None:
+    slept: List[float] = []
+    monkeypatch.setattr(time, "sleep", slept.append)
+    with compat.prompt_registration_poll():
+        polled = rospy.impl.init.time
+        for _ in range(9):
+            polled.sleep(0.1)  # what start_node does while the master has not answered
+        polled.sleep(0.00001)  # its XML-RPC start poll: passed through as asked
+    assert slept[:6] == pytest.approx([0.002, 0.004, 0.008, 0.016, 0.032, 0.064])
+    assert slept[6:9] == pytest.approx([0.1, 0.1, 0.1])  # a master that is down: rospy's own pace, no faster
+    assert slept[9] == pytest.approx(0.00001)
+    assert polled.monotonic is time.monotonic  # everything else is the real module's
+
+
+def test_registration_poll_is_rospys_again_after_the_block_even_on_error() -> None:
+    original = rospy.impl.init.time
+    with pytest.raises(RuntimeError):
+        with compat.prompt_registration_poll():
+            assert rospy.impl.init.time is not original
+            raise RuntimeError("init_node failed")
+    assert rospy.impl.init.time is original
