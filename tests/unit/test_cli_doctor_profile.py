@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from micros_rt.cli import CommandError
+from micros_rt.cli import doctor
 from micros_rt.cli import profile as profile_cmd
 from micros_rt.cli.doctor import (
     FAIL,
@@ -46,7 +47,10 @@ def test_a_good_domain_id_passes() -> None:
     ({"ROS_IP": "127.0.0.1", "ROS_HOSTNAME": "10.1.2.3"}, "rospy advertises ROS_HOSTNAME"),
     ({"ROS_IP": "127.0.0.1", "ROS_MASTER_URI": "http://10.1.2.4:11311/"}, "on another host"),
 ])
-def test_address_problems_fail_with_a_fix(env: dict[str, str], expected: str) -> None:
+def test_address_problems_fail_with_a_fix(env: dict[str, str], expected: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    # a name that does not resolve is answered here: looking it up for real sent a DNS query out of eth0
+    real = doctor._resolve
+    monkeypatch.setattr(doctor, "_resolve", lambda host: None if host.endswith(".invalid") else real(host))
     check = check_address(env, IFACES)
     assert check.status == FAIL and expected in check.detail, check
     assert check.fix
