@@ -199,11 +199,11 @@ class _Subscription:
         """Take what the readers have, deliver it and TCPROS messages, until both are empty."""
         queue, tcp = self.queue, self.tcp_inbox
         while not self.closed:
-            took = 0
+            more = False  # a reader gave a full batch: it may hold more
             for reader in self.readers:
                 batch = reader.take(_TAKE_BATCH)
                 if batch:
-                    took += len(batch)
+                    more = more or len(batch) >= _TAKE_BATCH
                     self._admit(reader, batch)
             if queue:
                 bounded = self.depth is not None
@@ -220,7 +220,9 @@ class _Subscription:
                     self._tcp_space.notify_all()
                 for msg in msgs:
                     self._deliver_tcpros(msg)
-            if not took and not queue and not tcp:
+            if not more and not queue and not tcp:
+                # what arrived meanwhile keeps the reader's condition (or the guard) raised: the next wait
+                # returns at once, so no second take just to find a reader empty (1.7 us per message)
                 if self._burst_dropped:
                     self._report_burst()
                 return
