@@ -63,7 +63,9 @@ def start_dds_early() -> None:
     Importing cyclonedds and micros_rt's DDS modules takes 80-200 ms of a node's start, and the node's
     first ``advertise`` or ``subscribe`` waited for it; ``init_node`` spends a good part of that waiting
     on the master's answers. The participant itself (~3 ms) is still created by the first topic, after
-    rospy's logging is set up, so a DDS that cannot start is reported as before."""
+    rospy's logging is set up, so a DDS that cannot start is reported as before. The two threads import
+    disjoint modules (rospy's ``init_node`` itself imports only configparser and encodings.idna), so
+    neither can meet the other's half-imported module."""
     if os.environ.get("MICROS_RT_DISABLE_DDS", "") not in ("", "0"):
         return
 
