@@ -48,6 +48,19 @@ def parse_user_data(data: Optional[bytes]) -> Optional[Dict[str, str]]:
     return out
 
 
+def matched_handles(get: Callable[[], List[int]]) -> List[int]:
+    """The instance handles a writer's ``get_matched_subscriptions`` (a reader's ``get_matched_publications``)
+    returns, asked again when a match came in between: cyclonedds-python counts the matches, sizes an
+    array, then fills it, and a match made between the two calls made it index past the end (IndexError
+    out of ``get_num_connections()`` and housekeeping, seen with readers coming and going)."""
+    for _ in range(8):
+        try:
+            return list(get())
+        except IndexError:
+            continue
+    return list(get())  # matches changing faster than this for eight rounds: say so
+
+
 class DDSWriter:
     """A DataWriter for one topic of one process, fed with genpy messages."""
 
@@ -59,6 +72,7 @@ class DDSWriter:
         self._matched = 0
         self._on_matched = on_matched
         self._reader_guids: Dict[int, str] = {}  # matched reader's instance handle -> its GUID
+        self._guids_lock = threading.Lock()
         self._participant = participant
         topic = participant.topic(topic_name, dds_type.idl_class)
         listener = Listener(on_publication_matched=self._matched_changed)  # type: ignore[no-untyped-call]
@@ -104,22 +118,23 @@ class DDSWriter:
     def matched_reader_guids(self) -> List[str]:
         """GUIDs of the matched readers. A match's instance handle stays its own while it lasts, so each
         reader's data (its whole QoS, parsed: ~40 us) is read once, not at every housekeeping round."""
-        handles = self._writer.get_matched_subscriptions()
-        known = self._reader_guids
-        for handle in handles:
-            if handle not in known:
-                try:
-                    data = self._writer.get_matched_subscription_data(handle)
-                except DDSException:
-                    data = None
-                if data is None:
-                    continue  # unmatched meanwhile
-                known[handle] = str(data.key)
-        if len(known) > len(handles):
-            live = set(handles)
-            for handle in [h for h in known if h not in live]:
-                del known[handle]
-        return [known[h] for h in handles if h in known]
+        handles = matched_handles(self._writer.get_matched_subscriptions)
+        with self._guids_lock:  # housekeeping, get_num_connections() and a publish timeout may ask at once
+            known = self._reader_guids
+            for handle in handles:
+                if handle not in known:
+                    try:
+                        data = self._writer.get_matched_subscription_data(handle)
+                    except (DDSException, IndexError):  # IndexError: unmatched since (the binding's word for it)
+                        data = None
+                    if data is None:
+                        continue  # unmatched meanwhile
+                    known[handle] = str(data.key)
+            if len(known) > len(handles):
+                live = set(handles)
+                for handle in [h for h in known if h not in live]:
+                    del known[handle]
+            return [known[h] for h in handles if h in known]
 
     #: ``write_serialized(data) -> int``: write one serialized sample (from the type's codec) and send
     #: it now, or within the batch window of its ``latency_budget`` with the next ones; Cyclone's return code (< 0:
@@ -182,7 +197,7 @@ class DDSReader:
             return info
         try:
             data = self._reader.get_matched_publication_data(handle)
-        except DDSException:
+        except (DDSException, IndexError):  # IndexError: unmatched since (the binding's word for it)
             data = None
         if data is None:
             return None
@@ -200,7 +215,7 @@ class DDSReader:
 
     def matched_writer_guids(self) -> List[str]:
         out = []
-        handles = self._reader.get_matched_publications()
+        handles = matched_handles(self._reader.get_matched_publications)
         for handle in handles:
             info = self.writer_info(handle)
             if info is not None:
