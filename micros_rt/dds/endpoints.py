@@ -61,22 +61,6 @@ def matched_handles(get: Callable[[], List[int]]) -> List[int]:
     return list(get())  # matches changing faster than this for eight rounds: say so
 
 
-def matched_data(get: Callable[[int], Any], handle: int) -> Any:
-    """``get(handle)`` (``get_matched_subscription_data``/``get_matched_publication_data``), or None when
-    that match has ended meanwhile (the binding says so with DDSException or IndexError)."""
-    try:
-        return get(handle)
-    except (DDSException, IndexError):
-        return None
-
-
-def forget_ended(cache: Dict[int, Any], handles: List[int]) -> None:
-    """Drop the cached entries of matches not among ``handles`` any more (hold the cache's lock)."""
-    if len(cache) > len(handles):
-        for gone in set(cache) - set(handles):
-            del cache[gone]
-
-
 class DDSWriter:
     """A DataWriter for one topic of one process, fed with genpy messages."""
 
@@ -139,10 +123,17 @@ class DDSWriter:
             known = self._reader_guids
             for handle in handles:
                 if handle not in known:
-                    data = matched_data(self._writer.get_matched_subscription_data, handle)
-                    if data is not None:
-                        known[handle] = str(data.key)
-            forget_ended(known, handles)
+                    try:
+                        data = self._writer.get_matched_subscription_data(handle)
+                    except (DDSException, IndexError):  # IndexError: unmatched since (the binding's word for it)
+                        data = None
+                    if data is None:
+                        continue  # unmatched meanwhile
+                    known[handle] = str(data.key)
+            if len(known) > len(handles):
+                live = set(handles)
+                for handle in [h for h in known if h not in live]:
+                    del known[handle]
             return [known[h] for h in handles if h in known]
 
     #: ``write_serialized(data) -> int``: write one serialized sample (from the type's codec) and send
@@ -204,7 +195,10 @@ class DDSReader:
         info = self._writers.get(handle)
         if info is not None:
             return info
-        data = matched_data(self._reader.get_matched_publication_data, handle)
+        try:
+            data = self._reader.get_matched_publication_data(handle)
+        except (DDSException, IndexError):  # IndexError: unmatched since (the binding's word for it)
+            data = None
         if data is None:
             return None
         from cyclonedds.qos import Policy
@@ -226,8 +220,10 @@ class DDSReader:
             info = self.writer_info(handle)
             if info is not None:
                 out.append(info.guid)
-        with self._lock:
-            forget_ended(self._writers, handles)  # writers that went (a publisher restarting)
+        if len(self._writers) > len(handles):  # forget writers that went (a publisher restarting)
+            with self._lock:
+                for gone in set(self._writers) - set(handles):
+                    del self._writers[gone]
         return out
 
     def close(self) -> None:
