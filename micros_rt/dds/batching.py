@@ -8,7 +8,15 @@ but then it sends a datagram only when it is full or flushed: something has to f
 
 micros_rt decides per writer:
 
-* ``latency_budget == 0`` (the default): no batching; each write is sent at once, as Cyclone does.
+* ``latency_budget == 0`` (the default): batching as TCP's autocorking does it (:func:`adaptive_write`).
+  A write that follows the writer's previous one by more than :data:`BURST_GAP` is sent at once, so a
+  lone message (a 100 Hz topic, a ping-pong) leaves as without batching. Writes closer together are a
+  burst: they share a datagram, which leaves at the first write :data:`BURST_AGE` after its oldest
+  sample, when it is full, or, once the burst ended, by the flusher within :data:`BURST_TAIL`. A
+  stream above ~20 kHz then pays at most BURST_AGE (0.5 ms) of latency and sends one datagram where it
+  sent a hundred. Benchmark, 64 B one way: 88 k msg/s -> 196-211 k; fan-out to 4 subscribers 69 k ->
+  211-242 k with 2 us of publisher CPU per message instead of 8 (BURST_AGE 0.1 ms gave 134-167 k and
+  100-153 k: subscribers then spend their time on datagrams).
 * ``latency_budget > 0``: the writer is created with writer batching (:func:`batching_writer_class`);
   each sample waits in the pending datagram and let the process's one
   :class:`Flusher` thread send it within :func:`batch_window` of the first unsent write: half the
@@ -34,13 +42,21 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from .._logging import nonblocking_logger
 
-__all__ = ["MAX_BATCH_WINDOW", "Flusher", "batch_window", "batching_writer_class", "close_flusher", "flush_writer",
+__all__ = ["BURST_AGE", "BURST_GAP", "BURST_TAIL", "MAX_BATCH_WINDOW", "Flusher", "adaptive_write", "batch_window",
+           "batching_writer_class", "close_flusher", "flush_writer",
            "flusher"]
 
 _log = nonblocking_logger("rosout.micros_rt.dds")
 
 #: The longest a sample waits in its writer's datagram (seconds), whatever the budget.
 MAX_BATCH_WINDOW = 0.002
+#: Without a latency budget: a write within this long (s) of the writer's previous one is part of a burst.
+BURST_GAP = 50e-6
+#: A burst's datagram leaves at the first write this long (s) after its oldest sample ...
+BURST_AGE = 500e-6
+#: ... or, when no such write comes, by the flusher this long (s) after a sample joined it. Longer than
+#: BURST_AGE, so a write after the flusher sent the datagram never finds a sample it believes pending.
+BURST_TAIL = 0.001
 
 _flush_fn: Optional[Callable[[int], int]] = None
 
@@ -72,14 +88,49 @@ def flush_writer(ref: int) -> int:
     return int(fn(ref))
 
 
+def adaptive_write(ref: int, write: Callable[[int, bytes], int], *, flush: Optional[Callable[[int], int]] = None,
+                   pending: Optional[Callable[[int, float], None]] = None,
+                   clock: Callable[[], float] = time.monotonic) -> Callable[[bytes], int]:
+    """``write_serialized`` for batching writer ``ref`` without a latency budget: a lone sample is sent at
+    once, a burst shares datagrams (see the module's text). Calls come one at a time per writer (the
+    publication's lock); the flusher may flush concurrently, which Cyclone allows."""
+    flush = flush or flush_writer
+    pending = pending or flusher().pending
+    last = [-1.0, 0.0]  # when the previous write returned; the oldest sample in the datagram (0.0: none)
+
+    def write_serialized(data: bytes) -> int:
+        start = clock()
+        ret = write(ref, data)
+        if ret < 0:
+            return ret
+        now = clock()
+        oldest = last[1]
+        if oldest == 0.0:
+            # idle since the previous write returned, not how long this one took: a write that waited for
+            # a slow reader (back-pressure) is still part of the burst, and a burst must stay batched
+            # then, or the reader gets one datagram per sample and falls further behind
+            if start - last[0] > BURST_GAP:
+                flush(ref)  # a lone sample
+            else:
+                last[1] = now
+                pending(ref, BURST_TAIL)
+        elif now - oldest >= BURST_AGE:
+            flush(ref)
+            last[1] = 0.0
+        else:
+            pending(ref, BURST_TAIL)  # one dict lookup when the flusher already has this writer
+        last[0] = now
+        return ret
+    return write_serialized
+
+
 _writer_class: Any = None
 
 
 def batching_writer_class() -> Any:
     """A ``cyclonedds.pub.DataWriter`` whose writers batch their samples (writer-batching QoS, which
     the Python binding does not expose: set on the C QoS right before ``dds_create_writer``). Only
-    micros_rt's own writers with a latency budget batch; every other writer in the process sends as
-    Cyclone always does."""
+    micros_rt's own topic writers batch; every other writer in the process sends as Cyclone always does."""
     global _writer_class
     if _writer_class is None:
         from cyclonedds.pub import DataWriter

@@ -14,11 +14,10 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from cyclonedds._clayer import ddspy_take, ddspy_write
 from cyclonedds.core import DDSException, InstanceState, Listener, ReadCondition, SampleState, ViewState
-from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 
 from ..exceptions import DDSUnavailableError
-from .batching import batch_window, batching_writer_class, flusher
+from .batching import adaptive_write, batch_window, batching_writer_class, flusher
 from .participant import DDSParticipant, delete_entity
 from .types import DDSType
 from .._logging import nonblocking_logger
@@ -77,22 +76,15 @@ class DDSWriter:
         topic = participant.topic(topic_name, dds_type.idl_class)
         listener = Listener(on_publication_matched=self._matched_changed)  # type: ignore[no-untyped-call]
         try:
-            writer_class = batching_writer_class() if self.batch_window > 0 else DataWriter
-            self._writer = writer_class(participant.dp, topic, qos, listener)
+            self._writer = batching_writer_class()(participant.dp, topic, qos, listener)
         except DDSException as exc:
             participant.release_topic(topic_name)
             raise DDSUnavailableError(f"cannot create a DDS writer for {topic_name}: {exc}") from exc
         self._ref = self._writer._ref
         self.guid = str(self._writer.guid)
         self.closed = False
-        self.write_serialized = self._batched_write() if self.batch_window > 0 else self._plain_write()
-
-    def _plain_write(self) -> Callable[[bytes], int]:
-        ref, write = self._ref, ddspy_write
-
-        def write_serialized(data: bytes) -> int:
-            return int(write(ref, data))
-        return write_serialized
+        self.write_serialized = (self._batched_write() if self.batch_window > 0
+                                 else adaptive_write(self._ref, ddspy_write))
 
     def _batched_write(self) -> Callable[[bytes], int]:
         ref, write, window = self._ref, ddspy_write, self.batch_window
@@ -137,7 +129,7 @@ class DDSWriter:
             return [known[h] for h in handles if h in known]
 
     #: ``write_serialized(data) -> int``: write one serialized sample (from the type's codec) and send
-    #: it now, or within the batch window of its ``latency_budget`` with the next ones; Cyclone's return code (< 0:
+    #: it now, with the rest of a burst, or within the batch window of its ``latency_budget``; Cyclone's return code (< 0:
     #: failed, -10: timed out on back-pressure after the Reliability max_blocking_time).
     write_serialized: Callable[[bytes], int]
 
@@ -145,8 +137,7 @@ class DDSWriter:
         if self.closed:
             return
         self.closed = True
-        if self.batch_window > 0:
-            flusher().forget(self._ref)  # what waits in the datagram leaves before the writer goes
+        flusher().forget(self._ref)  # what waits in the datagram leaves before the writer goes
         delete_entity(self._writer)
         self._participant.release_topic(self.topic_name)
 

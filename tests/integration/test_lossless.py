@@ -37,6 +37,19 @@ def assert_lossless(summary: Dict[str, Any], count: int) -> None:
     assert summary["stats"]["dropped_queue_full"] == 0, summary
 
 
+def test_bursts_without_latency_budget_arrive_whole_and_without_waiting_for_the_next(
+        ros_master: harness.RosMaster, spawn: harness.Spawner) -> None:
+    # the default writer batches a burst (micros_rt.dds.batching.adaptive_write): the samples written back to
+    # back share datagrams, and the last ones of each burst wait in the writer until the flusher sends them
+    # (within 1 ms). Had they to wait for the next write, they would arrive with the next burst, 200 ms on.
+    summary = stream(spawn, "/default_bursts", 500, 64, send_args=("--rate", "5", "--burst", "50"),
+                     recv_args=("--idle", "2"), timeout=30.0)
+    assert summary["transports"] == ["DDS"]
+    assert_lossless(summary, 500)
+    assert summary["latency"]["count"] == 500, summary
+    assert summary["latency"]["max"] < 0.1, summary["latency"]
+
+
 @pytest.mark.parametrize("count,size", [(100_000, 64), (2_000, 1 << 20)])
 def test_queue_size_none_loses_nothing_over_dds(ros_master: harness.RosMaster, spawn: harness.Spawner,
                                                  count: int, size: int) -> None:

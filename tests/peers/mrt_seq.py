@@ -50,8 +50,8 @@ def send(a: argparse.Namespace, nh: micros_rt.NodeHandle) -> int:
     for i in range(a.count):
         msg.data = struct.pack("<Q", i) + pad
         pub.publish(msg)
-        if period:
-            delay = start + (i + 1) * period - time.monotonic()
+        if period and (i + 1) % a.burst == 0:
+            delay = start + (i + 1) // a.burst * period - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
             if a.progress and i % a.progress == 0:
@@ -123,6 +123,7 @@ def main() -> int:
     ap.add_argument("--idle", type=float, default=5.0, help="stop after this long without a new message")
     ap.add_argument("--linger", type=float, default=3.0)
     ap.add_argument("--rate", type=float, default=0.0, help="send: messages per second (0: as fast as possible)")
+    ap.add_argument("--burst", type=int, default=1, help="send: with --rate, this many messages back to back each time")
     ap.add_argument("--progress", type=int, default=0, help="send: a progress event every N messages")
     ap.add_argument("--best-effort", action="store_true")
     ap.add_argument("--latency-budget", type=float, default=0.0, help="send: batch writes within this budget (s)")

@@ -11,7 +11,7 @@ from typing import List, Tuple
 
 import pytest
 
-from micros_rt.dds.batching import MAX_BATCH_WINDOW, Flusher, batch_window
+from micros_rt.dds.batching import BURST_AGE, BURST_GAP, BURST_TAIL, MAX_BATCH_WINDOW, Flusher, adaptive_write, batch_window
 
 
 class Recorder:
@@ -139,3 +139,83 @@ def test_only_writers_with_a_budget_batch() -> None:
     qos = Qos(Policy.Reliability.Reliable(max_blocking_time=0))
     assert _writer_batching(batching_writer_class()(dp, topic, qos)) is True
     assert _writer_batching(DataWriter(dp, topic, qos)) is False
+
+
+# --- adaptive_write: batching without a latency budget ------------------------------------------------
+
+
+class FakeWriter:
+    """Cyclone's side of adaptive_write: a clock it controls, the writes (each taking `takes` s), the
+    flushes and the flusher registrations, in order."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+        self.takes = 2e-6
+        self.ret = 0
+        self.log: List[str] = []
+        self.write = adaptive_write(7, self._write, flush=self._flush, pending=self._pending, clock=lambda: self.now)
+
+    def _write(self, ref: int, data: bytes) -> int:
+        assert ref == 7
+        self.now += self.takes
+        self.log.append(f"write {data.decode()}")
+        return self.ret
+
+    def _flush(self, ref: int) -> int:
+        self.log.append("flush")
+        return 0
+
+    def _pending(self, ref: int, within: float) -> None:
+        assert within == BURST_TAIL
+        self.log.append("pending")
+
+    def publish(self, data: str, after: float) -> int:
+        self.now += after
+        return self.write(data.encode())
+
+
+def test_a_lone_sample_is_sent_at_once() -> None:
+    w = FakeWriter()
+    w.publish("a", 0.0)
+    w.publish("b", 0.01)  # a 100 Hz topic
+    w.publish("c", BURST_GAP * 1.5)
+    assert w.log == ["write a", "flush", "write b", "flush", "write c", "flush"]
+
+
+def test_a_burst_shares_a_datagram_sent_by_age_or_by_the_flusher() -> None:
+    w = FakeWriter()
+    w.publish("a", 1.0)  # lone: sent
+    w.publish("b", 5e-6)  # a burst starts: b waits, the flusher is told
+    w.publish("c", 5e-6)
+    assert w.log == ["write a", "flush", "write b", "pending", "write c", "pending"]
+    w.log.clear()
+    w.publish("d", BURST_AGE)  # the datagram's oldest (b) is BURST_AGE old: it leaves with d
+    w.publish("e", 5e-6)  # a new datagram
+    assert w.log == ["write d", "flush", "write e", "pending"]
+
+
+def test_a_write_that_waited_for_a_slow_reader_stays_in_the_burst() -> None:
+    w = FakeWriter()
+    w.publish("a", 1.0)
+    w.takes = 0.05  # back-pressure: the write blocks 50 ms
+    w.publish("b", 5e-6)
+    w.takes = 2e-6
+    w.publish("c", 5e-6)  # written 5 us after b returned: a burst, though b took 50 ms
+    # b's datagram started when b returned; c is within BURST_AGE of it
+    assert w.log == ["write a", "flush", "write b", "pending", "write c", "pending"]
+
+
+def test_a_failed_write_changes_nothing() -> None:
+    w = FakeWriter()
+    w.ret = -10  # timed out on back-pressure
+    assert w.publish("a", 1.0) == -10
+    assert w.log == ["write a"]
+    w.ret = 0
+    w.publish("b", 1.0)
+    assert w.log == ["write a", "write b", "flush"]
+
+
+def test_burst_tail_outlives_burst_age() -> None:
+    # a write after the flusher sent the datagram must not find a sample it believes pending (and so send
+    # nothing): the flusher waits BURST_TAIL after a sample joined, the next write sends at BURST_AGE
+    assert BURST_TAIL > BURST_AGE > BURST_GAP > 0
