@@ -53,8 +53,13 @@ def _graph_id() -> str:
 
 
 def _require_node() -> None:
+    """The node is ready for a topic: initialised, and the DDS import that ``init_node`` started finished."""
     if not _node.initialized:
         raise NodeNotInitializedError("call micros_rt.init_node(name) before advertising or subscribing")
+    # cyclonedds's modules import each other in a cycle: a second thread importing them meanwhile meets one
+    # half-initialised ("cannot import name 'DcpsEndpoint' from partially initialized module
+    # 'cyclonedds.builtin_types'", once in 180 benchmark phases: a subscribe right after init_node)
+    wait_dds_started()
 
 
 def start_dds_early() -> None:
@@ -63,9 +68,9 @@ def start_dds_early() -> None:
     Importing cyclonedds and micros_rt's DDS modules takes 80-200 ms of a node's start, and the node's
     first ``advertise`` or ``subscribe`` waited for it; ``init_node`` spends a good part of that waiting
     on the master's answers. The participant itself (~3 ms) is still created by the first topic, after
-    rospy's logging is set up, so a DDS that cannot start is reported as before. The two threads import
-    disjoint modules (rospy's ``init_node`` itself imports only configparser and encodings.idna), so
-    neither can meet the other's half-imported module."""
+    rospy's logging is set up, so a DDS that cannot start is reported as before. rospy's ``init_node``
+    imports only configparser and encodings.idna meanwhile, and the first topic waits for this thread
+    (:func:`_require_node`), so no two threads import cyclonedds at once."""
     if os.environ.get("MICROS_RT_DISABLE_DDS", "") not in ("", "0"):
         return
 
@@ -87,6 +92,8 @@ def wait_dds_started(timeout: float = 10.0) -> None:
     thread = _node.dds_start
     if thread is not None and thread is not threading.current_thread():
         thread.join(timeout)
+        if not thread.is_alive():
+            _node.dds_start = None
 
 
 def dds_backend() -> "Optional[DDSBackend]":

@@ -32,3 +32,19 @@ def test_registration_poll_is_rospys_again_after_the_block_even_on_error() -> No
             assert rospy.impl.init.time is not original
             raise RuntimeError("init_node failed")
     assert rospy.impl.init.time is original
+
+
+def test_the_first_topic_waits_for_the_dds_import_started_by_init_node(monkeypatch: pytest.MonkeyPatch) -> None:
+    # a subscribe right after init_node once imported cyclonedds while the early-import thread was still at
+    # it, and met a half-initialised module (ImportError); the first topic must wait for that thread
+    import threading
+
+    from micros_rt import _runtime
+
+    importing = threading.Thread(target=time.sleep, args=(0.3,), name="slow import stand-in", daemon=True)
+    monkeypatch.setattr(_runtime._node, "initialized", True)
+    monkeypatch.setattr(_runtime._node, "dds_start", importing)
+    importing.start()
+    _runtime._require_node()
+    assert not importing.is_alive()
+    assert _runtime._node.dds_start is None  # later topics do not join again
