@@ -11,7 +11,7 @@ from typing import List, Tuple
 
 import pytest
 
-from micros_rt.dds.batching import BURST_AGE, BURST_GAP, BURST_TAIL, MAX_BATCH_WINDOW, Flusher, adaptive_write, batch_window
+from micros_rt.dds.batching import BURST_AGE, BURST_GAP, BURST_IDLE, BURST_TAIL, MAX_BATCH_WINDOW, Flusher, adaptive_write, batch_window
 
 
 class Recorder:
@@ -205,6 +205,35 @@ def test_a_write_that_waited_for_a_slow_reader_stays_in_the_burst() -> None:
     assert w.log == ["write a", "flush", "write b", "pending", "write c", "pending"]
 
 
+def test_one_pause_inside_a_burst_does_not_end_it_two_do() -> None:
+    w = FakeWriter()
+    w.publish("a", 1.0)  # lone
+    w.publish("b", 5e-6)  # burst
+    w.takes = BURST_AGE  # c's write itself takes long (back-pressure): not a pause, and b is old when it returns
+    w.publish("c", 5e-6)  # sends b and c
+    w.takes = 2e-6
+    w.log.clear()
+    w.publish("d", BURST_GAP * 4)  # a pause (preempted, a GC pass): still the burst, d waits for company
+    w.publish("e", 5e-6)
+    assert w.log == ["write d", "pending", "write e", "pending"]
+    w.log.clear()
+    w.publish("f", BURST_AGE)  # a pause that sends d, e, f (age) ...
+    w.publish("g", BURST_GAP * 4)  # ... and a second pause in a row: the burst ended, g leaves alone
+    assert w.log == ["write f", "flush", "write g", "flush"]
+
+
+def test_a_pause_longer_than_burst_idle_ends_a_burst_at_once() -> None:
+    w = FakeWriter()
+    w.publish("a", 1.0)
+    w.publish("b", 5e-6)
+    w.takes = BURST_AGE
+    w.publish("c", 5e-6)  # sends b and c: the datagram is empty, the writer was bursting
+    w.takes = 2e-6
+    w.log.clear()
+    w.publish("d", BURST_IDLE * 1.5)  # a 100 Hz topic's next message after a burst: sent at once
+    assert w.log == ["write d", "flush"]
+
+
 def test_a_failed_write_changes_nothing() -> None:
     w = FakeWriter()
     w.ret = -10  # timed out on back-pressure
@@ -219,3 +248,4 @@ def test_burst_tail_outlives_burst_age() -> None:
     # a write after the flusher sent the datagram must not find a sample it believes pending (and so send
     # nothing): the flusher waits BURST_TAIL after a sample joined, the next write sends at BURST_AGE
     assert BURST_TAIL > BURST_AGE > BURST_GAP > 0
+    assert BURST_IDLE > BURST_TAIL  # a burst's tail is sent before its writer counts as idle
