@@ -15,9 +15,9 @@ micros_rt decides per writer:
   burst: they share a datagram, which leaves at the first write :data:`BURST_AGE` after its oldest
   sample, when it is full, or, once the burst ended, by the flusher within :data:`BURST_TAIL`. A
   stream above ~20 kHz then pays at most BURST_AGE (0.5 ms) of latency and sends one datagram where it
-  sent a hundred. Benchmark, 64 B one way: 88 k msg/s -> 196-211 k; fan-out to 4 subscribers 69 k ->
-  211-242 k with 2 us of publisher CPU per message instead of 8 (BURST_AGE 0.1 ms gave 134-167 k and
-  100-153 k: subscribers then spend their time on datagrams).
+  sent a hundred. Benchmark, 64 B one way: 88 k msg/s -> 182-244 k; fan-out to 4 subscribers 69 k ->
+  306-397 k with 1.3-1.7 us of publisher CPU per message instead of 8 (BURST_AGE 0.1 ms gave far less:
+  subscribers then spend their time on datagrams).
 * ``latency_budget > 0``: the writer is created with writer batching (:func:`batching_writer_class`);
   each sample waits in the pending datagram and let the process's one
   :class:`Flusher` thread send it within :func:`batch_window` of the first unsent write: half the
@@ -43,9 +43,8 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from .._logging import nonblocking_logger
 
-__all__ = ["BURST_AGE", "BURST_GAP", "BURST_IDLE", "BURST_TAIL", "MAX_BATCH_WINDOW", "Flusher", "adaptive_write", "batch_window",
-           "batching_writer_class", "close_flusher", "flush_writer",
-           "flusher"]
+__all__ = ["BURST_AGE", "BURST_GAP", "BURST_IDLE", "BURST_TAIL", "MAX_BATCH_WINDOW", "Flusher", "adaptive_write",
+           "batch_window", "batching_writer_class", "budget_write", "close_flusher", "flush_writer", "flusher"]
 
 _log = nonblocking_logger("rosout.micros_rt.dds")
 
@@ -91,6 +90,19 @@ def flush_writer(ref: int) -> int:
     return int(fn(ref))
 
 
+def budget_write(ref: int, write: Callable[[int, bytes], int], window: float) -> Callable[[bytes], int]:
+    """``write_serialized`` for batching writer ``ref`` with a latency budget: every sample waits in the
+    datagram, which leaves when full or from the flusher within ``window`` (:func:`batch_window`)."""
+    pending = flusher().pending
+
+    def write_serialized(data: bytes) -> int:
+        ret = write(ref, data)
+        if ret >= 0:
+            pending(ref, window)  # sent with the next full datagram, or by the flusher within window
+        return ret
+    return write_serialized
+
+
 def adaptive_write(ref: int, write: Callable[[int, bytes], int], *, flush: Optional[Callable[[int], int]] = None,
                    pending: Optional[Callable[[int, float], None]] = None,
                    clock: Callable[[], float] = time.monotonic) -> Callable[[bytes], int]:
@@ -99,11 +111,12 @@ def adaptive_write(ref: int, write: Callable[[int, bytes], int], *, flush: Optio
     publication's lock); the flusher may flush concurrently, which Cyclone allows."""
     flush = flush or flush_writer
     pending = pending or flusher().pending
-    # when the previous write returned; the oldest sample in the datagram (0.0: none); 1.0 when the previous
-    # write, too, came after an idle gap
-    last = [-1.0, 0.0, 1.0]
+    returned = -1.0  # when the previous write returned
+    oldest = 0.0  # when the oldest sample in the datagram was written (0.0: the datagram is empty)
+    was_spaced = True  # the previous write, too, came after an idle gap
 
     def write_serialized(data: bytes) -> int:
+        nonlocal returned, oldest, was_spaced
         start = clock()
         ret = write(ref, data)
         if ret < 0:
@@ -112,25 +125,24 @@ def adaptive_write(ref: int, write: Callable[[int, bytes], int], *, flush: Optio
         # idle since the previous write returned, not how long this one took: a write that waited for a slow
         # reader (back-pressure) is still part of the burst, and a burst must stay batched then, or the reader
         # gets one datagram per sample and falls further behind
-        idle = start - last[0]
+        idle = start - returned
         spaced = idle > BURST_GAP
-        oldest = last[1]
         if oldest == 0.0:
             # one pause inside a burst (the thread preempted, a garbage collection) does not end it: only a
             # second gap in a row, or one longer than BURST_IDLE, makes a lone sample (measured, fan-out to 4
             # subscribers on 2 cores: 187-230 k msg/s when each pause sent a sample alone, 313-397 k without)
-            if spaced and (last[2] or idle > BURST_IDLE):
+            if spaced and (was_spaced or idle > BURST_IDLE):
                 flush(ref)  # a lone sample
             else:
-                last[1] = now
+                oldest = now
                 pending(ref, BURST_TAIL)
         elif now - oldest >= BURST_AGE:
             flush(ref)
-            last[1] = 0.0
+            oldest = 0.0
         else:
             pending(ref, BURST_TAIL)  # one dict lookup when the flusher already has this writer
-        last[0] = now
-        last[2] = 1.0 if spaced else 0.0
+        returned = now
+        was_spaced = spaced
         return ret
     return write_serialized
 

@@ -17,7 +17,7 @@ from cyclonedds.core import DDSException, InstanceState, Listener, ReadCondition
 from cyclonedds.sub import DataReader
 
 from ..exceptions import DDSUnavailableError
-from .batching import adaptive_write, batch_window, batching_writer_class, flusher
+from .batching import adaptive_write, batch_window, batching_writer_class, budget_write, flusher
 from .participant import DDSParticipant, delete_entity
 from .types import DDSType
 from .._logging import nonblocking_logger
@@ -60,6 +60,16 @@ def matched_handles(get: Callable[[], List[int]]) -> List[int]:
     return list(get())  # matches changing faster than this for eight rounds: say so
 
 
+def matched_data(get: Callable[[int], Any], handle: int) -> Any:
+    """``get(handle)`` (a writer's ``get_matched_subscription_data``, a reader's
+    ``get_matched_publication_data``), or None when that match has ended meanwhile: the binding says so with
+    DDSException or IndexError."""
+    try:
+        return get(handle)
+    except (DDSException, IndexError):
+        return None
+
+
 class DDSWriter:
     """A DataWriter for one topic of one process, fed with genpy messages."""
 
@@ -83,19 +93,8 @@ class DDSWriter:
         self._ref = self._writer._ref
         self.guid = str(self._writer.guid)
         self.closed = False
-        self.write_serialized = (self._batched_write() if self.batch_window > 0
+        self.write_serialized = (budget_write(self._ref, ddspy_write, self.batch_window) if self.batch_window > 0
                                  else adaptive_write(self._ref, ddspy_write))
-
-    def _batched_write(self) -> Callable[[bytes], int]:
-        ref, write, window = self._ref, ddspy_write, self.batch_window
-        pending = flusher().pending
-
-        def write_serialized(data: bytes) -> int:
-            ret: int = write(ref, data)
-            if ret >= 0:
-                pending(ref, window)  # sent with the next full datagram, or by the flusher within window
-            return ret
-        return write_serialized
 
     def _matched_changed(self, _writer: Any, status: Any) -> None:
         self._matched = status.current_count
@@ -115,13 +114,9 @@ class DDSWriter:
             known = self._reader_guids
             for handle in handles:
                 if handle not in known:
-                    try:
-                        data = self._writer.get_matched_subscription_data(handle)
-                    except (DDSException, IndexError):  # IndexError: unmatched since (the binding's word for it)
-                        data = None
-                    if data is None:
-                        continue  # unmatched meanwhile
-                    known[handle] = str(data.key)
+                    data = matched_data(self._writer.get_matched_subscription_data, handle)
+                    if data is not None:  # None: unmatched meanwhile
+                        known[handle] = str(data.key)
             if len(known) > len(handles):
                 live = set(handles)
                 for handle in [h for h in known if h not in live]:
@@ -186,10 +181,7 @@ class DDSReader:
         info = self._writers.get(handle)
         if info is not None:
             return info
-        try:
-            data = self._reader.get_matched_publication_data(handle)
-        except (DDSException, IndexError):  # IndexError: unmatched since (the binding's word for it)
-            data = None
+        data = matched_data(self._reader.get_matched_publication_data, handle)
         if data is None:
             return None
         from cyclonedds.qos import Policy
