@@ -77,8 +77,8 @@ if ! venv_ok; then
 fi
 # An editable install compiles nothing, and with PYTHONDONTWRITEBYTECODE=1 (set on some machines, these
 # included) every node start would compile micros_rt's ~12,000 lines again (measured: its modules import in
-# 48 ms then, 20 ms from bytecode). Compile them as `pip install` of a wheel does; Python recompiles in memory a module whose
-# source changed since, so a stale file costs time, never correctness.
+# 48 ms then, 20 ms from bytecode). Compile them as `pip install` of a wheel does; Python recompiles in
+# memory a module whose source changed since, so a stale file costs time, never correctness.
 quiet "bytecode compile" "$VENV/bin/python" -m compileall -q -j 0 micros_rt
 
 # ---------------------------------------------------------------- .venv-ros2 (rclpy, NO system site packages)

@@ -122,7 +122,7 @@ def main() -> int:
     ap.add_argument("--timeout", type=float, default=60.0)
     ap.add_argument("--idle", type=float, default=5.0, help="stop after this long without a new message")
     ap.add_argument("--linger", type=float, default=3.0)
-    ap.add_argument("--rate", type=float, default=0.0, help="send: messages per second (0: as fast as possible)")
+    ap.add_argument("--rate", type=float, default=0.0, help="send: messages (with --burst, bursts) per second (0: as fast as possible)")
     ap.add_argument("--burst", type=int, default=1, help="send: with --rate, this many messages back to back each time")
     ap.add_argument("--progress", type=int, default=0, help="send: a progress event every N messages")
     ap.add_argument("--best-effort", action="store_true")

@@ -4,24 +4,16 @@ run's domain; no master): the GUIDs follow readers that come and go, also with s
 from __future__ import annotations
 
 import threading
-import time
-from typing import Callable, List, Set
+from typing import List, Set
 
 from std_msgs.msg import String
+
+import harness
 
 from micros_rt.dds.endpoints import DDSReader, DDSWriter
 from micros_rt.dds.participant import get_participant
 from micros_rt.dds.types import dds_type_for
 from micros_rt.qos.mapping import plain_reader_qos, plain_writer_qos
-
-
-def _until(what: Callable[[], bool], timeout: float = 10.0) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if what():
-            return True
-        time.sleep(0.02)
-    return what()
 
 
 def test_matched_reader_guids_follow_readers_that_come_and_go_under_concurrent_callers() -> None:
@@ -33,7 +25,7 @@ def test_matched_reader_guids_follow_readers_that_come_and_go_under_concurrent_c
     readers = [DDSReader(participant, topic, dds_type, plain_reader_qos(queue_size=10)) for _ in range(3)]
     try:
         want: Set[str] = {r.guid for r in readers}
-        assert _until(lambda: set(writer.matched_reader_guids()) == want), writer.matched_reader_guids()
+        harness.wait_until(lambda: set(writer.matched_reader_guids()) == want, 10, message="the three readers matched")
 
         errors: List[BaseException] = []
         stop = threading.Event()
@@ -52,13 +44,15 @@ def test_matched_reader_guids_follow_readers_that_come_and_go_under_concurrent_c
             t.start()
         for _ in range(10):  # readers matched and unmatched while the askers run
             extra = DDSReader(participant, topic, dds_type, plain_reader_qos(queue_size=10))
-            assert _until(lambda: extra.guid in writer.matched_reader_guids())
+            harness.wait_until(lambda: extra.guid in writer.matched_reader_guids(), 10, message="a new reader matched")
             extra.close()
-            assert _until(lambda: extra.guid not in writer.matched_reader_guids())
+            harness.wait_until(lambda: extra.guid not in writer.matched_reader_guids(), 10,
+                               message="a closed reader unmatched")
         gone = readers.pop()
         gone.close()
         want_after = {r.guid for r in readers}
-        assert _until(lambda: set(writer.matched_reader_guids()) == want_after), writer.matched_reader_guids()
+        harness.wait_until(lambda: set(writer.matched_reader_guids()) == want_after, 10,
+                           message="the two remaining readers, the closed one gone")
         stop.set()
         for t in askers:
             t.join(10)
