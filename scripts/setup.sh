@@ -26,7 +26,7 @@ quiet() {
 APT_PACKAGES=(
     python3-rospy python3-rosmaster python3-rostopic python3-rosnode
     python3-std-msgs python3-geometry-msgs python3-sensor-msgs ros-core
-    python3-venv tcpdump nftables iproute2 python3-matplotlib
+    python3-venv tcpdump nftables iproute2 python3-matplotlib python3-numpy
     python3-std-srvs python3-roslaunch python3-rosservice python3-dev gcc
     mosquitto mosquitto-clients libmsgpack-dev graphviz openssl
 )

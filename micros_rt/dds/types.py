@@ -20,7 +20,10 @@ tests check the codec byte for byte against cyclonedds' own serializer.
 
 from __future__ import annotations
 
+import array
+import numbers
 import struct
+import sys
 import threading
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Tuple, Type
@@ -30,6 +33,11 @@ import roslib.message
 
 from ..exceptions import MicrosRtError, TypeMappingError
 from .typecache import type_key
+
+try:  # genpy imports it too when it is installed; rospy.numpy_msg needs it
+    import numpy
+except ImportError:  # pragma: no cover - python3-numpy is a dependency (scripts/setup.sh)
+    numpy = None  # type: ignore[assignment]
 
 __all__ = ["DDSType", "MalformedSampleError", "dds_type_for", "dds_topic_name", "dds_type_name"]
 
@@ -201,8 +209,9 @@ def _group_structs(codes: List[str], endian: str) -> List[struct.Struct]:
 class _CodecBuilder:
     """Walks a message class and emits encode and decode functions."""
 
-    def __init__(self, endian: str) -> None:
+    def __init__(self, endian: str, *, numpy_arrays: bool = False) -> None:
         self.endian = endian
+        self.numpy_arrays = numpy_arrays  # decode numeric arrays as numpy arrays (rospy.numpy_msg classes)
         self.enc = _Source()
         self.dec = _Source()
 
@@ -278,14 +287,29 @@ class _CodecBuilder:
                 self._emit_count(v, p, leaf[2])
                 s.emit(f"b += {v}")
             elif kind == "primarray":
-                _, p, code, length, _isbool = leaf
+                _, p, code, length, is_bool = leaf
                 size = struct.calcsize(code)
                 v = s.var()
                 s.emit(f"{v} = {p}")
                 self._emit_count(v, p, length)
-                s.emit(f"if {v}:")
+                s.emit(f"if len({v}):")  # len(): an ndarray has no truth value
                 s.emit(f"    b += _Z[:(4 - len(b)) & {size - 1}]")
-                s.emit(f"    b += _pack('{self.endian}%d{code}' % len({v}), *{v})")
+                if not is_bool and self.endian == "<":
+                    # numeric arrays that already hold the wire's bytes go in as a block (numpy arrays of the
+                    # field's exact dtype, array.array of its typecode): no Python float per element. Any other
+                    # dtype is converted, and range-checked, element by element, as genpy does
+                    if numpy is not None:
+                        dt = s.const(numpy.dtype(self.endian + code), "D")
+                        s.emit(f"    if {v}.__class__ is _NDARRAY and {v}.dtype == {dt} and {v}.ndim == 1:")
+                        s.emit(f"        b += {v}.tobytes()")
+                        s.emit(f"    elif {v}.__class__ is _ARRAY and {v}.typecode == {_array_code(code)!r}:")
+                    else:
+                        s.emit(f"    if {v}.__class__ is _ARRAY and {v}.typecode == {_array_code(code)!r}:")
+                    s.emit(f"        b += {v}")
+                    s.emit("    else:")
+                    s.emit(f"        b += _pack('{self.endian}%d{code}' % len({v}), *{v})")
+                else:
+                    s.emit(f"    b += _pack('{self.endian}%d{code}' % len({v}), *{v})")
             elif kind == "strarray":
                 _, p, length = leaf
                 v, x = s.var(), s.var("x")
@@ -388,7 +412,12 @@ class _CodecBuilder:
                 size = struct.calcsize(code)
                 s.emit(f"if {n}:")
                 s.emit(f"    p += (4 - p) & {size - 1}" if size > 1 else "    pass")
-                s.emit(f"{p} = _unpack_from('{self.endian}%d{code}' % {n}, buf, p)")
+                if self.numpy_arrays and base != "bool":
+                    # rospy.numpy_msg: a numpy array viewing the received sample, as rospy's frombuffer gives
+                    dt = s.const(numpy.dtype(self.endian + code), "D")
+                    s.emit(f"{p} = _frombuffer(buf, {dt}, {n}, p)")
+                else:
+                    s.emit(f"{p} = _unpack_from('{self.endian}%d{code}' % {n}, buf, p)")
                 if base == "bool":
                     s.emit(f"{p} = [bool(_q) for _q in {p}]")
                 elif length is None:
@@ -449,8 +478,20 @@ def _bad_len(path: str, expected: int, got: int) -> ValueError:
     return ValueError(f"field {path.split('.', 1)[-1]}: fixed-size array needs {expected} elements, got {got}")
 
 
+def _array_code(struct_code: str) -> str:
+    """The ``array.array`` typecode whose items have the size and kind of ``struct_code``'s (``'l'`` is 8
+    bytes on Linux, ``'i'`` 4), or ``''`` when none has (then no array.array takes the fast path)."""
+    for tc in (struct_code, "l" if struct_code == "q" else "L" if struct_code == "Q" else ""):
+        if tc and array.array(tc).itemsize == struct.calcsize(struct_code) and sys.byteorder == "little":
+            return tc
+    return ""
+
+
 _COMMON = {
     "_Z": bytes(8),
+    "_ARRAY": array.array,
+    "_NDARRAY": numpy.ndarray if numpy is not None else None,
+    "_frombuffer": numpy.frombuffer if numpy is not None else None,
     "_U32": struct.Struct("<I"),
     "_pack": struct.pack,
     "_unpack_from": struct.unpack_from,
@@ -510,13 +551,13 @@ def _short(value: Any) -> str:
 def _bad_scalar(base: str, value: Any) -> str | None:
     if base in _INT_RANGES:
         lo, hi = _INT_RANGES[base]
-        if not isinstance(value, int):
+        if not isinstance(value, numbers.Integral):  # numpy's integers too
             return f"{_short(value)} is not an integer ({base}: {lo}..{hi})"
-        if not lo <= value <= hi:
+        if not lo <= int(value) <= hi:
             return f"{_short(value)} is out of range ({base}: {lo}..{hi})"
         return None
     if base in ("float32", "float64"):
-        return None if isinstance(value, (int, float)) else f"{_short(value)} is not a number ({base})"
+        return None if isinstance(value, numbers.Real) else f"{_short(value)} is not a number ({base})"
     if base == "string":
         if isinstance(value, (bytes, bytearray)):
             return None
@@ -527,6 +568,9 @@ def _bad_scalar(base: str, value: Any) -> str | None:
         except UnicodeError:
             return f"{_short(value)} cannot be encoded as UTF-8"
     return None
+
+
+_SEQUENCES = (list, tuple, array.array) + ((numpy.ndarray,) if numpy is not None else ())
 
 
 def describe_bad_field(msg: Any, ros_type: str, path: str = "") -> str | None:
@@ -549,9 +593,11 @@ def describe_bad_field(msg: Any, ros_type: str, path: str = "") -> str | None:
         if is_array:
             if base in _BYTES_TYPES and isinstance(value, (bytes, bytearray)):
                 items: List[Any] = []
-            elif not isinstance(value, (list, tuple)) and not (base in _BYTES_TYPES and isinstance(value, (bytes,
-                                                                                                      bytearray))):
+            elif not isinstance(value, _SEQUENCES) and not (base in _BYTES_TYPES and isinstance(value, (bytes,
+                                                                                                     bytearray))):
                 return f"field {where}: {_short(value)} is not a list"
+            elif getattr(value, "ndim", 1) != 1:
+                return f"field {where}: a numpy array of {getattr(value, 'ndim')} dimensions, where one is needed"
             else:
                 items = list(value[:1000])
             if length is not None and len(value) != length:
@@ -579,6 +625,17 @@ def _describe_value(value: Any, base: str, where: str) -> str | None:
     if not isinstance(value, sub):
         return f"field {where}: {_short(value)} is not a {sub._type}"
     return describe_bad_field(value, sub._type, where)
+
+
+def is_numpy_msg(data_class: Any) -> bool:
+    """Whether ``data_class`` is a ``rospy.numpy_msg.numpy_msg(...)`` class: its numeric arrays are numpy arrays.
+
+    >>> from std_msgs.msg import Float32MultiArray
+    >>> from rospy.numpy_msg import numpy_msg
+    >>> is_numpy_msg(Float32MultiArray), is_numpy_msg(numpy_msg(Float32MultiArray))
+    (False, True)
+    """
+    return getattr(getattr(data_class, "deserialize", None), "__module__", None) == "rospy.numpy_msg"
 
 
 _cache: Dict[type, DDSType] = {}
@@ -616,8 +673,9 @@ def dds_type_for(data_class: Type[genpy.Message]) -> DDSType:
                     f"cannot serialize {ros_type}: {describe_bad_field(msg, ros_type) or exc}") from exc
 
         decoders = []
+        numpy_arrays = is_numpy_msg(data_class)
         for endian in "<>":
-            b = _CodecBuilder(endian)
+            b = _CodecBuilder(endian, numpy_arrays=numpy_arrays)
             b.dec.consts["_CLS"] = data_class
             b.decode_body(ros_type, "m")
             extra = {"_U32": struct.Struct(endian + "I")}

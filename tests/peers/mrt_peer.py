@@ -78,6 +78,27 @@ def full_dict(msg: Any) -> Any:
         return {"bytes_len": len(msg), "sha256": hashlib.sha256(msg).hexdigest(), "head": list(msg[:8])}
     if isinstance(msg, (list, tuple)):
         return [full_dict(x) for x in msg]
+    if hasattr(msg, "dtype") and hasattr(msg, "tolist"):  # numpy array (--numpy): its dtype shows what arrived
+        return {"ndarray": msg.dtype.str, "values": msg.tolist()}
+    return msg
+
+
+def as_numpy(msg: Any) -> Any:
+    """--numpy talk: every numeric array field (not uint8[]/char[]/bool[]) becomes a numpy array of its dtype."""
+    import numpy
+
+    dtypes = {"float32": "<f4", "float64": "<f8", "int8": "i1", "byte": "i1", "int16": "<i2", "uint16": "<u2",
+              "int32": "<i4", "uint32": "<u4", "int64": "<i8", "uint64": "<u8"}
+    for key, slot in zip(msg.__slots__, msg._slot_types):
+        value = getattr(msg, key)
+        base = slot.split("[")[0]
+        if slot.endswith("]") and base in dtypes:
+            setattr(msg, key, numpy.array(value, dtype=dtypes[base]))
+        elif isinstance(value, genpy.Message):
+            as_numpy(value)
+        elif slot.endswith("]") and value and isinstance(value[0], genpy.Message):
+            for item in value:
+                as_numpy(item)
     return msg
 
 
@@ -144,6 +165,8 @@ def main() -> int:
     ap.add_argument("--full-msg", action="store_true",
                     help="listen: print every received message in full (recv event key 'msg')")
     ap.add_argument("--exit-after", type=int, default=0, help="listen: exit after this many messages")
+    ap.add_argument("--numpy", action="store_true",
+                    help="use rospy.numpy_msg(TYPE): talk fills numeric arrays with numpy arrays, listen gets them")
     ap.add_argument("--with-qos", action="store_true",
                     help="use advertise_with_qos/subscribe_with_qos even when --qos is empty")
     ap.add_argument("--wait-dds-readers", type=int, default=0,
@@ -164,6 +187,10 @@ def main() -> int:
     if data_class is None:
         emit("error", text=f"unknown type {args.type}")
         return 2
+    if args.numpy:
+        from rospy.numpy_msg import numpy_msg
+
+        data_class = numpy_msg(data_class)
     name = args.node_name or f"mrt_{args.mode}"
     micros_rt.init_node(name, disable_signals=False)
     capture_logs()
@@ -199,7 +226,8 @@ def main() -> int:
                 break
             text = f"{args.prefix} {i}"
             if values is not None:
-                pub.publish(set_fields(data_class(), values, i))
+                msg = set_fields(data_class(), values, i)
+                pub.publish(as_numpy(msg) if args.numpy else msg)
             else:
                 pub.publish(fill(data_class(), text, i, args.stamp))
             emit("sent", seq=i, data=text, connections=pub.get_num_connections())

@@ -34,11 +34,16 @@ def main() -> int:
     ap.add_argument("--duration", type=float, default=30.0, help="exit after this many seconds")
     ap.add_argument("--queue-size", type=int, default=100)
     ap.add_argument("--tcp-nodelay", action="store_true")
+    ap.add_argument("--numpy", action="store_true", help="subscribe with rospy.numpy_msg(TYPE)")
     ap.add_argument("--rosout", action="store_true", help="keep the /rosout publisher (off by default)")
     args = ap.parse_args()
 
     t_end = time.monotonic() + args.duration
     cls = msg_class(args.type)
+    if args.numpy:
+        from rospy.numpy_msg import numpy_msg
+
+        cls = numpy_msg(cls)
     rospy.init_node(args.node_name, anonymous=False, disable_rosout=not args.rosout)
     caller_id = rospy.get_caller_id()
     topic = rospy.resolve_name(args.topic)

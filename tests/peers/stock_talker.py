@@ -49,6 +49,8 @@ def to_jsonable(value: Any) -> Any:
         return list(value)
     if isinstance(value, (list, tuple)):
         return [to_jsonable(v) for v in value]
+    if hasattr(value, "dtype") and hasattr(value, "tolist"):  # numpy array (numpy_msg): its dtype shows what arrived
+        return {"ndarray": value.dtype.str, "values": value.tolist()}
     return value
 
 
