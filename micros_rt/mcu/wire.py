@@ -201,6 +201,8 @@ def _array_codec(item: Tuple[_Enc, _Dec], size: Optional[int]) -> Tuple[_Enc, _D
     expected = "an array" + (f" of exactly {size} elements" if size is not None else "")
 
     def enc(v: Any, path: str) -> Any:
+        if hasattr(v, "tolist") and getattr(v, "ndim", 1) == 1:  # numpy arrays (rospy.numpy_msg), array.array
+            v = v.tolist()
         if not isinstance(v, (list, tuple)):
             raise genpy.SerializationError(f"field '{path}': {v!r} is not a list")
         if size is not None and len(v) != size:

@@ -200,3 +200,20 @@ def test_fuzzed_datagrams_and_frames_only_ever_raise_wire_error() -> None:
         except WireError as exc:
             kinds[exc.kind] = kinds.get(exc.kind, 0) + 1
     assert {"not_msgpack", "bad_shape", "bad_crc"} <= set(kinds)
+
+
+def test_numpy_and_array_values_go_out_as_the_list_would() -> None:
+    import array
+
+    import numpy
+
+    msg = Imu()
+    msg.orientation_covariance = [0.5 * i for i in range(9)]
+    expect = wire.codec_for(Imu).to_wire(msg)
+    msg.orientation_covariance = numpy.array([0.5 * i for i in range(9)])  # rospy.numpy_msg style
+    assert wire.codec_for(Imu).to_wire(msg) == expect
+    msg.orientation_covariance = array.array("d", [0.5 * i for i in range(9)])
+    assert wire.codec_for(Imu).to_wire(msg) == expect
+    msg.orientation_covariance = numpy.zeros((3, 3))
+    with pytest.raises(genpy.SerializationError, match="orientation_covariance"):
+        wire.codec_for(Imu).to_wire(msg)

@@ -165,3 +165,16 @@ def test_bad_rpc_request(payload: bytes) -> None:
 def test_bad_rpc_response() -> None:
     with pytest.raises(codec.CodecError, match="msg id and status"):
         codec.decode_rpc_response(b"\x04ros1\x01\x00")
+
+
+def test_json_of_numpy_and_array_values_is_the_json_of_the_list() -> None:
+    import array
+
+    import numpy
+    from rospy.numpy_msg import numpy_msg
+    from std_msgs.msg import Float32MultiArray
+
+    values = [0.5, -1.25, 3.0]
+    expect = codec.msg_to_json(Float32MultiArray(data=values))
+    assert codec.msg_to_json(numpy_msg(Float32MultiArray)(data=numpy.array(values, dtype=numpy.float32))) == expect
+    assert codec.msg_to_json(Float32MultiArray(data=array.array("f", values))) == expect
