@@ -60,7 +60,7 @@ def wait_cmd(prefix, timeout):
 
 # =========================================================================== messages
 
-KINDS = ("bytes", "image_vga", "image_hd", "cloud", "scan")
+KINDS = ("bytes", "image_vga", "image_hd", "cloud", "scan", "scan_np")
 
 
 class Msgs:
@@ -79,7 +79,10 @@ class Msgs:
             import sensor_msgs.msg as sm
             import std_msgs.msg as stdm
         self.cls = {"bytes": stdm.UInt8MultiArray, "image_vga": sm.Image, "image_hd": sm.Image,
-                    "cloud": sm.PointCloud2, "scan": sm.LaserScan}[kind]
+                    "cloud": sm.PointCloud2, "scan": sm.LaserScan, "scan_np": sm.LaserScan}[kind]
+        if kind == "scan_np" and not self.ros2:  # ROS 1's numpy configuration (rclpy's arrays are array.array)
+            from rospy.numpy_msg import numpy_msg
+            self.cls = numpy_msg(self.cls)
         self.sm = sm
         if kind == "image_vga":
             self.blob = self._u8(bytes(640 * 480 * 3))
@@ -90,10 +93,15 @@ class Msgs:
             f = sm.PointField
             self.fields = [f(name=n, offset=4 * i, datatype=7, count=1) for i, n in enumerate("xyz")] + \
                 [f(name="intensity", offset=12, datatype=7, count=1)]
-        elif kind == "scan":
+        elif kind in ("scan", "scan_np"):
             vals = [float(i % 100) / 10.0 for i in range(1081)]
-            self.ranges = array.array("f", vals) if self.ros2 else vals
-            self.intens = array.array("f", vals) if self.ros2 else vals
+            if self.ros2:
+                self.ranges = self.intens = array.array("f", vals)
+            elif kind == "scan_np":
+                import numpy
+                self.ranges = self.intens = numpy.array(vals, dtype=numpy.float32)
+            else:
+                self.ranges = self.intens = vals
 
     def _u8(self, b):
         return array.array("B", b) if self.ros2 else b

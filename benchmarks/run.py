@@ -71,6 +71,8 @@ REALISTIC = {  # kind: (label, size in bytes)
     "image_hd": ("sensor_msgs/Image 1920x1080 rgb8", 1920 * 1080 * 3),
     "cloud": ("sensor_msgs/PointCloud2 65,536 pts (1 MiB)", 65536 * 16),
     "scan": ("sensor_msgs/LaserScan 1,081 ranges", 1081 * 8),
+    # the same message in ROS 1's documented numpy configuration, both ends (rclpy: its own array.array)
+    "scan_np": ("sensor_msgs/LaserScan 1,081 ranges, rospy.numpy_msg", 1081 * 8),
 }
 FIGURE_GROUPS = ("lat64", "lat64k", "thr64", "thr1m", "fanout4", "disc", "realistic", "scale")
 # (figure, target ratio vs rospy, "<=" or ">=", extra condition)
