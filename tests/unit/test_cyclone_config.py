@@ -73,6 +73,12 @@ def test_loopback_nodes_use_large_fragments_and_network_nodes_do_not() -> None:
     assert "FragmentSize" not in micros_rt_defaults({"ROS_IP": "10.1.2.3"})  # 1,500 B MTUs: Cyclone's default
 
 
+def test_loopback_writers_start_without_slow_start_and_network_writers_keep_it() -> None:
+    # Cyclone's adaptive writer history starts at 30 kB in flight; on loopback it starts at its 500 kB ceiling
+    assert "<WhcHighInit>500kB</WhcHighInit>" in micros_rt_defaults({"ROS_IP": "127.0.0.1"})
+    assert "Watermarks" not in micros_rt_defaults({"ROS_IP": "10.1.2.3"})
+
+
 def test_large_samples_get_a_receive_buffer_to_land_in() -> None:
     # a 1920x1080 Image is ~100 fragments in one burst: the kernel's default UDP buffer dropped them
     from micros_rt.dds.participant import RECEIVE_BUFFER_CONFIG, micros_rt_defaults
