@@ -38,6 +38,14 @@ __all__ = [
 
 _log = nonblocking_logger("rosout.micros_rt.dds")
 
+#: Cyclone's writers start with 30 kB of unacknowledged data allowed (``WhcHighInit``) and grow it to 500 kB
+#: (``WhcHigh``) as acknowledgements come back: a slow start that suits a Wi-Fi link, not a host's own
+#: loopback. It throttled every burst that followed discovery: 2,776 LaserScans (8.6 KB) one way at
+#: 51-54 k/s, 80-83 k/s starting at 500 kB (3 runs each); 64 B in bursts of 60,000: 180-229 k/s against
+#: 239-252 k/s. Part of :data:`LOOPBACK_CONFIG`, so a user's ``CYCLONEDDS_URI`` (whose
+#: ``WhcHigh``/``WhcLow`` Cyclone checks against it) and other interfaces keep Cyclone's slow start.
+LOOPBACK_WATERMARKS = "<Watermarks><WhcHighInit>500kB</WhcHighInit></Watermarks>"
+
 LOOPBACK_CONFIG = (
     '<CycloneDDS><Domain id="any"><General>'
     '<Interfaces><NetworkInterface name="lo" multicast="false"/></Interfaces>'
@@ -45,6 +53,7 @@ LOOPBACK_CONFIG = (
     "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
     "<MaxAutoParticipantIndex>32</MaxAutoParticipantIndex>"
     '<Peers><Peer address="127.0.0.1"/></Peers></Discovery>'
+    f"<Internal>{LOOPBACK_WATERMARKS}</Internal>"
     "</Domain></CycloneDDS>"
 )
 
@@ -110,24 +119,15 @@ LOOPBACK_TRANSPORT = "<General><MaxMessageSize>65500B</MaxMessageSize><FragmentS
 #: net.core.rmem_max; nothing fails when it allows less): 363-400 Images/s (stock rospy: 137-152).
 RECEIVE_BUFFER_CONFIG = '<SocketReceiveBufferSize max="8MB"/>'
 
-#: Cyclone's writers start with 30 kB of unacknowledged data allowed (``WhcHighInit``) and grow it to 500 kB
-#: (``WhcHigh``) as acknowledgements come back: a slow start that suits a Wi-Fi link, not a host's own
-#: loopback. It throttled every burst that followed discovery: 2,776 LaserScans (8.6 KB) one way at
-#: 51-54 k/s, 80-83 k/s starting at 500 kB (3 runs each); 64 B in bursts of 60,000: 180-229 k/s against
-#: 239-252 k/s. On loopback writers start at the full 500 kB; other interfaces keep Cyclone's slow start.
-LOOPBACK_WATERMARKS = "<Watermarks><WhcHighInit>500kB</WhcHighInit></Watermarks>"
 
 
 def micros_rt_defaults(env: Mapping[str, str] = os.environ) -> str:
     """Settings micros_rt applies under any configuration (a user's ``CYCLONEDDS_URI`` overrides them):
-    the participant lease, a receive buffer large samples fit in, and on a loopback node large fragments
-    and no slow start of writers."""
-    loopback = _is_loopback(env)
-    transport = LOOPBACK_TRANSPORT if loopback else ""
-    watermarks = LOOPBACK_WATERMARKS if loopback else ""
+    the participant lease, a receive buffer large samples fit in, and on a loopback node large fragments."""
+    transport = LOOPBACK_TRANSPORT if _is_loopback(env) else ""
     return (f'<CycloneDDS><Domain id="any">{transport}<Discovery>'
             f"<LeaseDuration>{lease_duration(env):g}s</LeaseDuration>"
-            f"</Discovery><Internal>{RECEIVE_BUFFER_CONFIG}{watermarks}</Internal></Domain></CycloneDDS>")
+            f"</Discovery><Internal>{RECEIVE_BUFFER_CONFIG}</Internal></Domain></CycloneDDS>")
 
 
 def cyclone_config(env: Mapping[str, str] = os.environ) -> str:

@@ -308,6 +308,11 @@ class _CodecBuilder:
                     s.emit(f"        b += {v}")
                     s.emit("    else:")
                     s.emit(f"        b += _pack('{self.endian}%d{code}' % len({v}), *{v})")
+                elif numpy is not None:  # bool[]: a numpy bool array is its bytes (0/1); anything else item by item
+                    s.emit(f"    if {v}.__class__ is _NDARRAY and {v}.dtype == _NPBOOL and {v}.ndim == 1:")
+                    s.emit(f"        b += {v}.tobytes()")
+                    s.emit("    else:")
+                    s.emit(f"        b += _pack('{self.endian}%d{code}' % len({v}), *{v})")
                 else:
                     s.emit(f"    b += _pack('{self.endian}%d{code}' % len({v}), *{v})")
             elif kind == "strarray":
@@ -413,9 +418,14 @@ class _CodecBuilder:
                 s.emit(f"if {n}:")
                 s.emit(f"    p += (4 - p) & {size - 1}" if size > 1 else "    pass")
                 if self.numpy_arrays and base != "bool":
-                    # rospy.numpy_msg: a numpy array viewing the received sample, as rospy's frombuffer gives
+                    # rospy.numpy_msg: a numpy array viewing the received sample, as rospy's frombuffer gives;
+                    # from a big-endian sample a native copy, as rospy's (its TCPROS side writes raw bytes)
                     dt = s.const(numpy.dtype(self.endian + code), "D")
-                    s.emit(f"{p} = _frombuffer(buf, {dt}, {n}, p)")
+                    if self.endian == "<" and sys.byteorder == "little":
+                        s.emit(f"{p} = _frombuffer(buf, {dt}, {n}, p)")
+                    else:
+                        native = s.const(numpy.dtype(code), "D")
+                        s.emit(f"{p} = _frombuffer(buf, {dt}, {n}, p).astype({native})")
                 else:
                     s.emit(f"{p} = _unpack_from('{self.endian}%d{code}' % {n}, buf, p)")
                 if base == "bool":
@@ -492,6 +502,7 @@ _COMMON = {
     "_ARRAY": array.array,
     "_NDARRAY": numpy.ndarray if numpy is not None else None,
     "_frombuffer": numpy.frombuffer if numpy is not None else None,
+    "_NPBOOL": numpy.dtype(numpy.bool_) if numpy is not None else None,
     "_U32": struct.Struct("<I"),
     "_pack": struct.pack,
     "_unpack_from": struct.unpack_from,
@@ -549,6 +560,8 @@ def _short(value: Any) -> str:
 
 
 def _bad_scalar(base: str, value: Any) -> str | None:
+    if numpy is not None and isinstance(value, numpy.bool_):
+        value = bool(value)
     if base in _INT_RANGES:
         lo, hi = _INT_RANGES[base]
         if not isinstance(value, numbers.Integral):  # numpy's integers too

@@ -3,6 +3,8 @@ under a user's CYCLONEDDS_URI, and that a real Cyclone participant accepts what 
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from micros_rt.dds.participant import (
@@ -73,10 +75,26 @@ def test_loopback_nodes_use_large_fragments_and_network_nodes_do_not() -> None:
     assert "FragmentSize" not in micros_rt_defaults({"ROS_IP": "10.1.2.3"})  # 1,500 B MTUs: Cyclone's default
 
 
-def test_loopback_writers_start_without_slow_start_and_network_writers_keep_it() -> None:
+def test_loopback_writers_start_without_slow_start_and_others_keep_it() -> None:
     # Cyclone's adaptive writer history starts at 30 kB in flight; on loopback it starts at its 500 kB ceiling
-    assert "<WhcHighInit>500kB</WhcHighInit>" in micros_rt_defaults({"ROS_IP": "127.0.0.1"})
-    assert "Watermarks" not in micros_rt_defaults({"ROS_IP": "10.1.2.3"})
+    assert "<WhcHighInit>500kB</WhcHighInit>" in cyclone_config({"ROS_IP": "127.0.0.1"})
+    assert "Watermarks" not in cyclone_config({"ROS_IP": "10.1.2.3"})
+    # a user's file sets watermarks that Cyclone checks the start against: micros_rt's start stays out
+    assert "Watermarks" not in cyclone_config({"ROS_IP": "127.0.0.1", "CYCLONEDDS_URI": "file:///x.xml"})
+
+
+def test_a_users_low_writer_ceiling_still_starts_on_loopback(tmp_path: Path) -> None:
+    # Cyclone refuses a start above the ceiling ("invalid watermark settings"): a user's WhcHigh of 100 kB
+    from cyclonedds.domain import Domain, DomainParticipant
+
+    user = tmp_path / "cyclone.xml"
+    user.write_text('<CycloneDDS><Domain id="any"><General><Interfaces><NetworkInterface name="lo" '
+                    'multicast="false"/></Interfaces><AllowMulticast>false</AllowMulticast></General>'
+                    "<Internal><Watermarks><WhcHigh>100kB</WhcHigh></Watermarks></Internal></Domain></CycloneDDS>")
+    domain = Domain(228, cyclone_config({"ROS_IP": "127.0.0.1", "CYCLONEDDS_URI": f"file://{user}"}))
+    participant = DomainParticipant(228)
+    assert str(participant.guid)
+    del participant, domain
 
 
 def test_large_samples_get_a_receive_buffer_to_land_in() -> None:
