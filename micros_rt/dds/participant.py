@@ -38,13 +38,28 @@ __all__ = [
 
 _log = nonblocking_logger("rosout.micros_rt.dds")
 
-#: Cyclone's writers start with 30 kB of unacknowledged data allowed (``WhcHighInit``) and grow it to 500 kB
-#: (``WhcHigh``) as acknowledgements come back: a slow start that suits a Wi-Fi link, not a host's own
-#: loopback. It throttled every burst that followed discovery: 2,776 LaserScans (8.6 KB) one way at
-#: 51-54 k/s, 80-83 k/s starting at 500 kB (3 runs each); 64 B in bursts of 60,000: 180-229 k/s against
-#: 239-252 k/s. Part of :data:`LOOPBACK_CONFIG`, so a user's ``CYCLONEDDS_URI`` (whose
-#: ``WhcHigh``/``WhcLow`` Cyclone checks against it) and other interfaces keep Cyclone's slow start.
-LOOPBACK_WATERMARKS = "<Watermarks><WhcHighInit>500kB</WhcHighInit></Watermarks>"
+#: Cyclone's reliable writers on a host's own loopback, where the network is never what is slow:
+#:
+#: - Writers start with a small window of unacknowledged data (``WhcHighInit``) and grow it toward 500 kB
+#:   (``WhcHigh``) as acknowledgements come back: a slow start that throttled every burst after discovery
+#:   (2,776 LaserScans of 8.6 KB one way at 51-54 k/s; 80-83 k/s starting at 500 kB; 64 B bursts of 60,000:
+#:   180-229 k/s against 239-252 k/s). Here writers start at 500 kB.
+#: - The window also shrinks by a fifth whenever a writer retransmits (``WhcAdaptive``), down to 1 kB, and
+#:   grows back only while nothing is retransmitted. A subscriber killed mid-stream is retransmitted to until
+#:   its lease ends, so subscribers that kept dying wore a lossless (``queue_size=None``) publisher's window
+#:   down to a few samples: with listeners killed every 0.5-1 s, the 15th-16th new subscriber heard nothing
+#:   and publish() blocked until PublishTimeoutError (3 runs of 18-20; none of 45 with the window fixed).
+#:   Here the window stays at 500 kB.
+#: - A reader that learns from a heartbeat that it misses data waits ``NackDelay`` (100 ms) before asking
+#:   for it, which spares a network with many readers a storm of requests. Discovery data goes that way
+#:   whenever it crosses the new participant's first announcement: a quarter of the subscribers started
+#:   next to a talker heard it ~80 ms later than the rest (3 of 12, 4 of 14). Here the wait is 5 ms (14 of 14
+#:   heard it within 20 ms of subscribing).
+#:
+#: Part of :data:`LOOPBACK_CONFIG` only: a user's ``CYCLONEDDS_URI`` (whose ``WhcHigh``/``WhcLow`` Cyclone
+#: checks the start against) and other interfaces keep Cyclone's defaults.
+LOOPBACK_INTERNAL = ("<Watermarks><WhcHighInit>500kB</WhcHighInit><WhcAdaptive>false</WhcAdaptive></Watermarks>"
+                     "<NackDelay>5ms</NackDelay>")
 
 LOOPBACK_CONFIG = (
     '<CycloneDDS><Domain id="any"><General>'
@@ -53,7 +68,7 @@ LOOPBACK_CONFIG = (
     "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
     "<MaxAutoParticipantIndex>32</MaxAutoParticipantIndex>"
     '<Peers><Peer address="127.0.0.1"/></Peers></Discovery>'
-    f"<Internal>{LOOPBACK_WATERMARKS}</Internal>"
+    f"<Internal>{LOOPBACK_INTERNAL}</Internal>"
     "</Domain></CycloneDDS>"
 )
 

@@ -331,3 +331,27 @@ def test_hundred_publisher_restarts_keep_the_subscriber_small(ros_master: harnes
     assert final["writers"] <= 1, final
     assert final["rss_kb"] - after10["rss_kb"] < 5 * 1024, (after10, final)
     assert len(got) >= 100, len(got)
+
+
+def test_lossless_publisher_outlives_subscribers_killed_one_after_another(ros_master: harness.RosMaster,
+                                                                          spawn: harness.Spawner) -> None:
+    # micros_rt's own loopback configuration (no CYCLONEDDS_URI): a 100 Hz queue_size=None talker, and
+    # subscribers killed (SIGKILL) one after another, each while the previous one's lease still runs. With
+    # Cyclone's adaptive writer window, every dead subscriber's retransmissions shrank the talker's window, and
+    # the 15th-16th newcomer heard nothing while publish() blocked until PublishTimeoutError
+    env = {k: v for k, v in ros_master.env.items() if k != "CYCLONEDDS_URI"}
+    env["ROS_IP"] = "127.0.0.1"
+    talker = spawn(mrt("talk", "--topic", "/churn", "--queue-size", 0, "--count", 100000, "--rate", 100,
+                       "--node-name", "churn_talker"), env=env)
+    talker.wait_for("ready", 30)
+    for i in range(24):
+        listener = spawn(mrt("listen", "--topic", "/churn", "--duration", 60, "--node-name", f"churn_{i}"), env=env)
+        listener.wait_for("recv", 15)  # every newcomer hears the talker, over DDS
+        assert listener.events("recv")[0]["transport"] == "DDS"
+        listener.proc.kill()  # no goodbye: its DDS reader stays matched until the lease ends
+        listener.proc.wait(10)
+        time.sleep(0.3)
+        assert talker.alive(), talker.stderr_tail()
+    final = spawn(mrt("listen", "--topic", "/churn", "--duration", 60, "--node-name", "churn_last"), env=env)
+    final.wait_for_count("recv", 100, timeout=15)
+    assert talker.alive() and not talker.events("error"), talker.stderr_tail()

@@ -75,12 +75,16 @@ def test_loopback_nodes_use_large_fragments_and_network_nodes_do_not() -> None:
     assert "FragmentSize" not in micros_rt_defaults({"ROS_IP": "10.1.2.3"})  # 1,500 B MTUs: Cyclone's default
 
 
-def test_loopback_writers_start_without_slow_start_and_others_keep_it() -> None:
-    # Cyclone's adaptive writer history starts at 30 kB in flight; on loopback it starts at its 500 kB ceiling
-    assert "<WhcHighInit>500kB</WhcHighInit>" in cyclone_config({"ROS_IP": "127.0.0.1"})
-    assert "Watermarks" not in cyclone_config({"ROS_IP": "10.1.2.3"})
-    # a user's file sets watermarks that Cyclone checks the start against: micros_rt's start stays out
-    assert "Watermarks" not in cyclone_config({"ROS_IP": "127.0.0.1", "CYCLONEDDS_URI": "file:///x.xml"})
+def test_loopback_writers_keep_a_fixed_window_and_readers_ask_at_once_others_keep_cyclones() -> None:
+    # on loopback: writers start at, and stay at, 500 kB in flight (no slow start, no shrinking on
+    # retransmits to dead readers); a reader asks for missing data after 5 ms, not 100
+    loop = cyclone_config({"ROS_IP": "127.0.0.1"})
+    for setting in ("<WhcHighInit>500kB</WhcHighInit>", "<WhcAdaptive>false</WhcAdaptive>", "<NackDelay>5ms</NackDelay>"):
+        assert setting in loop
+    for other in (cyclone_config({"ROS_IP": "10.1.2.3"}),
+                  # a user's file sets watermarks that Cyclone checks the start against: micros_rt's stay out
+                  cyclone_config({"ROS_IP": "127.0.0.1", "CYCLONEDDS_URI": "file:///x.xml"})):
+        assert "Watermarks" not in other and "NackDelay" not in other
 
 
 def test_a_users_low_writer_ceiling_still_starts_on_loopback(tmp_path: Path) -> None:
