@@ -358,11 +358,13 @@ class Bench:
         return out
 
     def thr(self, t, specs, subs=1, seconds=None):
-        """specs: [(tag, kind, size, count)]: one sender and ``subs`` receivers, one topic per spec, in turn."""
+        """specs: [(tag, kind, size, count)]: one sender and ``subs`` receivers, one topic per spec, in turn;
+        each spec sends ``count`` messages or for its time bound (``seconds`` for bytes, ``real_s`` for the
+        realistic types, whose count is a placeholder), whichever comes first."""
         seconds = seconds or self.P["thr_s"]
         topic = self.topic("thr")
         sp = ",".join(f"{k}:{sz}:{c}:0:{seconds if k == 'bytes' else self.P['real_s']}" for _, k, sz, c in specs)
-        limit = 60 + len(specs) * (seconds + 10)
+        limit = 60 + len(specs) * (max(seconds, self.P["real_s"]) + 10)
         common = ["--topic", topic, "--specs", sp, "--timeout", limit]
         recvs, send, out = [], None, {}
         try:

@@ -41,9 +41,9 @@ _log = nonblocking_logger("rosout.micros_rt.dds")
 #: Cyclone's reliable writers on a host's own loopback, where the network is never what is slow:
 #:
 #: - Writers start with a small window of unacknowledged data (``WhcHighInit``) and grow it toward 500 kB
-#:   (``WhcHigh``) as acknowledgements come back: a slow start that throttled every burst after discovery
-#:   (2,776 LaserScans of 8.6 KB one way at 51-54 k/s; 80-83 k/s starting at 500 kB; 64 B bursts of 60,000:
-#:   180-229 k/s against 239-252 k/s). Here writers start at 500 kB.
+#:   (``WhcHigh``) as acknowledgements come back: a slow start that throttled every burst right after
+#:   discovery (a burst of 2,776 numpy_msg LaserScans of 8.6 KB one way at 51-54 k/s; 80-83 k/s starting at
+#:   500 kB; 64 B bursts of 60,000: 180-229 k/s against 239-252 k/s). Here writers start at 500 kB.
 #: - The window also shrinks by a fifth whenever a writer retransmits (``WhcAdaptive``), down to 1 kB, and
 #:   grows back only while nothing is retransmitted. A subscriber killed mid-stream is retransmitted to until
 #:   its lease ends, so subscribers that kept dying wore a lossless (``queue_size=None``) publisher's window
@@ -133,7 +133,6 @@ LOOPBACK_TRANSPORT = "<General><MaxMessageSize>65500B</MaxMessageSize><FragmentS
 #: Cyclone's NACK/retransmit cycle: 64 Images/s one way. Up to 8 MB (what the kernel allows, see
 #: net.core.rmem_max; nothing fails when it allows less): 363-400 Images/s (stock rospy: 137-152).
 RECEIVE_BUFFER_CONFIG = '<SocketReceiveBufferSize max="8MB"/>'
-
 
 
 def micros_rt_defaults(env: Mapping[str, str] = os.environ) -> str:

@@ -302,9 +302,9 @@ class _CodecBuilder:
                         dt = s.const(numpy.dtype(self.endian + code), "D")
                         s.emit(f"    if {v}.__class__ is _NDARRAY and {v}.dtype == {dt} and {v}.ndim == 1:")
                         s.emit(f"        b += {v}.tobytes()")
-                        s.emit(f"    elif {v}.__class__ is _ARRAY and {v}.typecode == {_array_code(code)!r}:")
+                        s.emit(f"    elif {v}.__class__ is _ARRAY and {v}.typecode in {_array_codes(code)!r}:")
                     else:
-                        s.emit(f"    if {v}.__class__ is _ARRAY and {v}.typecode == {_array_code(code)!r}:")
+                        s.emit(f"    if {v}.__class__ is _ARRAY and {v}.typecode in {_array_codes(code)!r}:")
                     s.emit(f"        b += {v}")
                     s.emit("    else:")
                     s.emit(f"        b += _pack('{self.endian}%d{code}' % len({v}), *{v})")
@@ -488,13 +488,16 @@ def _bad_len(path: str, expected: int, got: int) -> ValueError:
     return ValueError(f"field {path.split('.', 1)[-1]}: fixed-size array needs {expected} elements, got {got}")
 
 
-def _array_code(struct_code: str) -> str:
-    """The ``array.array`` typecode whose items have the size and kind of ``struct_code``'s (``'l'`` is 8
-    bytes on Linux, ``'i'`` 4), or ``''`` when none has (then no array.array takes the fast path)."""
-    for tc in (struct_code, "l" if struct_code == "q" else "L" if struct_code == "Q" else ""):
-        if tc and array.array(tc).itemsize == struct.calcsize(struct_code) and sys.byteorder == "little":
-            return tc
-    return ""
+def _array_codes(struct_code: str) -> str:
+    """The ``array.array`` typecodes whose items have the size and kind of ``struct_code``'s (on Linux
+    ``'q'`` and ``'l'`` are both 8 bytes), or ``''`` on a big-endian host (then no array takes the fast path)."""
+    if sys.byteorder != "little":
+        return ""
+    size = struct.calcsize(struct_code)
+    kind = "f" if struct_code in "fd" else "u" if struct_code.isupper() else "i"
+    return "".join(tc for tc in "bBhHiIlLqQfd"
+                   if array.array(tc).itemsize == size
+                   and ("f" if tc in "fd" else "u" if tc.isupper() else "i") == kind)
 
 
 _COMMON = {

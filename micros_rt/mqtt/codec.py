@@ -252,7 +252,7 @@ def _to_jsonable(value: Any) -> Any:
         return list(value)
     if isinstance(value, (list, tuple)):
         return [_to_jsonable(v) for v in value]
-    if hasattr(value, "tolist"):  # numpy arrays and scalars (rospy.numpy_msg), array.array
+    if hasattr(value, "tolist") and getattr(value, "ndim", 1) <= 1:  # numpy (rospy.numpy_msg), array.array
         return _to_jsonable(value.tolist())
     if isinstance(value, float) and not math.isfinite(value):
         return str(value)
