@@ -7,7 +7,6 @@ IdlStruct objects of the high-level API.
 
 from __future__ import annotations
 
-import logging
 import threading
 from typing import Any, Callable, Dict, List, Optional, Tuple
 

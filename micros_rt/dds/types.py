@@ -294,27 +294,26 @@ class _CodecBuilder:
                 self._emit_count(v, p, length)
                 s.emit(f"if len({v}):")  # len(): an ndarray has no truth value
                 s.emit(f"    b += _Z[:(4 - len(b)) & {size - 1}]")
-                if not is_bool and self.endian == "<":
-                    # numeric arrays that already hold the wire's bytes go in as a block (numpy arrays of the
-                    # field's exact dtype, array.array of its typecode): no Python float per element. Any other
-                    # dtype is converted, and range-checked, element by element, as genpy does
-                    if numpy is not None:
-                        dt = s.const(numpy.dtype(self.endian + code), "D")
-                        s.emit(f"    if {v}.__class__ is _NDARRAY and {v}.dtype == {dt} and {v}.ndim == 1:")
-                        s.emit(f"        b += {v}.tobytes()")
-                        s.emit(f"    elif {v}.__class__ is _ARRAY and {v}.typecode in {_array_codes(code)!r}:")
-                    else:
-                        s.emit(f"    if {v}.__class__ is _ARRAY and {v}.typecode in {_array_codes(code)!r}:")
-                    s.emit(f"        b += {v}")
+                # values that already hold the wire's bytes go in as a block: a 1-D numpy array of the field's
+                # exact dtype (bool[]: numpy's bool, one byte 0/1 each), an array.array of its typecode. Any
+                # other value is converted, and range-checked, element by element, as genpy does
+                blocks: List[Tuple[str, str]] = []
+                if numpy is not None:
+                    dt = s.const(numpy.dtype(numpy.bool_) if is_bool else numpy.dtype(self.endian + code), "D")
+                    blocks.append((f"{v}.__class__ is _NDARRAY and {v}.dtype == {dt} and {v}.ndim == 1",
+                                   f"b += {v}.tobytes()"))
+                codes = _array_codes(code) if not is_bool and self.endian == "<" else ""
+                if codes:
+                    blocks.append((f"{v}.__class__ is _ARRAY and {v}.typecode in {codes!r}", f"b += {v}"))
+                pack = f"b += _pack('{self.endian}%d{code}' % len({v}), *{v})"
+                for i, (condition, block) in enumerate(blocks):
+                    s.emit(f"    {'elif' if i else 'if'} {condition}:")
+                    s.emit(f"        {block}")
+                if blocks:
                     s.emit("    else:")
-                    s.emit(f"        b += _pack('{self.endian}%d{code}' % len({v}), *{v})")
-                elif numpy is not None:  # bool[]: a numpy bool array is its bytes (0/1); anything else item by item
-                    s.emit(f"    if {v}.__class__ is _NDARRAY and {v}.dtype == _NPBOOL and {v}.ndim == 1:")
-                    s.emit(f"        b += {v}.tobytes()")
-                    s.emit("    else:")
-                    s.emit(f"        b += _pack('{self.endian}%d{code}' % len({v}), *{v})")
+                    s.emit(f"        {pack}")
                 else:
-                    s.emit(f"    b += _pack('{self.endian}%d{code}' % len({v}), *{v})")
+                    s.emit(f"    {pack}")
             elif kind == "strarray":
                 _, p, length = leaf
                 v, x = s.var(), s.var("x")
@@ -505,7 +504,6 @@ _COMMON = {
     "_ARRAY": array.array,
     "_NDARRAY": numpy.ndarray if numpy is not None else None,
     "_frombuffer": numpy.frombuffer if numpy is not None else None,
-    "_NPBOOL": numpy.dtype(numpy.bool_) if numpy is not None else None,
     "_U32": struct.Struct("<I"),
     "_pack": struct.pack,
     "_unpack_from": struct.unpack_from,

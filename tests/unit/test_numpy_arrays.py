@@ -21,8 +21,8 @@ from micros_rt.dds.types import MalformedSampleError, dds_type_for, is_numpy_msg
 VALUES = [k * 0.25 for k in range(-5, 1076)]  # float32-exact
 
 
-def scan(ranges: Any, intensities: Any, cls: Any = LaserScan) -> Any:
-    msg = cls()
+def scan(ranges: Any, intensities: Any) -> Any:
+    msg = LaserScan()
     msg.header.frame_id = "laser"
     msg.angle_min, msg.angle_max = -2.25, 2.25
     msg.ranges, msg.intensities = ranges, intensities
