@@ -117,10 +117,16 @@ from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from std_msgs.msg import String
 
+def topic_name(e):
+    try:
+        return e.topic.get_name()
+    except AttributeError:  # registered, not yet built: the ROS 2 graph announcer's writer, made on its own thread
+        return ""
+
 def state():
     live = list(Entity._entities.values())  # cyclonedds' registry of entities not yet deleted
     # data endpoints only (rt/...): the node's ros_discovery_info announcement lives with the node
-    data = [e for e in live if isinstance(e, (DataWriter, DataReader)) and e.topic.get_name().startswith("rt/")]
+    data = [e for e in live if isinstance(e, (DataWriter, DataReader)) and topic_name(e).startswith("rt/")]
     return {"writers": sum(isinstance(e, DataWriter) for e in data),
             "readers": sum(isinstance(e, DataReader) for e in data),
             "waitsets": sum(isinstance(e, (WaitSet, GuardCondition)) for e in live),
