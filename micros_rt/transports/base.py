@@ -1,0 +1,280 @@
+"""The transport interface: what a publication and a subscription ask of every data plane.
+
+Every transport (TCPROS, DDS, MQTT, the microcontroller link) opens one writer per publication and one
+reader per subscription, and the per-topic endpoints (:mod:`micros_rt._publication`,
+:mod:`micros_rt._subscription`) talk to these few methods only, as rospy's ``ProtocolHandler`` and
+httpx's transport interface keep their callers free of per-transport ``if`` chains.
+
+Writers are two-phase so that a bad message is refused before anything is sent on any transport:
+every writer :meth:`~TransportWriter.prepare`\\s (serializes, raising ``genpy.SerializationError``), then
+every writer :meth:`~TransportWriter.send`\\s what it prepared. ``prepare`` returns None when nobody is
+there to receive (the message is then not encoded for that transport at all).
+
+Readers come in two kinds, behind one :class:`TransportReader` shape (``take``/``decode``/``close``):
+
+- *polled* readers (DDS) keep received samples in the transport (Cyclone's reader cache) until the
+  subscription's delivery thread takes them; their ``condition`` wakes that thread's wait set;
+- *pushed* readers (TCPROS, MQTT, microcontroller UDP) get messages on the transport's own I/O threads;
+  :class:`PushReader` queues them per reader so that a slow subscription never blocks a network
+  thread that other topics share (paho's, a UDP receive thread). Only a thread of the link's own
+  (one rospy receive thread per TCPROS connection) waits for room, as rospy's does.
+
+Each reader declares in :attr:`TransportReader.enforces` which subscriber QoS the transport applies
+itself (Cyclone: the time-based filter); the subscription's one admission path applies the rest.
+"""
+
+from __future__ import annotations
+
+import collections
+import importlib
+import threading
+from dataclasses import dataclass
+from typing import (Any, Callable, Deque, Dict, FrozenSet, List, Optional, Protocol, Sequence, Set, Tuple, Type,
+                    runtime_checkable)
+
+import genpy
+
+from ..qos import AdvertiseQoSOptions, SubscribeQoSOptions
+
+__all__ = ["Backend", "EndpointSpec", "Feed", "MirrorWriter", "PROFILE_BACKENDS", "ProfileBackend", "PushInfo",
+           "PushReader", "ReaderBackend", "RemoteWriter", "Sample", "TIME_FILTER", "LIFESPAN", "TransportReader",
+           "TransportWriter", "WriterBackend", "profile_backends"]
+
+#: Names of the subscriber QoS a reader can enforce natively (:attr:`TransportReader.enforces`).
+TIME_FILTER = "time_filter"
+LIFESPAN = "lifespan"
+
+
+@dataclass(frozen=True)
+class EndpointSpec:
+    """One topic endpoint as the transport needs to know it."""
+
+    topic: str                         # resolved ROS name
+    data_class: Type[genpy.Message]
+    queue_size: Optional[int]          # None/0: lossless (reliable, keep all, back-pressure)
+    latch: bool                        # writer: keep the last message for late joiners; reader: want it
+    tag: Dict[str, str]                # micros_rt identity (graph, node), visible to peers
+
+
+@dataclass(frozen=True)
+class RemoteWriter:
+    """A peer writer a reader heard: its id and its micros_rt tag (None for foreign, e.g. ROS 2)."""
+
+    guid: str
+    tag: Optional[Dict[str, str]]
+
+
+#: One received sample: (payload, info) where ``info`` has ``valid_data`` (bool), ``source_timestamp``
+#: (ns, 0 when unknown) and ``publication_handle`` (the writer, for :meth:`TransportReader.writer`).
+#: Cyclone's own SampleInfo has exactly these, so the DDS path builds no object per sample.
+Sample = Tuple[Any, Any]
+
+
+@runtime_checkable
+class TransportWriter(Protocol):
+    """A publication's writer on one transport."""
+
+    protocol: str
+
+    def prepare(self, msg: Any) -> Any:
+        """Serialize ``msg`` for this transport (None: nobody to send to); raise
+        ``genpy.SerializationError`` on a bad value, before anything is sent anywhere."""
+
+    def send(self, prepared: Any) -> None:
+        """Send what :meth:`prepare` returned; may block on back-pressure (bounded, then raises)."""
+
+    def close(self) -> None: ...
+
+
+@runtime_checkable
+class TransportReader(Protocol):
+    """A subscription's reader on one transport."""
+
+    protocol: str
+    #: subscriber QoS the transport applies itself (:data:`TIME_FILTER`, :data:`LIFESPAN`)
+    enforces: FrozenSet[str]
+
+    def take(self, n: int) -> Sequence[Sample]:
+        """Up to ``n`` received samples, oldest first, without blocking."""
+
+    def decode(self, payload: Any) -> Any:
+        """A genpy message from a payload; raise ``ValueError`` on a malformed one."""
+
+    def close(self) -> None: ...
+
+
+class WriterBackend(TransportWriter, Protocol):
+    """A negotiated transport's writer (DDS): it also says which readers it reaches."""
+
+    guid: str
+
+    def matched_peers(self) -> Set[str]:
+        """Ids of the readers this writer reaches now."""
+
+
+class ReaderBackend(TransportReader, Protocol):
+    """A negotiated transport's reader (DDS): samples carry the writer they came from, and the
+    subscription delivers only those of writers whose publisher accepted this transport."""
+
+    guid: str
+
+    def writer(self, handle: Any) -> Optional[RemoteWriter]:
+        """The writer behind a sample's handle (None when it is already gone)."""
+
+    def matched_writers(self) -> Set[str]:
+        """Ids of the writers this reader hears now."""
+
+
+class Backend(Protocol):
+    """A negotiated data plane: opens writers and readers. ``wake`` is called (from any thread) when data
+    or a match arrives; a back end may instead expose a native wait condition the inbox attaches to."""
+
+    protocol: str
+
+    def open_writer(self, spec: EndpointSpec, options: AdvertiseQoSOptions) -> WriterBackend: ...
+
+    def open_reader(self, spec: EndpointSpec, options: Optional[SubscribeQoSOptions],
+                    wake: Callable[[], None], on_incompatible: Callable[[int], None]) -> ReaderBackend: ...
+
+    def describe(self) -> List[str]:
+        """Words for ``rosnode info`` and logs (domain, interface)."""
+
+
+class PushInfo:
+    """The ``info`` of a pushed sample (the shape of Cyclone's SampleInfo that the core reads)."""
+
+    __slots__ = ("source_timestamp", "publication_handle")
+    valid_data = True
+
+    def __init__(self, source_timestamp: int, publication_handle: Any) -> None:
+        self.source_timestamp = source_timestamp
+        self.publication_handle = publication_handle
+
+
+class PushReader:
+    """The reader of a transport whose I/O threads hand over decoded messages (TCPROS, MQTT, UDP).
+
+    Each reader has its own queue of ``depth`` messages (None: unbounded, for lossless subscriptions).
+    :meth:`put` from a thread of the link's own (``blocking=True``: one rospy receive thread per TCPROS
+    connection) waits for room, which slows that link only, as rospy's back-pressure does. :meth:`put`
+    from a thread other topics share (``blocking=False``: paho's network thread, a UDP receive thread)
+    never waits: a full queue drops its oldest message and counts it in :attr:`dropped`, as ROS keeps the
+    newest ``queue_size``.
+    """
+
+    enforces: FrozenSet[str] = frozenset()
+
+    def __init__(self, protocol: str, depth: Optional[int], wake: Callable[[], None], *, blocking: bool,
+                 links: Optional[Callable[[], Dict[str, str]]] = None) -> None:
+        self.protocol = protocol
+        self.depth = depth
+        self.blocking = blocking
+        self.dropped = 0
+        self.closed = False
+        self._wake = wake
+        self._queue: Deque[Sample] = collections.deque()
+        self._space = threading.Condition()
+        #: link id -> protocol name of the links feeding this reader (for ``connection_transports()``)
+        self.links = links
+
+    def put(self, msg: Any, source_ns: int = 0, link: Any = None) -> None:
+        """Queue one message (any thread). ``source_ns``: its sending time when known (a Header stamp)."""
+        sample = (msg, PushInfo(source_ns, link))
+        depth, q = self.depth, self._queue
+        if depth is None:
+            q.append(sample)
+        elif self.blocking:
+            with self._space:
+                while len(q) >= depth and not self.closed:
+                    self._space.wait(0.5)  # back-pressure to this link only
+                q.append(sample)
+        else:
+            q.append(sample)
+            while len(q) > depth:
+                try:
+                    q.popleft()
+                except IndexError:  # the delivery thread took it meanwhile
+                    break
+                self.dropped += 1
+        self._wake()
+
+    def take(self, n: int) -> Sequence[Sample]:
+        q = self._queue
+        out: List[Sample] = []
+        while q and len(out) < n:
+            try:
+                out.append(q.popleft())
+            except IndexError:
+                break
+        if out and self.blocking and self.depth is not None:
+            with self._space:
+                self._space.notify_all()
+        return out
+
+    def pending(self) -> int:
+        return len(self._queue)
+
+    @staticmethod
+    def decode(payload: Any) -> Any:
+        return payload  # the transport decoded it on its own thread
+
+    def transports(self) -> Dict[str, str]:
+        """Link id -> protocol name, for ``Subscriber.connection_transports()``."""
+        return {} if self.links is None else self.links()
+
+    def close(self) -> None:
+        """Stop accepting and release a thread waiting for room (harmless twice)."""
+        if self.closed:
+            return
+        self.closed = True
+        with self._space:
+            self._space.notify_all()
+
+
+# ---------------------------------------------------------------------------------------------------
+# Transports a YAML profile attaches to topics beside the negotiated DDS/TCPROS link (MQTT today).
+# A publication mirrors its messages to each writer they open; a subscription is fed through a
+# PushReader of its own per feed, into the same admission path as every other reader.
+
+
+class MirrorWriter(TransportWriter, Protocol):
+    """A profile transport's writer: two-phase like every :class:`TransportWriter` (prepare raises on a
+    bad value before anything is sent anywhere; send does not raise for a peer or broker that is away)."""
+
+
+class Feed(Protocol):
+    """Messages from a profile transport into a subscription (``deliver(msg)`` per message, from the
+    transport's I/O thread; it never blocks)."""
+
+    protocol: str
+
+    def transports(self) -> Dict[str, str]:
+        """Link id -> protocol name, for ``Subscriber.connection_transports()``."""
+
+    def close(self) -> None: ...
+
+
+class ProfileBackend(Protocol):
+    """A transport chosen per topic by the YAML profile: opens a writer or a feed when one of its rules
+    names the topic, else returns None."""
+
+    def open_writer(self, spec: EndpointSpec, options: AdvertiseQoSOptions) -> Optional[MirrorWriter]: ...
+
+    def open_feed(self, spec: EndpointSpec, options: Optional[SubscribeQoSOptions],
+                  deliver: Callable[[Any], None]) -> Optional[Feed]: ...
+
+
+#: profile section -> module whose ``profile_backend(profile, graph=..., node=...)`` returns the
+#: :class:`ProfileBackend` for it. Imported only when a node's profile has that section.
+PROFILE_BACKENDS: Dict[str, str] = {"mqtt": "micros_rt.mqtt"}
+
+
+def profile_backends(profile: Any, *, graph: str, node: str) -> Tuple[ProfileBackend, ...]:
+    """The profile transports ``profile`` (a :class:`micros_rt.QoSProfile` or None) asks for."""
+    if profile is None:
+        return ()
+    found: List[ProfileBackend] = []
+    for section, module in PROFILE_BACKENDS.items():
+        if getattr(profile, section, None):
+            found.append(importlib.import_module(module).profile_backend(profile, graph=graph, node=node))
+    return tuple(found)
