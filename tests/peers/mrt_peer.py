@@ -137,6 +137,12 @@ class _JsonLogHandler(logging.Handler):
         emit("log", level=record.levelname, text=record.getMessage())
 
 
+def dataclasses_asdict(value: Any) -> Dict[str, Any]:
+    import dataclasses
+
+    return dataclasses.asdict(value)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("mode", choices=["talk", "listen"])
@@ -169,6 +175,10 @@ def main() -> int:
                     help="use rospy.numpy_msg(TYPE): talk fills numeric arrays with numpy arrays, listen gets them")
     ap.add_argument("--with-qos", action="store_true",
                     help="use advertise_with_qos/subscribe_with_qos even when --qos is empty")
+    ap.add_argument("--slow-topic", default=None,
+                    help="listen: also subscribe to this topic (queue_size 1) with a callback that sleeps "
+                         "--slow-sleep seconds per message; 'slow_recv' events, its statistics at 'done'")
+    ap.add_argument("--slow-sleep", type=float, default=0.5)
     ap.add_argument("--wait-dds-readers", type=int, default=0,
                     help="talk: wait (max 30 s) until the DDS writer matches this many readers (e.g. rclpy)")
     args = ap.parse_args()
@@ -278,6 +288,13 @@ def main() -> int:
             sub = nh.subscribe_with_qos(args.topic, data_class, cb, args.queue_size, opts)
         else:
             sub = nh.subscribe(args.topic, data_class, cb, args.queue_size, hints)
+        slow = None
+        if args.slow_topic:
+            def slow_cb(msg: Any) -> None:
+                emit("slow_recv", data=getattr(msg, "data", None), t=time.time())
+                time.sleep(args.slow_sleep)
+
+            slow = nh.subscribe(args.slow_topic, data_class, slow_cb, 1)
         emit("ready", topic=sub.resolved_name)
         end = time.monotonic() + args.duration
         last_status = 0.0
@@ -288,6 +305,8 @@ def main() -> int:
             if time.monotonic() - last_status > 0.5:
                 last_status = time.monotonic()
                 emit("status", transports=sub.connection_transports())
+        if slow is not None:
+            emit("slow_statistics", **dataclasses_asdict(slow.statistics()))
         emit("done", transports=sub.connection_transports(), latency_count=sub.latency.count,
              latency=sub.latency.summary(), expired=getattr(getattr(sub, "_sub", None), "expired_total", None))
     micros_rt.shutdown()
