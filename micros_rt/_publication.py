@@ -4,8 +4,6 @@ stock peers and TCPROS-preferring subscribers) and a back-end writer (DDS) for m
 from __future__ import annotations
 
 import collections
-import logging
-import socket
 import struct
 import threading
 import time
@@ -20,7 +18,8 @@ from ._introspection import remember_verdict
 from ._registry import EndpointRegistry
 from ._rospy_compat import short
 from ._stats import PublisherStatistics
-from .backends import EndpointSpec, MirrorWriter, ProfileBackend
+from .transports.base import EndpointSpec, ProfileBackend, TransportWriter
+from .transports.marking import mark_socket
 from .exceptions import MicrosRtError
 from .negotiation import (
     MAX_PENDING_DDS_OFFERS,
@@ -32,7 +31,7 @@ from .negotiation import (
     Verdict,
     decide,
 )
-from .qos import AdvertiseQoSOptions, TransportPriority, priority_socket_priority, priority_tos
+from .qos import AdvertiseQoSOptions, priority_tos
 from ._logging import nonblocking_logger
 
 if TYPE_CHECKING:
@@ -71,13 +70,18 @@ class _Publication:
                 self.dds = dds.open_writer(EndpointSpec(topic, data_class, queue_size, latch, tag), options)
             except MicrosRtError as exc:
                 _log.warning("micros_rt: topic %s will use TCPROS only: %s", topic, exc)
-        # writers of the back ends the YAML profile attaches to this topic (MQTT): every message is mirrored
+        # writers of the transports the YAML profile attaches to this topic (MQTT): every message is mirrored
         spec = EndpointSpec(topic, data_class, queue_size, latch, tag)
-        self.mirrors: Tuple[MirrorWriter, ...] = tuple(
+        self.mirrors: Tuple[TransportWriter, ...] = tuple(
             w for w in (b.open_writer(spec, options) for b in extra) if w is not None)
+        #: every writer of the topic, in sending order: TCPROS first (rospy serializes inside its send and
+        #: raises before writing), then the negotiated DDS writer, then the mirrors
+        self.writers: Tuple[TransportWriter, ...] = ()
 
     def start(self) -> None:
-        self.tcpros = compat.TcprosWriter(self.topic, self.data_class, self.queue_size, self.latch)
+        self.tcpros = compat.TcprosWriter(self.topic, self.data_class, self.queue_size, self.latch,
+                                          pseudo_links=self.connections.__len__)
+        self.writers = (self.tcpros,) + ((self.dds,) if self.dds is not None else ()) + self.mirrors
 
     # -- negotiation (XML-RPC threads) -------------------------------------
     def facts(self) -> PublicationFacts:
@@ -119,26 +123,11 @@ class _Publication:
                                   latch=self.latch, qos=self.options, node=compat.caller_id())
 
     def on_tcpros_connection(self, conn: Any, sock: Any) -> None:
-        """A TCPROS subscriber connected (rospy thread): mark its socket with our transport priority.
-
-        IP_TOS carries the DSCP (:func:`priority_tos`); SO_PRIORITY (:func:`priority_socket_priority`)
-        picks the local queueing band, set after IP_TOS, which overwrites it on Linux. NORMAL leaves
-        the socket as it is.
-        """
+        """A TCPROS subscriber connected (rospy thread): mark its socket with our transport priority."""
         prio = self.options.transport_priority
-        if prio == TransportPriority.NORMAL or sock is None:
-            return
-        tos = priority_tos(prio)
-        if sock.family == socket.AF_INET6:
-            sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_TCLASS, tos)
-        elif sock.family == socket.AF_INET:
-            sock.setsockopt(socket.IPPROTO_IP, socket.IP_TOS, tos)
-        else:
-            return  # unix sockets carry no TOS
-        if hasattr(socket, "SO_PRIORITY"):
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_PRIORITY, priority_socket_priority(prio))
-        _log.debug("micros_rt: topic %s: TCPROS link to %s marked TOS 0x%02x (%s)", self.topic,
-                   getattr(conn, "endpoint_id", "?"), tos, prio.name)
+        if sock is not None and mark_socket(sock, prio):
+            _log.debug("micros_rt: topic %s: TCPROS link to %s marked TOS 0x%02x (%s)", self.topic,
+                       getattr(conn, "endpoint_id", "?"), priority_tos(prio), prio.name)
 
     def _connection_closed(self, conn: compat.DDSConnection) -> None:
         with self.lock:
@@ -213,21 +202,19 @@ class _Publication:
             raise rospy.ROSException(f"publish() to a closed topic {self.topic}")
         with tcpros.lock():
             try:
-                dds = self.dds
-                prepared = dds.prepare(msg) if dds is not None and (dds.matched_count or self.latch) else None
-                mirrored = [(m, m.prepare(msg)) for m in self.mirrors] if self.mirrors else ()
-                tcpros.send(msg, len(self.connections))  # serializes (and may raise) before it writes anything
-                if prepared is not None:
-                    assert dds is not None
+                # every writer prepares (serializes, may raise) before any sends; TCPROS, first, raises
+                # inside its send before it writes anything
+                prepared = [(w, w.prepare(msg)) for w in self.writers]
+                for writer, data in prepared:
+                    if data is None:
+                        continue  # nobody to send to on that transport
                     t0 = time.monotonic()
                     try:
-                        dds.send(prepared)
+                        writer.send(data)
                     finally:
                         waited = time.monotonic() - t0
                         if waited > 0.001:
                             self.blocked_seconds += waited
-                for mirror, data in mirrored:
-                    mirror.send(data)
                 self.published += 1
             except (genpy.SerializationError, struct.error, TypeError, ValueError, AttributeError, OverflowError,
                     UnicodeError) as exc:
@@ -245,6 +232,7 @@ class _Publication:
             conn.close()
         dds, self.dds = self.dds, None
         mirrors, self.mirrors = self.mirrors, ()
+        self.writers = ()
         for mirror in mirrors:
             mirror.close()
         if dds is not None:

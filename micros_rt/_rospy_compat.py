@@ -523,15 +523,21 @@ def install(find_publication: Callable[[str], Optional[PublicationHook]],
 
 class TcprosWriter:
     """TCPROS, rospy's own transport, for one publication: the rospy Publisher (master registration too)
-    behind the back-end writer methods. TCPROS serializes in :meth:`send` and raises
-    ``genpy.SerializationError`` before writing anything, so a publication sends TCPROS first."""
+    behind the transport writer methods (:class:`micros_rt.transports.base.TransportWriter`).
+
+    rospy serializes inside ``publish`` and raises ``genpy.SerializationError`` before writing anything,
+    so :meth:`prepare` hands the message through and a publication sends TCPROS first. rospy's list of
+    connections also holds micros_rt's DDS pseudo-connections (``pseudo_links()`` counts them): with no
+    TCPROS link left and no latch, there is nothing to send."""
 
     protocol = TCPROS
 
-    def __init__(self, topic: str, data_class: Any, queue_size: Optional[int], latch: bool) -> None:
+    def __init__(self, topic: str, data_class: Any, queue_size: Optional[int], latch: bool, *,
+                 pseudo_links: Callable[[], int]) -> None:
         self.latch = latch
         self._pub = ROSPY_PUBLISHER(topic, data_class, queue_size=queue_size, latch=latch)
         self._impl = self._pub.impl
+        self._pseudo_links = pseudo_links
         self.guid = topic
 
     @property
@@ -547,12 +553,13 @@ class TcprosWriter:
         return self._impl.publock
 
     def prepare(self, msg: Any) -> Any:
-        return msg
+        if self.latch or len(self._impl.connections) > self._pseudo_links():
+            return msg
+        return None
 
-    def send(self, msg: Any, dds_links: int = 0) -> None:
+    def send(self, msg: Any) -> None:
         """Publish to the TCPROS links (rospy keeps the latched message even when there are none)."""
-        if self.latch or len(self._impl.connections) > dds_links:
-            self._impl.publish(msg)
+        self._impl.publish(msg)
 
     def close(self) -> None:
         self._pub.unregister()

@@ -23,7 +23,7 @@ from ._delivery import Inbox
 from ._registry import EndpointRegistry
 from ._stats import LatencyStats, SubscriberStatistics
 from ._writers import DELIVER, HOLD, Accepted, WriterState, WriterTable
-from .backends import EndpointSpec, Feed, ProfileBackend
+from .transports.base import TIME_FILTER, EndpointSpec, Feed, ProfileBackend, PushReader, TransportReader
 from .exceptions import MicrosRtError
 from .negotiation import DDS, TCPROS, DDSAnswer, DDSOffer, TransportHints
 from .qos import (
@@ -73,9 +73,6 @@ class _Subscription:
         self.dropped_filtered = self.malformed = 0
         self._burst_dropped = 0
         self.queue: Deque[Tuple[bytes, Any, WriterState]] = collections.deque()
-        self.tcp_inbox: Deque[Any] = collections.deque()
-        self._tcp_space = threading.Condition()
-        self._tcp_cap = self.depth or UNBOUNDED_QUEUE_DEPTH
         self.time_filter = TimeFilter(self.effective.time_filter_duration)
         self.deadline = DeadlineMonitor(self.effective.deadline, start=time.monotonic())
         self.writers = WriterTable(graph, self.depth or UNBOUNDED_QUEUE_DEPTH)
@@ -96,18 +93,37 @@ class _Subscription:
                          "nothing will be received", topic)
         self.thread = threading.Thread(target=self._run, name=f"micros_rt delivery {topic}", daemon=True)
         self.tcpros: Optional[compat.TcprosReader] = None
+        # pushed readers: TCPROS (rospy's receive thread per connection waits for room: back-pressure to
+        # that link, as rospy's own callback queue) and one per profile feed (MQTT: paho's network thread
+        # is shared by every MQTT topic of the process, so it never waits; the oldest is dropped, counted)
+        self.tcp_in = PushReader(TCPROS, self.depth or UNBOUNDED_QUEUE_DEPTH, self.inbox.wake, blocking=True,
+                                 links=self._tcpros_links)
+        self.pushed: Tuple[PushReader, ...] = (self.tcp_in,)
+        self._pushed_dropped = 0  # drops of non-blocking pushed readers already reported in a burst
         self._extra = extra
         self.feeds: Tuple[Feed, ...] = ()
 
     def start(self) -> None:
         """Start delivering and register with rospy (which triggers the negotiation: the reader exists)."""
         self.thread.start()
-        self.tcpros = compat.TcprosReader(self.topic, self.data_class, self._on_tcpros, self.queue_size)
-        # fed by the back ends the YAML profile attaches to this topic (MQTT), through the TCPROS delivery
-        # path (time filter, deadline, latency, counters)
+        self.tcpros = compat.TcprosReader(self.topic, self.data_class, self.tcp_in.put, self.queue_size)
+        # fed by the transports the YAML profile attaches to this topic (MQTT), each through a pushed
+        # reader of its own into the same admission path (time filter, deadline, latency, counters)
         spec = EndpointSpec(self.topic, self.data_class, self.queue_size, False, self.tag)
-        self.feeds = tuple(f for f in (b.open_feed(spec, self.options, self._on_tcpros) for b in self._extra)
-                           if f is not None)
+        feeds: List[Feed] = []
+        for backend in self._extra:
+            inlet = PushReader("feed", self.depth, self.inbox.wake, blocking=False)
+            feed = backend.open_feed(spec, self.options, inlet.put)
+            if feed is not None:
+                inlet.protocol = feed.protocol
+                inlet.links = feed.transports
+                feeds.append(feed)
+                self.pushed = self.pushed + (inlet,)
+        self.feeds = tuple(feeds)
+
+    def _tcpros_links(self) -> Dict[str, str]:
+        tcpros = self.tcpros
+        return {} if tcpros is None else tcpros.transports()
 
     def _open_reader(self, *, latched: bool) -> DDSTopicReader:
         assert self._dds is not None
@@ -164,14 +180,6 @@ class _Subscription:
         self.inbox.wake()
         return 1, f"Connected topic[{self.topic}] over DDS", 0
 
-    # -- TCPROS (rospy's receive threads): enqueue, or wait for room as rospy's own thread would ------
-    def _on_tcpros(self, msg: Any) -> None:
-        with self._tcp_space:
-            while len(self.tcp_inbox) >= self._tcp_cap and not self.closed:
-                self._tcp_space.wait(0.5)  # back-pressure to the TCP link, as rospy's callback thread
-            self.tcp_inbox.append(msg)
-        self.inbox.wake()
-
     # -- delivery thread ---------------------------------------------------
     def _run(self) -> None:
         next_housekeeping = time.monotonic() + 0.5
@@ -197,7 +205,7 @@ class _Subscription:
 
     def _drain(self) -> None:
         """Take what the readers have, deliver it and TCPROS messages, until both are empty."""
-        queue, tcp = self.queue, self.tcp_inbox
+        queue, pushed = self.queue, self.pushed
         while not self.closed:
             more = False  # a reader gave a full batch: it may hold more
             for reader in self.readers:
@@ -213,14 +221,15 @@ class _Subscription:
                     self._deliver_dds(data, info, state)
                     if bounded and time.monotonic() - last_take > _RETAKE_SECONDS:
                         break  # take again: the newest queue_size are what ROS delivers
-            if tcp:
-                with self._tcp_space:
-                    msgs = list(tcp)
-                    tcp.clear()
-                    self._tcp_space.notify_all()
-                for msg in msgs:
-                    self._deliver_tcpros(msg)
-            if not more and not queue and not tcp:
+            for inlet in pushed:
+                batch = inlet.take(_TAKE_BATCH)
+                if batch:
+                    more = more or len(batch) >= _TAKE_BATCH
+                    for msg, info in batch:
+                        self._deliver_pushed(inlet, msg, info)
+            if len(pushed) > 1:
+                self._count_pushed_drops()
+            if not more and not queue:
                 # what arrived meanwhile keeps the reader's condition (or the guard) raised: the next wait
                 # returns at once, so no second take just to find a reader empty (1.7 us per message)
                 if self._burst_dropped:
@@ -272,11 +281,36 @@ class _Subscription:
                 self.received += 1
                 self._deliver_dds(data, info, state)
 
+    def _count_pushed_drops(self) -> None:
+        dropped = sum(r.dropped for r in self.pushed)
+        if dropped != self._pushed_dropped:
+            self._burst_dropped += dropped - self._pushed_dropped
+            self._pushed_dropped = dropped
+
+    # -- the one admission path: what the reader did not enforce, whatever the transport -------------
+    def _admit_enforced(self, reader: TransportReader, source_ns: int, qos: Optional[Any]) -> bool:
+        """Apply the time filter (unless the reader's transport did) and lifespan (Cyclone expires
+        samples in its cache, but a sample taken can still wait behind slow callbacks; a writer whose
+        QoS is unknown, as over TCPROS, has none); count what is dropped."""
+        tf = self.time_filter
+        if tf.period > 0.0 and TIME_FILTER not in reader.enforces and not tf.admit(time.time()):
+            self.dropped_filtered += 1
+            return False
+        if qos is not None and source_ns and is_expired(source_ns, time.time_ns(), qos.msg_valid_period):
+            self.dropped_expired += 1
+            return False
+        return True
+
+    def _deliver_pushed(self, reader: PushReader, msg: Any, info: Any) -> None:
+        self.received += 1
+        source_ns = info.source_timestamp or _header_stamp(msg)
+        if not self._admit_enforced(reader, source_ns or 0, None):
+            return
+        self._deliver(msg, source_ns, 0.0)
+
     def _deliver_dds(self, data: bytes, info: Any, state: WriterState) -> None:
         qos = state.qos
-        # Lifespan: Cyclone expires samples in its cache; a sample taken can still wait behind slow callbacks
-        if qos is not None and is_expired(info.source_timestamp, time.time_ns(), qos.msg_valid_period):
-            self.dropped_expired += 1
+        if not self._admit_enforced(self.readers[0], info.source_timestamp, qos):
             return
         if not state.skew.done:
             self._check_clock_skew(state, time.time_ns() - info.source_timestamp)
@@ -312,14 +346,6 @@ class _Subscription:
             _log.warning("micros_rt: topic %s: dropped a malformed DDS sample from writer %s (%s); is its type "
                          "really %s? Further malformed samples from it are counted, not logged",
                          self.topic, state.guid, str(exc)[:200], self.data_class._type)
-
-    def _deliver_tcpros(self, msg: Any) -> None:
-        self.received += 1
-        # a TCPROS link has no DDS time filter: the subscriber enforces it
-        if self.time_filter.period > 0.0 and not self.time_filter.admit(time.time()):
-            self.dropped_filtered += 1
-            return
-        self._deliver(msg, _header_stamp(msg), 0.0)
 
     def _deliver(self, msg: Any, source_ts_ns: Optional[int], budget: float) -> None:
         """Hand one message to the callbacks."""
@@ -395,7 +421,7 @@ class _Subscription:
                              "in 30 s; check both nodes' network (ROS_IP, CYCLONEDDS_URI)", self.topic, acc.pub_uri)
             compat.remove_pseudo_connection(self.topic, conn, publisher=False)
             conn.close()
-        if self.queue or self.tcp_inbox:
+        if self.queue or any(r.pending() for r in self.pushed):
             return  # samples of a gone writer still to deliver: prune next time
         self.writers.prune(matched)
 
@@ -414,8 +440,10 @@ class _Subscription:
                 _log.exception("micros_rt: topic %s: callback raised on a latched message (continuing)", self.topic)
 
     def statistics(self) -> SubscriberStatistics:
+        pushed_drops = sum(r.dropped for r in self.pushed)  # dropped before the delivery thread saw them
         return SubscriberStatistics(
-            received=self.received, delivered=self.delivered, dropped_queue_full=self.dropped_queue_full,
+            received=self.received + pushed_drops, delivered=self.delivered,
+            dropped_queue_full=self.dropped_queue_full + pushed_drops,
             dropped_expired=self.dropped_expired, dropped_filtered=self.dropped_filtered, malformed=self.malformed,
             deadline_missed=self.deadline.missed_total, writers=len(self.writers))
 
@@ -432,8 +460,8 @@ class _Subscription:
         feeds, self.feeds = self.feeds, ()
         for feed in feeds:
             feed.close()
-        with self._tcp_space:
-            self._tcp_space.notify_all()
+        for inlet in self.pushed:
+            inlet.close()
         self.inbox.wake()
         if self.thread.is_alive() and threading.current_thread() is not self.thread:
             self.thread.join(timeout=5.0)
@@ -480,10 +508,10 @@ class Subscriber:
     def connection_transports(self) -> Dict[str, str]:
         """Publisher URI -> 'DDS' or 'TCPROS' for every current connection (and the MQTT link's URI -> 'MQTT')."""
         sub = self._sub
-        links = {} if sub is None or sub.tcpros is None else sub.tcpros.transports()
+        links: Dict[str, str] = {}
         if sub is not None:
-            for feed in sub.feeds:
-                links.update(feed.transports())
+            for reader in sub.pushed:
+                links.update(reader.transports())
         return links
 
     @property

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any, Deque, Dict, List, Optional, Set, Tuple
 
 from ._rospy_compat import DDSConnection
-from .backends import RemoteWriter
+from .transports.base import RemoteWriter
 from .qos import AdvertiseQoSOptions, ClockSkewCheck
 
 __all__ = ["Accepted", "WriterState", "WriterTable", "DELIVER", "HOLD", "DROP", "HOLD_SECONDS"]

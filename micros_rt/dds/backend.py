@@ -10,7 +10,7 @@ from typing import Any, Callable, List, Optional, Sequence, Set, Tuple, TypeVar
 
 from cyclonedds.core import DDSException, Listener
 
-from ..backends import EndpointSpec, RemoteWriter, Sample
+from ..transports.base import TIME_FILTER, EndpointSpec, RemoteWriter, Sample
 from ..exceptions import MicrosRtError, PublishTimeoutError, TransportError
 from ..qos import (
     PUBLISH_BLOCK_TIMEOUT,
@@ -52,7 +52,8 @@ class DDSTopicWriter:
         self._ref = self._writer._ref
         self._write = self._writer.write_serialized
         self.guid = self._writer.guid
-        self.prepare = self.dds_type.encode  # raises genpy.SerializationError on a bad field value
+        self._encode = self.dds_type.encode  # raises genpy.SerializationError on a bad field value
+        self._latch = spec.latch
         backend.announce(add_writer=self.guid)
         prio = options.transport_priority
         backend.participant.mark_priority(int(prio), priority_tos(prio), priority_socket_priority(prio))
@@ -60,6 +61,13 @@ class DDSTopicWriter:
     @property
     def matched_count(self) -> int:
         return self._writer.matched_count
+
+    def prepare(self, msg: Any) -> Optional[bytes]:
+        """CDR of ``msg``, or None while no reader is matched (a latched topic always encodes: Cyclone
+        keeps the last sample for late joiners)."""
+        if self._writer._matched or self._latch:
+            return self._encode(msg)
+        return None
 
     def send(self, prepared: bytes) -> None:
         ret = self._write(prepared)
@@ -84,6 +92,8 @@ class DDSTopicReader:
     """A subscription's DDS reader; its ``condition`` wakes the delivery thread's wait set."""
 
     protocol = "DDS"
+    #: Cyclone applies TimeBasedFilter in the reader (and Lifespan in its cache)
+    enforces = frozenset({TIME_FILTER})
 
     def __init__(self, backend: "DDSBackend", spec: EndpointSpec, options: Optional[SubscribeQoSOptions],
                  wake: Callable[[], None], on_incompatible: Callable[[int], None]) -> None:

@@ -28,7 +28,7 @@ from typing import Any, Callable, Deque, Dict, List, Optional, Sequence, Set, Tu
 import genpy
 
 from micros_rt._logging import nonblocking_logger
-from micros_rt.backends import RemoteWriter, Sample
+from micros_rt.transports.base import RemoteWriter, Sample
 from micros_rt.exceptions import TransportError
 from micros_rt.negotiation.ratelimit import RateLimitedLog
 from micros_rt.qos.enforcement import TimeFilter, is_expired

@@ -37,7 +37,7 @@ from typing import Any, Callable, Dict, List, Optional, Pattern, Tuple
 import genpy
 
 from .._logging import nonblocking_logger
-from ..backends import EndpointSpec
+from ..transports.base import EndpointSpec
 from ..exceptions import ProfileError
 from ..negotiation.ratelimit import RateLimitedLog
 from ..qos import AdvertiseQoSOptions, SubscribeQoSOptions, TransportPriority, priority_tos

@@ -13,7 +13,7 @@ from micros_rt import _writers
 from micros_rt._registry import EndpointRegistry
 from micros_rt._rospy_compat import DDSConnection
 from micros_rt._writers import DELIVER, DROP, HOLD, Accepted, WriterTable
-from micros_rt.backends import RemoteWriter
+from micros_rt.transports.base import RemoteWriter
 from micros_rt.qos import AdvertiseQoSOptions
 
 # ------------------------------------------------------------------------------------------------ registry
