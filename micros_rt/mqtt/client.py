@@ -33,6 +33,7 @@ from paho.mqtt.reasoncodes import ReasonCode
 from .._logging import nonblocking_logger
 from ..negotiation.ratelimit import RateLimitedLog
 from .params import MqttParams, resolve_path
+from ..exceptions import MicrosRtError
 
 __all__ = ["ConnectionCounters", "DiskBuffer", "MqttConfigError", "MqttConnection", "MessageHandler",
            "properties_from_dict", "properties_to_dict"]
@@ -51,7 +52,7 @@ RECONNECT_MIN_DELAY = 1
 RECONNECT_MAX_DELAY = 8
 
 
-class MqttConfigError(ValueError):
+class MqttConfigError(MicrosRtError, ValueError):
     """A connection setting that cannot work (missing or unreadable certificate, bad key password...)."""
 
 

@@ -22,6 +22,8 @@ from typing import Any, Dict, Optional, Tuple, Type
 import genmsg.msgs  # type: ignore[import-untyped]
 import genpy
 
+from ..exceptions import MicrosRtError
+
 __all__ = [
     "CodecError",
     "PRIMITIVE_TYPES",
@@ -66,7 +68,7 @@ _INT_RANGES: Dict[str, Tuple[int, int]] = {
 }
 
 
-class CodecError(ValueError):
+class CodecError(MicrosRtError, ValueError):
     """A payload that does not decode; the message says what was wrong with it."""
 
 

@@ -25,6 +25,8 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import yaml
 
+from ..exceptions import MicrosRtError
+
 __all__ = [
     "BrokerParams",
     "ClientParams",
@@ -38,7 +40,7 @@ __all__ = [
 ]
 
 
-class ParamsError(ValueError):
+class ParamsError(MicrosRtError, ValueError):
     """A bad parameter file or value; the message names the file and the parameter."""
 
 
