@@ -142,12 +142,10 @@ class Publisher(compat.ROSPY_PUBLISHER):  # type: ignore[misc]
         _take_names(self, pub, "pub")
         if tcp_nodelay:
             compat.set_publisher_tcp_nodelay(pub.resolved_name)
-        if headers and self.impl is not None:
-            self.impl.add_headers(headers)
         if subscriber_listener is not None and self.impl is not None:
             self._listener = _Listener(subscriber_listener, self.publish)
-            self.impl.add_subscriber_listener(self._listener)  # TCPROS subscribers (rospy calls it)
             _dds_subscribers.watch(pub.resolved_name, self._listener)
+        compat.configure_publisher_impl(self.impl, headers=headers, subscriber_listener=self._listener)
 
     def publish(self, *args: Any, **kwds: Any) -> None:
         pub = self.micros_rt
@@ -193,12 +191,8 @@ class Subscriber(compat.ROSPY_SUBSCRIBER):  # type: ignore[misc]
         self.micros_rt = sub
         _take_names(self, sub, "sub")
         self.callback, self.callback_args = callback, callback_args
-        if self.impl is not None:
-            # rospy's TCPROS side reads both when it connects to a publisher
-            if buff_size != _DEFAULT_BUFF_SIZE:
-                self.impl.set_buff_size(buff_size)
-            if tcp_nodelay:
-                self.impl.set_tcp_nodelay(True)
+        compat.configure_subscriber_impl(self.impl, buff_size=None if buff_size == _DEFAULT_BUFF_SIZE else buff_size,
+                                         tcp_nodelay=tcp_nodelay)
 
     def get_num_connections(self) -> int:
         sub = self.micros_rt

@@ -14,32 +14,23 @@ answers with a fault, which is how the tools tell the two apart.
 
 from __future__ import annotations
 
-import collections
 import dataclasses
 import json
 import os
 import time
-from typing import Any, Dict, List
+from typing import Any, Callable, Dict, List, Optional
 
 from . import _rospy_compat as compat
 from .negotiation import Verdict
 
-__all__ = ["INFO_METHOD", "INFO_VERSION", "MAX_VERDICTS", "answer", "install", "node_info", "remember_verdict"]
+__all__ = ["INFO_METHOD", "INFO_VERSION", "answer", "install", "node_info"]
 
 #: The XML-RPC method name on the node API.
 INFO_METHOD = "microsRtInfo"
 #: Bumped when the layout of the answer changes incompatibly.
 INFO_VERSION = 1
-#: Verdicts remembered per publication (fake offers from many caller ids must not grow memory).
-MAX_VERDICTS = 256
-
-
-def remember_verdict(table: "collections.OrderedDict[str, Verdict]", subscriber: str, verdict: Verdict) -> None:
-    """Keep ``verdict`` as the last one for ``subscriber`` in ``table`` (bounded: oldest forgotten first)."""
-    table.pop(subscriber, None)
-    table[subscriber] = verdict
-    while len(table) > MAX_VERDICTS:
-        table.popitem(last=False)
+#: The node state the answers describe (set by :func:`install`; the node module owns it)
+_node_state: Optional[Callable[[], Any]] = None
 
 
 def _verdict_dict(verdict: Verdict) -> Dict[str, Any]:
@@ -80,8 +71,9 @@ def _subscription_info(sub: Any) -> Dict[str, Any]:
 
 def node_info() -> Dict[str, Any]:
     """This node's micros_rt view of itself (what ``microsRtInfo`` returns, before JSON)."""
-    from ._runtime import _node
-
+    if _node_state is None:
+        raise RuntimeError("micros_rt node info asked before init_node")
+    _node = _node_state()
     dds = _node.dds
     return {
         "version": INFO_VERSION,
@@ -104,6 +96,9 @@ def answer(caller_id: str) -> List[Any]:
         return [-1, f"micros_rt: cannot collect node info: {exc}", ""]
 
 
-def install() -> None:
-    """Answer :data:`INFO_METHOD` on this process's node API (idempotent)."""
+def install(node_state: Callable[[], Any]) -> None:
+    """Answer :data:`INFO_METHOD` on this process's node API (idempotent) about ``node_state()``
+    (the node's publications, subscriptions, graph, DDS back end and profile)."""
+    global _node_state
+    _node_state = node_state
     compat.add_node_api_method(INFO_METHOD, answer)

@@ -14,7 +14,6 @@ import rospy
 import rospy.topics
 
 from . import _rospy_compat as compat
-from ._introspection import remember_verdict
 from ._registry import EndpointRegistry
 from ._rospy_compat import short
 from ._stats import PublisherStatistics
@@ -30,6 +29,7 @@ from .negotiation import (
     RateLimitedLog,
     Verdict,
     decide,
+    remember_verdict,
 )
 from .qos import AdvertiseQoSOptions, priority_tos
 from ._logging import nonblocking_logger

@@ -26,7 +26,7 @@ import logging
 import threading
 import time
 import xmlrpc.client
-from typing import Any, Callable, Iterator, List, Optional, Protocol, Tuple
+from typing import Any, Callable, Dict, Iterator, List, Optional, Protocol, Tuple
 
 import rospy
 import rospy.core
@@ -208,6 +208,28 @@ def set_publisher_tcp_nodelay(topic: str) -> None:
     get_tcpros_handler().set_tcp_nodelay(topic, True)
 
 
+def configure_publisher_impl(impl: Any, *, headers: Optional[Dict[str, str]] = None,
+                             subscriber_listener: Any = None) -> None:
+    """rospy.Publisher(headers=..., subscriber_listener=...) on rospy's per-topic publisher ``impl``."""
+    if impl is None:
+        return
+    if headers:
+        impl.add_headers(headers)
+    if subscriber_listener is not None:
+        impl.add_subscriber_listener(subscriber_listener)  # TCPROS subscribers (rospy calls it)
+
+
+def configure_subscriber_impl(impl: Any, *, buff_size: Optional[int] = None, tcp_nodelay: bool = False) -> None:
+    """rospy.Subscriber(buff_size=..., tcp_nodelay=...) on rospy's per-topic subscriber ``impl`` (its TCPROS
+    side reads both when it connects to a publisher)."""
+    if impl is None:
+        return
+    if buff_size is not None:
+        impl.set_buff_size(buff_size)
+    if tcp_nodelay:
+        impl.set_tcp_nodelay(True)
+
+
 def latched_messages(topic: str) -> List[Any]:
     """The last message of each latching TCPROS publisher connected to subscribed ``topic`` (rospy keeps
     it on the connection for callbacks added later)."""
@@ -238,7 +260,7 @@ def add_node_api_method(name: str, method: Callable[[str], List[Any]]) -> None:
     setattr(masterslave.ROSHandler, name, lambda self, caller_id, *_: method(caller_id))
 
 
-class _TimeoutTransport(xmlrpc.client.Transport):
+class TimeoutTransport(xmlrpc.client.Transport):
     # rospy sets a process-wide socket timeout for this call; a per-connection
     # timeout keeps user sockets out of it.
     def __init__(self, timeout: float) -> None:
@@ -255,7 +277,7 @@ def _request_topic(pub_uri: str, topic: str, protocols: List[List[Any]]) -> Tupl
     interval = 0.5
     deadline = time.monotonic() + 60.0
     while not rospy.core.is_shutdown():
-        proxy = xmlrpc.client.ServerProxy(pub_uri, transport=_TimeoutTransport(10.0), allow_none=False)
+        proxy = xmlrpc.client.ServerProxy(pub_uri, transport=TimeoutTransport(10.0), allow_none=False)
         try:
             answer: Any = proxy.requestTopic(caller_id(), topic, protocols)
             code, msg, result = answer
@@ -409,7 +431,7 @@ class MasterWatch:
             return False
 
     def _master_pid(self) -> Optional[int]:
-        proxy = xmlrpc.client.ServerProxy(self.uri, transport=_TimeoutTransport(2.0))
+        proxy = xmlrpc.client.ServerProxy(self.uri, transport=TimeoutTransport(2.0))
         try:
             answer: Any = proxy.getPid(caller_id())
             code, _msg, pid = answer

@@ -63,7 +63,7 @@ def init_node(name: str, argv: Optional[List[str]] = None, anonymous: bool = Fal
     >>> micros_rt.init_node("talker", anonymous=True)   # doctest: +SKIP
     """
     compat.install(_node.publications.get, _node.subscriptions.get)
-    _introspection.install()
+    _introspection.install(lambda: _node)
     path = qos_profile or os.environ.get("MICROS_RT_QOS_PROFILE") or None
     profile = QoSProfile.load(path) if path else None
     _tune_malloc()

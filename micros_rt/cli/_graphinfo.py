@@ -19,7 +19,7 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 from .._introspection import INFO_METHOD
 # the library's XML-RPC transport with a per-connection timeout (the micros_rt package imports rospy anyway)
-from .._rospy_compat import _TimeoutTransport
+from .._rospy_compat import TimeoutTransport
 from . import CommandError
 
 __all__ = [
@@ -60,7 +60,7 @@ def resolve_topic(name: str, env: Mapping[str, str] = os.environ) -> str:
 
 
 def _proxy(uri: str, timeout: float) -> xmlrpc.client.ServerProxy:
-    return xmlrpc.client.ServerProxy(uri, transport=_TimeoutTransport(timeout))
+    return xmlrpc.client.ServerProxy(uri, transport=TimeoutTransport(timeout))
 
 
 def ros_call(uri: str, method: str, *args: Any, timeout: float = NODE_TIMEOUT) -> Any:

@@ -3,7 +3,7 @@ protocol-order loop. Pure: nothing here touches rospy or creates DDS entities
 (:mod:`micros_rt._rospy_compat` adapts it to rospy's ``requestTopic``)."""
 
 from .choose import Choice, choose_protocol
-from .decide import PublicationFacts, Verdict, decide
+from .decide import MAX_VERDICTS, PublicationFacts, Verdict, decide, remember_verdict
 from .hints import TransportHints
 from .messages import DDSAnswer, DDSOffer, MalformedNegotiationError, is_guid
 from .protocol import (
@@ -21,6 +21,7 @@ __all__ = [
     "DEFAULT_PROTOCOLS",
     "MAX_FIELD_CHARS",
     "MAX_PENDING_DDS_OFFERS",
+    "MAX_VERDICTS",
     "TCPROS",
     "UNMATCHED_READER_TIMEOUT",
     "Choice",
@@ -34,4 +35,5 @@ __all__ = [
     "choose_protocol",
     "decide",
     "is_guid",
+    "remember_verdict",
 ]

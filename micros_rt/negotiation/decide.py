@@ -7,6 +7,7 @@ logs the reason of a declined offer and moves on to the subscriber's next protoc
 
 from __future__ import annotations
 
+import collections
 from dataclasses import dataclass
 from typing import Optional
 
@@ -82,3 +83,15 @@ def decide(offer: DDSOffer, facts: PublicationFacts, *, subscriber: str) -> Verd
                        f"topic {topic}: {facts.pending} DDS subscribers accepted but not yet discovered (limit "
                        f"{MAX_PENDING_DDS_OFFERS}); serving {subscriber} over TCPROS")
     return Verdict(True, "accepted", f"topic {topic}: DDS accepted for subscriber {subscriber}")
+
+
+#: Verdicts remembered per publication (fake offers from many caller ids must not grow memory).
+MAX_VERDICTS = 256
+
+
+def remember_verdict(table: "collections.OrderedDict[str, Verdict]", subscriber: str, verdict: Verdict) -> None:
+    """Keep ``verdict`` as the last one for ``subscriber`` in ``table`` (bounded: oldest forgotten first)."""
+    table.pop(subscriber, None)
+    table[subscriber] = verdict
+    while len(table) > MAX_VERDICTS:
+        table.popitem(last=False)

@@ -8,7 +8,7 @@ from typing import Any, Dict, List, Optional
 
 import pytest
 
-from micros_rt._introspection import MAX_VERDICTS, remember_verdict
+from micros_rt.negotiation import MAX_VERDICTS, remember_verdict
 from micros_rt.cli import CommandError
 from micros_rt.cli._args import ArgumentParser
 from micros_rt.cli._graphinfo import (
