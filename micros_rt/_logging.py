@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import atexit
 import logging
+import logging.handlers
 import queue
 import sys
 import threading
@@ -18,58 +19,78 @@ from typing import Any, Optional, Tuple
 
 __all__ = ["NonBlockingLogger", "nonblocking_logger", "flush"]
 
-_queue: "queue.Queue[Optional[logging.LogRecord]]" = queue.Queue(maxsize=10_000)
+_queue: "queue.Queue[logging.LogRecord]" = queue.Queue(maxsize=10_000)
 _lock = threading.Lock()
-_thread: Optional[threading.Thread] = None
+_listener: Optional[logging.handlers.QueueListener] = None
 dropped = 0
 
 
-def _forward() -> None:
-    while True:
-        record = _queue.get()
+class _Forward(logging.Handler):
+    """On the listener's thread: hand a record to the handlers of the logger it was made for."""
+
+    def handle(self, record: logging.LogRecord) -> bool:
         try:
-            if record is None:
-                return
             logging.getLogger(record.name).handle(record)
         except Exception:  # a broken handler must not end the forwarding
             pass
-        finally:
-            _queue.task_done()
+        return True
+
+    def emit(self, record: logging.LogRecord) -> None:  # pragma: no cover (handle() does the work)
+        self.handle(record)
 
 
-def _ensure_thread() -> None:
-    global _thread
-    if _thread is not None and _thread.is_alive():
+class _Enqueue(logging.handlers.QueueHandler):
+    """The standard library's queue handler, never blocking: a full queue drops the record, counted."""
+
+    def enqueue(self, record: logging.LogRecord) -> None:
+        global dropped
+        try:
+            self.queue.put_nowait(record)
+        except queue.Full:
+            dropped += 1
+
+    def prepare(self, record: logging.LogRecord) -> logging.LogRecord:
+        return record  # same process: the real handlers format it, exc_info and all
+
+
+_enqueue = _Enqueue(_queue)
+
+
+def _ensure_listener() -> None:
+    global _listener
+    if _listener is not None:
         return
     with _lock:
-        if _thread is None or not _thread.is_alive():
-            _thread = threading.Thread(target=_forward, name="micros_rt logging", daemon=True)
-            _thread.start()
+        if _listener is None:
+            listener = logging.handlers.QueueListener(_queue, _Forward())
+            listener.start()
+            if listener._thread is not None:  # name it for thread dumps (py-spy, faulthandler)
+                listener._thread.name = "micros_rt logging"
+            _listener = listener
 
 
 class NonBlockingLogger:
     """``debug``/``info``/``warning``/``error``/``exception`` like a ``logging.Logger`` named ``name``
     (its level, its handlers, propagation: whatever rospy or the application configured, even after
-    ``rospy.init_node`` reconfigures logging), but handled on micros_rt's logging thread."""
+    ``rospy.init_node`` reconfigures logging), but handled on micros_rt's logging thread. Records carry
+    the file, line and function of the call, as ``logging.Logger``'s do."""
 
     def __init__(self, name: str) -> None:
         self.name = name
         self._target = logging.getLogger(name)
 
     def _log(self, level: int, msg: str, args: Tuple[Any, ...], exc_info: Any = None) -> None:
-        global dropped
         target = self._target
         if not target.isEnabledFor(level):
             return
         if exc_info is True:
             exc_info = sys.exc_info()
-        record = target.makeRecord(self.name, level, "(micros_rt)", 0, msg, args, exc_info)
-        _ensure_thread()
-        try:
-            _queue.put_nowait(record)
-        except queue.Full:
-            dropped += 1
-
+        caller = sys._getframe(2)  # the frame that called debug()/warning()/...
+        code = caller.f_code
+        record = target.makeRecord(self.name, level, code.co_filename, caller.f_lineno, msg, args, exc_info,
+                                   code.co_name)
+        _ensure_listener()
+        _enqueue.enqueue(record)
     def debug(self, msg: str, *args: Any, exc_info: Any = None) -> None:
         self._log(logging.DEBUG, msg, args, exc_info)
 
@@ -93,7 +114,7 @@ def nonblocking_logger(name: str) -> NonBlockingLogger:
 
 def flush(timeout: float = 2.0) -> None:
     """Wait (bounded) until queued records are handled: at shutdown, so the last words are not lost."""
-    if _thread is None or not _thread.is_alive():
+    if _listener is None:
         return
     done = threading.Event()
 
