@@ -14,10 +14,11 @@ import rospy
 import rospy.topics
 
 from . import _rospy_compat as compat
+from ._lanes import Lane
 from ._registry import EndpointRegistry
 from ._rospy_compat import short
 from ._stats import PublisherStatistics
-from .transports.base import EndpointSpec, ProfileBackend, TransportWriter
+from .transports.base import BackPressuredWriter, EndpointSpec, ProfileBackend, TransportWriter
 from .transports.marking import mark_socket
 from .exceptions import MicrosRtError
 from .negotiation import (
@@ -31,7 +32,7 @@ from .negotiation import (
     decide,
     remember_verdict,
 )
-from .qos import AdvertiseQoSOptions, priority_tos
+from .qos import AdvertiseQoSOptions, is_lossless, priority_tos
 from ._logging import nonblocking_logger
 
 if TYPE_CHECKING:
@@ -75,13 +76,22 @@ class _Publication:
         self.mirrors: Tuple[TransportWriter, ...] = tuple(
             w for w in (b.open_writer(spec, options) for b in extra) if w is not None)
         #: every writer of the topic, in sending order: TCPROS first (rospy serializes inside its send and
-        #: raises before writing), then the negotiated DDS writer, then the mirrors
+        #: raises before writing), then the negotiated DDS writer, then the mirrors; lanes in front of those
+        #: that can refuse a sample for want of room
         self.writers: Tuple[TransportWriter, ...] = ()
+        self.lanes: Tuple[Lane, ...] = ()
 
     def start(self) -> None:
         self.tcpros = compat.TcprosWriter(self.topic, self.data_class, self.queue_size, self.latch,
                                           pseudo_links=self.connections.__len__)
-        self.writers = (self.tcpros,) + ((self.dds,) if self.dds is not None else ()) + self.mirrors
+        # a lane in front of every writer that can say "no room now" (DDS): one topic's back-pressure never
+        # holds another topic's publish(), and a KEEP_LAST topic's publish() never waits (as rospy's)
+        self.lanes = tuple(Lane(w, topic=self.topic, depth=None if is_lossless(self.queue_size) else self.queue_size)
+                           for w in ((self.dds,) if self.dds is not None else ()) + self.mirrors
+                           if isinstance(w, BackPressuredWriter))
+        by_writer = {id(lane.writer): lane for lane in self.lanes}
+        self.writers = (self.tcpros,) + tuple(by_writer.get(id(w), w) for w in
+                                              ((self.dds,) if self.dds is not None else ()) + self.mirrors)
 
     # -- negotiation (XML-RPC threads) -------------------------------------
     def facts(self) -> PublicationFacts:
@@ -222,7 +232,8 @@ class _Publication:
                     f"topic {self.topic}: cannot serialize {type(msg).__name__}: {exc}") from exc
 
     def statistics(self) -> PublisherStatistics:
-        return PublisherStatistics(published=self.published, dropped=0, blocked_seconds=self.blocked_seconds)
+        return PublisherStatistics(published=self.published, dropped=sum(lane.dropped for lane in self.lanes),
+                                   blocked_seconds=self.blocked_seconds)
 
     def close(self) -> None:
         """Release the DDS links and writer and unregister from rospy (the registry calls this once)."""
@@ -232,11 +243,11 @@ class _Publication:
             conn.close()
         dds, self.dds = self.dds, None
         mirrors, self.mirrors = self.mirrors, ()
+        lanes = {id(lane.writer): lane for lane in self.lanes}
         self.writers = ()
-        for mirror in mirrors:
-            mirror.close()
-        if dds is not None:
-            dds.close()
+        for writer in mirrors + ((dds,) if dds is not None else ()):
+            lane = lanes.get(id(writer))
+            (lane or writer).close()  # a lane lets what it holds leave first
         if self.tcpros is not None:
             try:
                 self.tcpros.close()

@@ -30,6 +30,10 @@ class Hosts:
     def sh(*argv: str) -> None:
         subprocess.run(list(argv), check=True, capture_output=True, timeout=20)
 
+    def link_name(self, i: int) -> str:
+        """Host ``i``'s interface (its end of the veth pair to the bridge)."""
+        return f"h{i}_{os.getpid()}"
+
     def ip(self, i: int) -> str:
         return f"{self.net}.{i + 1}"
 
@@ -39,7 +43,7 @@ class Hosts:
         self.sh("ip", "-n", self.bridge_ns, "link", "add", "br0", "type", "bridge")
         self.sh("ip", "-n", self.bridge_ns, "link", "set", "br0", "up")
         for i, ns in enumerate(self.names):
-            host_end, bridge_end = f"h{i}_{pid}", f"b{i}_{pid}"
+            host_end, bridge_end = self.link_name(i), f"b{i}_{pid}"
             self.sh("ip", "netns", "add", ns)
             self.sh("ip", "link", "add", host_end, "type", "veth", "peer", "name", bridge_end)
             self.sh("ip", "link", "set", host_end, "netns", ns)

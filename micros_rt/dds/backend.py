@@ -10,10 +10,11 @@ from typing import Any, Callable, List, Optional, Sequence, Set, Tuple, TypeVar
 
 from cyclonedds.core import DDSException, Listener
 
-from ..transports.base import TIME_FILTER, EndpointSpec, RemoteWriter, Sample
+from ..transports.base import TIME_FILTER, EndpointSpec, RemoteWriter, Sample, send_with_backoff
 from ..exceptions import MicrosRtError, PublishTimeoutError, TransportError
 from ..qos import (
     PUBLISH_BLOCK_TIMEOUT,
+    RELIABLE_MAX_BLOCKING_TIME,
     AdvertiseQoSOptions,
     SubscribeQoSOptions,
     is_lossless,
@@ -23,7 +24,7 @@ from ..qos import (
     reader_qos,
     writer_qos,
 )
-from .endpoints import DDSReader, DDSWriter, make_user_data
+from .endpoints import RELEASED_WRITE_MIN, DDSReader, DDSWriter, make_user_data
 from .participant import DDSParticipant
 from .types import DDSType, dds_topic_name, dds_type_for
 from .._logging import nonblocking_logger
@@ -33,6 +34,10 @@ __all__ = ["DDSBackend", "DDSTopicWriter", "DDSTopicReader"]
 _log = nonblocking_logger("rosout.micros_rt.dds")
 
 _DDS_RETCODE_TIMEOUT = -10
+
+#: A large write that takes longer than this (s) waited for socket room behind a slow link: the writer's
+#: next large samples go through its lane's thread (loopback: a 900 KB write takes ~0.5 ms).
+NETWORK_BOUND_SEND = 0.005
 
 
 class DDSTopicWriter:
@@ -54,6 +59,8 @@ class DDSTopicWriter:
         self.guid = self._writer.guid
         self._encode = self.dds_type.encode  # raises genpy.SerializationError on a bad field value
         self._latch = spec.latch
+        self._closed = False
+        self._network_bound = False  # the last large write waited on the network (see may_wait)
         backend.announce(add_writer=self.guid)
         prio = options.transport_priority
         backend.participant.mark_priority(int(prio), priority_tos(prio), priority_socket_priority(prio))
@@ -69,21 +76,42 @@ class DDSTopicWriter:
             return self._encode(msg)
         return None
 
+    def try_send(self, prepared: bytes) -> bool:
+        """Write at once, or return False when Cyclone has no room (more unacknowledged data than the
+        writer's window): the writer's max_blocking_time is 0, so Cyclone never waits holding the GIL."""
+        if len(prepared) >= RELEASED_WRITE_MIN:
+            t0 = time.monotonic()
+            ret = self._write(prepared)
+            self._network_bound = time.monotonic() - t0 > NETWORK_BOUND_SEND
+        else:
+            ret = self._write(prepared)
+        if ret >= 0:
+            return True
+        if ret == _DDS_RETCODE_TIMEOUT:
+            return False
+        raise TransportError(f"topic {self.topic}: DDS write failed (Cyclone return code {ret})")
+
+    def may_wait(self, prepared: bytes) -> bool:
+        """A large sample while the network is what limits this writer: its last large write waited more
+        than :data:`NETWORK_BOUND_SEND` for socket room (a slow link). On loopback a 900 KB write takes
+        ~0.5 ms and stays on the caller's thread, with no hop to the lane's."""
+        return self._network_bound and len(prepared) >= RELEASED_WRITE_MIN
+
     def send(self, prepared: bytes) -> None:
-        ret = self._write(prepared)
-        if ret < 0:
-            if ret == _DDS_RETCODE_TIMEOUT:
-                raise PublishTimeoutError(
-                    f"topic {self.topic}: publish() stayed blocked for "
-                    f"{PUBLISH_BLOCK_TIMEOUT if self.lossless else 1.0:.1f} s because a reliable DDS subscriber "
-                    f"does not keep up (queue_size=None never drops). The subscribers: "
-                    f"{', '.join(sorted(self.matched_peers())) or 'none matched'}")
-            raise TransportError(f"topic {self.topic}: DDS write failed (Cyclone return code {ret})")
+        """Write, waiting (in Python, other threads running) while a reliable subscriber is behind; raise
+        :class:`PublishTimeoutError` after the bound."""
+        bound = PUBLISH_BLOCK_TIMEOUT if self.lossless else RELIABLE_MAX_BLOCKING_TIME
+        if not send_with_backoff(self.try_send, prepared, bound, lambda: self._closed):
+            raise PublishTimeoutError(
+                f"topic {self.topic}: publish() stayed blocked for {bound:.1f} s because a reliable DDS "
+                f"subscriber does not keep up{' (queue_size=None never drops)' if self.lossless else ''}. "
+                f"The subscribers: {', '.join(sorted(self.matched_peers())) or 'none matched'}")
 
     def matched_peers(self) -> Set[str]:
         return set(self._writer.matched_reader_guids())
 
     def close(self) -> None:
+        self._closed = True
         self._backend.announce(remove=self.guid)
         self._writer.close()
 

@@ -54,6 +54,7 @@ from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions
 __all__ = [
     "PUBLISH_BLOCK_TIMEOUT",
     "RELIABLE_MAX_BLOCKING_TIME",
+    "WRITER_MAX_BLOCKING_TIME",
     "UNBOUNDED_QUEUE_DEPTH",
     "duration_ns",
     "is_lossless",
@@ -69,9 +70,16 @@ __all__ = [
 #: never expects) and lets memory grow without bound; 1000 samples is rospy's own common "big queue".
 UNBOUNDED_QUEUE_DEPTH: int = 1000
 
-#: Seconds a reliable writer may block in ``write()`` when its history is full of unacknowledged
-#: samples (KEEP_LAST only blocks on resource limits, so this is a safety net, not the normal path).
+#: Seconds a reliable KEEP_LAST writer's blocking ``send`` waits while Cyclone has more unacknowledged
+#: data than the writer's window. Not Cyclone's max_blocking_time (that is 0, :data:`WRITER_MAX_BLOCKING_TIME`):
+#: micros_rt waits in Python, and ``publish()`` of a KEEP_LAST topic does not wait at all (its lane keeps
+#: the newest ``queue_size`` and sends them when there is room, :mod:`micros_rt._lanes`).
 RELIABLE_MAX_BLOCKING_TIME: float = 1.0
+
+#: Cyclone's Reliability max_blocking_time for micros_rt writers: 0, never wait inside ``dds_write``.
+#: Cyclone waits there holding Python's GIL, so a topic with a slow link stalled every thread of the
+#: process (a 1 kHz control topic ran at a third of its rate beside a throttled camera).
+WRITER_MAX_BLOCKING_TIME: float = 0.0
 
 #: Seconds ``publish()`` on a lossless topic (``queue_size=None``/0) may block while a reliable
 #: subscriber is behind before it raises :class:`micros_rt.PublishTimeoutError` naming the topic.
@@ -132,8 +140,9 @@ def writer_qos(
 ) -> Qos:
     """DataWriter Qos for a publisher advertised with ``options``, ``queue_size`` and ``latch``.
 
-    - Reliability RELIABLE (max_blocking_time 1 s; :data:`PUBLISH_BLOCK_TIMEOUT` when lossless) or
-      BEST_EFFORT per ``using_best_effort_protocol``.
+    - Reliability RELIABLE (max_blocking_time 0: :data:`WRITER_MAX_BLOCKING_TIME`; the waiting for room,
+      bounded by :data:`PUBLISH_BLOCK_TIMEOUT` when lossless, happens in Python) or BEST_EFFORT per
+      ``using_best_effort_protocol``.
     - History KEEP_LAST(queue_size) (always >= 1, which a latched writer needs), or KEEP_ALL when
       ``queue_size`` is None/0 (:func:`is_lossless`): nothing dropped, ``publish()`` blocks instead.
     - Durability TRANSIENT_LOCAL if ``latch`` (late joiners get the last message) else VOLATILE.
@@ -156,8 +165,7 @@ def writer_qos(
     history_depth(queue_size)  # validates
     lossless = is_lossless(queue_size)
     policies: list[object] = [
-        _reliability(options.using_best_effort_protocol,
-                     PUBLISH_BLOCK_TIMEOUT if lossless else RELIABLE_MAX_BLOCKING_TIME),
+        _reliability(options.using_best_effort_protocol, WRITER_MAX_BLOCKING_TIME),
         Policy.History.KeepAll if lossless else Policy.History.KeepLast(depth=history_depth(queue_size)),
         Policy.Durability.TransientLocal if latch else Policy.Durability.Volatile,
         Policy.LatencyBudget(budget=0),  # not Cyclone's send-thread mode: micros_rt batches (dds.batching)

@@ -35,6 +35,8 @@ from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions, Tran
 INFINITE_NS = 0x7FFFFFFFFFFFFFFF  # DDS_INFINITY
 ONE_SECOND_NS = 1_000_000_000
 RELIABLE = Policy.Reliability.Reliable(max_blocking_time=ONE_SECOND_NS)
+# writers never wait inside Cyclone (it waits holding the GIL); micros_rt waits in Python
+WRITER_RELIABLE = Policy.Reliability.Reliable(max_blocking_time=0)
 
 
 def w(options: AdvertiseQoSOptions | None = None, **kw: Any) -> Qos:
@@ -79,7 +81,7 @@ def test_history_depth_rejects_bad_queue_sizes() -> None:
 
 def test_writer_defaults_exactly() -> None:
     assert w() == Qos(
-        RELIABLE,
+        WRITER_RELIABLE,
         Policy.History.KeepLast(depth=10),
         Policy.Durability.Volatile,
         Policy.LatencyBudget(budget=0),
@@ -95,7 +97,7 @@ def test_writer_best_effort() -> None:
     assert w(AdvertiseQoSOptions(using_best_effort_protocol=True))[Policy.Reliability] == (
         Policy.Reliability.BestEffort
     )
-    assert w(AdvertiseQoSOptions(using_best_effort_protocol=False))[Policy.Reliability] == RELIABLE
+    assert w(AdvertiseQoSOptions(using_best_effort_protocol=False))[Policy.Reliability] == WRITER_RELIABLE
 
 
 @pytest.mark.parametrize("queue_size, depth", [(1, 1), (7, 7)])
@@ -103,7 +105,7 @@ def test_writer_best_effort() -> None:
 def test_writer_history_keeps_last_queue_size(queue_size: int | None, depth: int, latch: bool) -> None:
     qos = w(queue_size=queue_size, latch=latch)
     assert qos[Policy.History] == Policy.History.KeepLast(depth=depth)
-    assert qos[Policy.Reliability] == RELIABLE
+    assert qos[Policy.Reliability] == WRITER_RELIABLE
 
 
 @pytest.mark.parametrize("queue_size", [0, None])
@@ -112,8 +114,7 @@ def test_writer_lossless_queue_keeps_all_and_blocks(queue_size: int | None, latc
     # rospy's queue_size=None is synchronous publishing: nothing dropped, publish() waits instead
     qos = w(queue_size=queue_size, latch=latch)
     assert qos[Policy.History] == Policy.History.KeepAll
-    assert qos[Policy.Reliability] == Policy.Reliability.Reliable(
-        max_blocking_time=int(PUBLISH_BLOCK_TIMEOUT * 1e9))
+    assert qos[Policy.Reliability] == WRITER_RELIABLE  # publish() waits up to PUBLISH_BLOCK_TIMEOUT, in Python
     best_effort = w(AdvertiseQoSOptions(using_best_effort_protocol=True), queue_size=queue_size, latch=latch)
     assert best_effort[Policy.History] == Policy.History.KeepAll
     assert best_effort[Policy.Reliability] == Policy.Reliability.BestEffort

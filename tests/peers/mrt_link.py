@@ -1,0 +1,180 @@
+"""A robot's control topic and camera sharing one link (the constrained-link scenario), one JSON event per line.
+
+    mrt_link.py pub --seconds 6 --control-priority HIGH --image-priority LOW    # one process, two threads
+    mrt_link.py sub --seconds 20                                              # counts and control latency
+
+pub: /control (geometry_msgs/PointStamped, --control-rate Hz, queue 100, stamp = wall clock) and /image
+(sensor_msgs/Image WIDTHxHEIGHT rgb8, --image-rate Hz, queue 2) from two threads, paced like rospy.Rate
+(a loop more than two periods behind starts again from now: it does not catch up in a burst). It reports
+how many of each it published in the window. --stock runs on plain rospy instead of micros_rt (run it
+with /usr/bin/python3, without micros_rt, for the comparison).
+sub: both topics; control latency (receive time - stamp) percentiles, counts, transports.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import threading
+import time
+from typing import Any, Dict, List
+
+
+def emit(event: str, **fields: Any) -> None:
+    fields["event"] = event
+    sys.stdout.write(json.dumps(fields) + "\n")
+    sys.stdout.flush()
+
+
+def paced(rate: float, seconds: float, body: Any, stop: threading.Event) -> int:
+    """Call body(i) at ``rate`` Hz for ``seconds``, as rospy.Rate paces; returns how many calls ran."""
+    period = 1.0 / rate
+    start = time.monotonic()
+    end = start + seconds
+    last = start
+    n = 0
+    while not stop.is_set():
+        now = time.monotonic()
+        if now >= end:
+            break
+        body(n)
+        n += 1
+        last += period
+        now = time.monotonic()
+        if now - last > 2 * period:
+            last = now
+        elif last > now:
+            time.sleep(last - now)
+    return n
+
+
+def percentile(values: List[float], q: float) -> float:
+    if not values:
+        return float("nan")
+    s = sorted(values)
+    return s[min(len(s) - 1, int(q * len(s)))]
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("mode", choices=["pub", "sub"])
+    ap.add_argument("--seconds", type=float, default=6.0)
+    ap.add_argument("--control-rate", type=float, default=1000.0)
+    ap.add_argument("--image-rate", type=float, default=30.0)
+    ap.add_argument("--width", type=int, default=640)
+    ap.add_argument("--height", type=int, default=480)
+    ap.add_argument("--control-priority", default="HIGH")
+    ap.add_argument("--image-priority", default="LOW")
+    ap.add_argument("--image-best-effort", action="store_true")
+    ap.add_argument("--stock", action="store_true", help="plain rospy (no micros_rt)")
+    ap.add_argument("--wait-subscribers", type=float, default=60.0)
+    args = ap.parse_args()
+
+    import rospy
+    from geometry_msgs.msg import PointStamped
+    from sensor_msgs.msg import Image
+
+    if args.stock:
+        rospy.init_node(f"link_{args.mode}", disable_signals=True)
+    else:
+        import micros_rt
+
+        micros_rt.init_node(f"link_{args.mode}", disable_signals=True)
+        nh = micros_rt.NodeHandle()
+
+    if args.mode == "pub":
+        if args.stock:
+            control_pub = rospy.Publisher("/control", PointStamped, queue_size=100)
+            image_pub = rospy.Publisher("/image", Image, queue_size=2)
+        else:
+            control_pub = nh.advertise_with_qos(
+                "/control", PointStamped, 100,
+                micros_rt.AdvertiseQoSOptions(transport_priority=micros_rt.TransportPriority[args.control_priority]))
+            image_pub = nh.advertise_with_qos(
+                "/image", Image, 2,
+                micros_rt.AdvertiseQoSOptions(transport_priority=micros_rt.TransportPriority[args.image_priority],
+                                              using_best_effort_protocol=args.image_best_effort))
+        deadline = time.monotonic() + args.wait_subscribers
+        while (control_pub.get_num_connections() < 1 or image_pub.get_num_connections() < 1) \
+                and time.monotonic() < deadline:
+            time.sleep(0.05)
+        emit("ready", control=control_pub.get_num_connections(), image=image_pub.get_num_connections())
+        frame = bytes(args.width * args.height * 3)
+        stop = threading.Event()
+        counts: Dict[str, int] = {}
+
+        def control(i: int) -> None:
+            msg = PointStamped()
+            msg.header.stamp = rospy.Time.from_sec(time.time())
+            msg.header.frame_id = "base"
+            msg.point.x = float(i)
+            control_pub.publish(msg)
+
+        def image(i: int) -> None:
+            msg = Image(height=args.height, width=args.width, encoding="rgb8", step=args.width * 3, data=frame)
+            msg.header.stamp = rospy.Time.from_sec(time.time())
+            msg.header.seq = i
+            image_pub.publish(msg)
+
+        threads = [threading.Thread(target=lambda: counts.__setitem__("image", paced(
+            args.image_rate, args.seconds, image, stop)), daemon=True)]
+        threads[0].start()
+        t0 = time.monotonic()
+        counts["control"] = paced(args.control_rate, args.seconds, control, stop)
+        elapsed = time.monotonic() - t0
+        threads[0].join(args.seconds + 30)
+        stats: Dict[str, Any] = {}
+        if not args.stock:
+            import dataclasses
+
+            stats = {"control": dataclasses.asdict(control_pub.statistics()),
+                     "image": dataclasses.asdict(image_pub.statistics())}
+            for name, p in (("control", control_pub), ("image", image_pub)):  # how often the link had no room
+                stats[name]["delayed"] = sum(lane.delayed for lane in getattr(p._pub, "lanes", ()))
+        emit("published", control=counts["control"], image=counts.get("image", 0), seconds=elapsed,
+             intended_control=int(args.control_rate * args.seconds), statistics=stats)
+        time.sleep(5.0)  # let what is in flight arrive (the subscriber reports on its own)
+        emit("done")
+        return 0
+
+    got: Dict[str, Any] = {"control": 0, "image": 0, "latency": [], "transports": set()}
+    lock = threading.Lock()
+
+    def on_control(msg: Any) -> None:
+        now = time.time()
+        with lock:
+            got["control"] += 1
+            got["latency"].append(now - msg.header.stamp.to_sec())
+            got["transports"].add((getattr(msg, "_connection_header", None) or {}).get("transport", "TCPROS"))
+
+    def on_image(msg: Any) -> None:
+        with lock:
+            got["image"] += 1
+
+    if args.stock:
+        rospy.Subscriber("/control", PointStamped, on_control, queue_size=1000, tcp_nodelay=True)
+        rospy.Subscriber("/image", Image, on_image, queue_size=2, tcp_nodelay=True)
+    else:
+        nh.subscribe("/control", PointStamped, on_control, 1000)
+        nh.subscribe("/image", Image, on_image, 2)
+    emit("ready")
+    end = time.monotonic() + args.seconds
+    last_change, last_count = time.monotonic(), -1
+    while time.monotonic() < end:
+        time.sleep(0.1)
+        with lock:
+            count = got["control"] + got["image"]
+        if count != last_count:
+            last_change, last_count = time.monotonic(), count
+        elif count > 0 and time.monotonic() - last_change > 4.0:
+            break  # the stream ended
+    with lock:
+        lat = [x * 1e3 for x in got["latency"]]
+        emit("summary", control=got["control"], image=got["image"], transports=sorted(got["transports"]),
+             p50_ms=percentile(lat, 0.5), p99_ms=percentile(lat, 0.99), max_ms=max(lat) if lat else None)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
