@@ -31,6 +31,7 @@ from typing import Any, Callable, Dict, List, Tuple, Type
 import genpy
 import roslib.message
 
+from ..rostypes import INT_RANGES
 from ..exceptions import MicrosRtError, TypeMappingError
 from .typecache import type_key
 
@@ -547,12 +548,8 @@ _ENCODE_ERRORS = (struct.error, TypeError, ValueError, AttributeError, OverflowE
 _DECODE_ERRORS = (struct.error, IndexError, ValueError, TypeError, AttributeError, OverflowError, MemoryError,
                   RecursionError)
 
-_INT_RANGES: Dict[str, Tuple[int, int]] = {
-    "int8": (-2 ** 7, 2 ** 7 - 1), "uint8": (0, 2 ** 8 - 1), "byte": (-2 ** 7, 2 ** 7 - 1), "char": (0, 255),
-    "int16": (-2 ** 15, 2 ** 15 - 1), "uint16": (0, 2 ** 16 - 1), "int32": (-2 ** 31, 2 ** 31 - 1),
-    "uint32": (0, 2 ** 32 - 1), "int64": (-2 ** 63, 2 ** 63 - 1), "uint64": (0, 2 ** 64 - 1),
-    "bool": (0, 255),
-}
+# genpy packs bool as uint8: any value 0..255 serializes (the one table of ranges is micros_rt.rostypes)
+_INT_RANGES: Dict[str, Tuple[int, int]] = {**INT_RANGES, "bool": (0, 255)}
 
 
 def _short(value: Any) -> str:
