@@ -24,12 +24,15 @@ from .exceptions import MicrosRtError
 from .negotiation import (
     MAX_PENDING_DDS_OFFERS,
     UNMATCHED_READER_TIMEOUT,
+    DDS,
     DDSAnswer,
     DDSOffer,
+    NegotiatedTransport,
     PublicationFacts,
     RateLimitedLog,
     Verdict,
     decide,
+    dds_transport,
     remember_verdict,
 )
 from .qos import AdvertiseQoSOptions, is_lossless, priority_tos
@@ -103,6 +106,10 @@ class _Publication:
             domain=self._dds_backend.domain_id if dds is not None and self._dds_backend else None,
             type_name=dds.dds_type.type_name if dds else "", md5=self.data_class._md5sum,
             options=self.options, latch=self.latch, pending=pending)
+
+    def negotiated_transports(self, subscriber: str) -> Dict[str, NegotiatedTransport]:
+        """What ``requestTopic`` may negotiate for this topic with ``subscriber``: DDS, judged here."""
+        return {DDS: dds_transport(lambda offer: self.judge(offer, subscriber))}
 
     def judge(self, offer: DDSOffer, subscriber: str) -> Tuple[Verdict, Optional[DDSAnswer]]:
         verdict = decide(offer, self.facts(), subscriber=short(subscriber))

@@ -36,7 +36,7 @@ import rospy.names
 import rospy.topics
 import rosgraph
 from .negotiation import DDS, TCPROS, DDSAnswer, DDSOffer, MalformedNegotiationError, RateLimitedLog, Verdict
-from .negotiation import choose_protocol
+from .negotiation import NegotiatedTransport, choose_protocol
 from rospy.impl.registration import (
     RegManager,
     Registration,
@@ -78,8 +78,8 @@ _ids = itertools.count(100000)
 class PublicationHook(Protocol):
     """What the publisher side of the negotiation asks a micros_rt publication."""
 
-    def judge(self, offer: DDSOffer, subscriber: str) -> Tuple[Verdict, Optional[DDSAnswer]]:
-        """Accept the DDS offer (with the answer to send) or decline it with a reason."""
+    def negotiated_transports(self, subscriber: str) -> Dict[str, NegotiatedTransport]:
+        """The transports this publication negotiates with ``subscriber``, by protocol name (DDS)."""
 
     def on_tcpros_connection(self, conn: Any, sock: Any) -> None:
         """A TCPROS subscriber connected (mark its socket)."""
@@ -355,14 +355,14 @@ def _wrapped_request_topic(original: Callable[..., Any]) -> Callable[..., Any]:
         # resolve like rospy's _remap_table does for 'topic' before we look it up
         resolved = rospy.names.resolve_name(topic, caller_id)
         hook = _find_publication(resolved)
-        judge = None if hook is None else (lambda offer: hook.judge(offer, caller_id))
-        choice = choose_protocol(protocols, judge_dds=judge, subscriber=short(caller_id),
+        negotiated = {} if hook is None else hook.negotiated_transports(caller_id)
+        choice = choose_protocol(protocols, negotiated=negotiated, subscriber=short(caller_id),
                                  supports=lambda name: any(h.supports(name) for h in self.protocol_handlers),
                                  topic=short(resolved))
         for verdict in choice.declined:
             _declines.warning((short(caller_id, 256), verdict.kind), verdict.reason, group=verdict.kind.split(":")[0])
-        if choice.dds is not None:
-            return 1, "ready on DDS", choice.dds.to_xmlrpc()
+        if choice.answer is not None:
+            return 1, f"ready on {choice.protocol}", choice.answer.to_xmlrpc()
         if choice.entry is not None:
             return original(self, caller_id, topic, [choice.entry])
         return 0, "no supported protocol implementations", []

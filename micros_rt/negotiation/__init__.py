@@ -2,7 +2,7 @@
 protocol-order loop. Pure: nothing here touches rospy or creates DDS entities
 (:mod:`micros_rt._rospy_compat` adapts it to rospy's ``requestTopic``)."""
 
-from .choose import Choice, choose_protocol
+from .choose import Choice, NegotiatedTransport, choose_protocol, dds_transport
 from .decide import MAX_VERDICTS, PublicationFacts, Verdict, decide, remember_verdict
 from .hints import TransportHints
 from .messages import DDSAnswer, DDSOffer, MalformedNegotiationError, is_guid
@@ -28,12 +28,14 @@ __all__ = [
     "DDSAnswer",
     "DDSOffer",
     "MalformedNegotiationError",
+    "NegotiatedTransport",
     "PublicationFacts",
     "RateLimitedLog",
     "TransportHints",
     "Verdict",
     "choose_protocol",
     "decide",
+    "dds_transport",
     "is_guid",
     "remember_verdict",
 ]

@@ -1,41 +1,66 @@
 """The protocol-order loop of ``requestTopic`` (publisher side), independent of rospy.
 
-The subscriber lists protocols in its preference order; the first one this publisher can serve
-wins. A DDS entry is judged by the publication (:func:`micros_rt.negotiation.decide`); other
-entries by rospy's protocol handlers. Malformed entries are skipped with a reason, never fatal.
+The subscriber lists protocols in its preference order; the first one this publisher can serve wins, as
+rospy's ``protocol_handlers`` loop does. Negotiated transports (DDS today) are registered by name
+(:class:`NegotiatedTransport`: how to read that protocol's offer, and the publication's judge); other
+entries go to rospy's protocol handlers (``supports``). Malformed entries are skipped with a reason,
+never fatal.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable, List, Optional, Tuple
+from typing import Any, Callable, List, Mapping, Optional, Tuple
 
 from .decide import Verdict
 from .messages import DDSAnswer, DDSOffer, MalformedNegotiationError
 from .protocol import DDS
 
-__all__ = ["Choice", "choose_protocol"]
+__all__ = ["Choice", "NegotiatedTransport", "choose_protocol", "dds_transport"]
 
 #: Judges one offer: (verdict, answer when accepted).
 JudgeDDS = Callable[[DDSOffer], Tuple[Verdict, Optional[DDSAnswer]]]
 
 
+@dataclass(frozen=True)
+class NegotiatedTransport:
+    """A transport negotiated in ``requestTopic``: ``parse(params, source)`` reads a subscriber's offer
+    (raising :class:`MalformedNegotiationError`), ``judge(offer)`` is the publication's verdict and answer
+    (an object with ``to_xmlrpc()``, the entry sent back)."""
+
+    parse: Callable[[Any, str], Any]
+    judge: Callable[[Any], Tuple[Verdict, Any]]
+
+
+def dds_transport(judge: JudgeDDS) -> NegotiatedTransport:
+    """DDS as a negotiated transport, judged by ``judge`` (a publication's)."""
+    return NegotiatedTransport(parse=lambda params, source: DDSOffer.from_xmlrpc(params, source=source), judge=judge)
+
+
 @dataclass
 class Choice:
-    """What ``requestTopic`` answers: a DDS answer, a rospy protocol entry, or nothing."""
+    """What ``requestTopic`` answers: a negotiated transport's answer, a rospy protocol entry, or nothing."""
 
-    dds: Optional[DDSAnswer] = None
+    #: the negotiated transport chosen and its answer (``to_xmlrpc()`` is the entry to send back)
+    protocol: str = ""
+    answer: Any = None
     entry: Optional[List[Any]] = None
-    #: Why DDS (or an entry) was not used, in words, with a stable kind for counting repeats.
+    #: Why a negotiated transport (or an entry) was not used, in words, with a stable kind for counting repeats.
     declined: List[Verdict] = field(default_factory=list)
 
+    @property
+    def dds(self) -> Optional[DDSAnswer]:
+        """The DDS answer when DDS was chosen."""
+        return self.answer if self.protocol == DDS else None
 
-def choose_protocol(protocols: object, *, judge_dds: Optional[JudgeDDS], supports: Callable[[str], bool],
-                    subscriber: str, topic: str) -> Choice:
+
+def choose_protocol(protocols: object, *, negotiated: Mapping[str, NegotiatedTransport],
+                    supports: Callable[[str], bool], subscriber: str, topic: str) -> Choice:
     """Walk ``protocols`` (the subscriber's list, from XML-RPC) in order.
 
-    ``judge_dds`` is None when this topic has no micros_rt publication (a stock rospy publisher in a
-    micros_rt process): DDS entries are then skipped silently, as a stock node would.
+    ``negotiated`` holds the transports this topic's publication can negotiate, by protocol name; an
+    entry of a negotiated transport the publication does not have (a stock rospy publisher in a micros_rt
+    process: none) is skipped silently, as a stock node would.
     """
     choice = Choice()
     if not isinstance(protocols, list):
@@ -47,23 +72,25 @@ def choose_protocol(protocols: object, *, judge_dds: Optional[JudgeDDS], support
             choice.declined.append(Verdict(False, "malformed",
                                            f"topic {topic}: ignored a malformed protocol entry from {subscriber}"))
             continue
-        if entry[0] == DDS:
-            if judge_dds is None:
-                continue
+        name = entry[0]
+        transport = negotiated.get(name)
+        if transport is not None:
             try:
-                offer = DDSOffer.from_xmlrpc(entry[1] if len(entry) > 1 else None, source=f"subscriber {subscriber}")
+                offer = transport.parse(entry[1] if len(entry) > 1 else None, f"subscriber {subscriber}")
             except MalformedNegotiationError as exc:
                 choice.declined.append(Verdict(False, f"malformed:{exc.field}",
-                                               f"topic {topic}: malformed DDS offer from {subscriber} ({exc}); "
+                                               f"topic {topic}: malformed {name} offer from {subscriber} ({exc}); "
                                                f"trying its next protocol"))
                 continue
-            verdict, answer = judge_dds(offer)
+            verdict, answer = transport.judge(offer)
             if verdict.accepted and answer is not None:
-                choice.dds = answer
+                choice.protocol, choice.answer = name, answer
                 return choice
             choice.declined.append(verdict)
             continue
-        if supports(entry[0]):
+        if name == DDS:
+            continue  # no such transport here (a stock publisher): skipped, as a stock node would
+        if supports(name):
             choice.entry = entry
             return choice
     return choice

@@ -13,7 +13,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import pytest
 
-from micros_rt.negotiation.choose import Choice, choose_protocol
+from micros_rt.negotiation.choose import Choice, NegotiatedTransport, choose_protocol, dds_transport
 from micros_rt.negotiation.decide import PublicationFacts, Verdict, decide
 from micros_rt.negotiation.messages import DDSAnswer, DDSOffer, MalformedNegotiationError, is_guid
 from micros_rt.negotiation.protocol import DDS, MAX_FIELD_CHARS, MAX_PENDING_DDS_OFFERS, TCPROS
@@ -428,7 +428,8 @@ def tcpros_only(name: str) -> bool:
 
 
 def choose(protocols: object, judge: Optional[Judge], supports: Callable[[str], bool] = tcpros_only) -> Choice:
-    return choose_protocol(protocols, judge_dds=judge, supports=supports, subscriber=SUB, topic="/chatter")
+    return choose_protocol(protocols, negotiated={} if judge is None else {DDS: dds_transport(judge)},
+                           supports=supports, subscriber=SUB, topic="/chatter")
 
 
 DDS_ENTRY = make_offer().to_xmlrpc()
@@ -466,7 +467,8 @@ def test_choose_accepted_verdict_without_answer_is_not_dds() -> None:
     def judge(offer: DDSOffer) -> Tuple[Verdict, Optional[DDSAnswer]]:
         return Verdict(True, "accepted", "ok"), None
 
-    choice = choose_protocol([DDS_ENTRY, TCP_ENTRY], judge_dds=judge, supports=tcpros_only, subscriber=SUB,
+    choice = choose_protocol([DDS_ENTRY, TCP_ENTRY], negotiated={DDS: dds_transport(judge)}, supports=tcpros_only,
+                             subscriber=SUB,
                              topic="/chatter")
     assert choice.dds is None and choice.entry == TCP_ENTRY
 
@@ -640,3 +642,50 @@ def test_ratelimit_2000_warnings_one_line(caplog: pytest.LogCaptureFixture) -> N
     assert records[0].levelno == logging.WARNING
     assert log.suppressed_total == 1999
     assert elapsed < 1.0
+
+
+class _ToyAnswer:
+    def __init__(self, segment: str) -> None:
+        self.segment = segment
+
+    def to_xmlrpc(self) -> List[Any]:
+        return ["SHM", {"segment": self.segment}]
+
+
+def _toy_shm(accept: bool, seen: List[Any]) -> NegotiatedTransport:
+    """A negotiated shared-memory transport as a new back end would register it: its offer's reader and
+    its publication's judge; nothing in choose_protocol knows its name."""
+    def parse(params: Any, source: str) -> Any:
+        if not isinstance(params, dict) or "host" not in params:
+            raise MalformedNegotiationError("host", f"{source}: SHM offer without a host")
+        return params
+
+    def judge(offer: Any) -> Tuple[Verdict, Any]:
+        seen.append(offer)
+        if accept and offer["host"] == "here":
+            return Verdict(True, "accepted", "same host"), _ToyAnswer("/dev/shm/t")
+        return Verdict(False, "host", "another host: no shared memory"), None
+
+    return NegotiatedTransport(parse=parse, judge=judge)
+
+
+def test_a_registered_negotiated_transport_is_chosen_in_the_subscribers_order() -> None:
+    seen: List[Any] = []
+    judge = Judge()
+    negotiated = {"SHM": _toy_shm(True, seen), DDS: dds_transport(judge)}
+    offers = [["SHM", {"host": "here"}], DDS_ENTRY, TCP_ENTRY]
+    choice = choose_protocol(offers, negotiated=negotiated, supports=tcpros_only, subscriber=SUB, topic="/t")
+    assert choice.protocol == "SHM" and choice.answer.to_xmlrpc() == ["SHM", {"segment": "/dev/shm/t"}]
+    assert choice.dds is None and judge.seen == []
+    # declined with a reason: the next protocol in the subscriber's order, DDS
+    choice = choose_protocol([["SHM", {"host": "there"}], DDS_ENTRY], negotiated=negotiated, supports=tcpros_only,
+                             subscriber=SUB, topic="/t")
+    assert choice.protocol == DDS and choice.dds is judge.answer
+    assert [v.kind for v in choice.declined] == ["host"]
+    # malformed: skipped with its field named; a publication without the transport skips it silently
+    choice = choose_protocol([["SHM", 7], TCP_ENTRY], negotiated=negotiated, supports=tcpros_only, subscriber=SUB,
+                             topic="/t")
+    assert choice.entry == TCP_ENTRY and [v.kind for v in choice.declined] == ["malformed:host"]
+    choice = choose_protocol([["SHM", {"host": "here"}], TCP_ENTRY], negotiated={}, supports=tcpros_only,
+                             subscriber=SUB, topic="/t")
+    assert choice.entry == TCP_ENTRY
