@@ -296,3 +296,59 @@ def test_transport_errors_are_in_the_one_exception_tree() -> None:
 
     for cls in (MqttConfigError, CodecError, ParamsError, McuConfigError, WireError):
         assert issubclass(cls, MicrosRtError) and issubclass(cls, ValueError), cls
+
+
+# -- subscription: one admission path, whatever the transport ------------------------------------------
+class _FilteringReader(PushReader):
+    """A fake pushed transport that says it applies the time filter itself (as Cyclone does)."""
+
+    enforces = frozenset({TIME_FILTER})
+
+
+def _subscription(options: Any, depth: Optional[int] = 100) -> Any:
+    from micros_rt._subscription import _Subscription
+    from micros_rt.negotiation import TransportHints
+
+    sub = _Subscription("/admission", String, depth, options, TransportHints().tcp(), dds=None, tag={}, graph="g")
+    got: List[Any] = []
+    sub.callbacks = ((lambda msg: got.append(msg.data), None),)
+    sub.thread.start()  # the delivery thread only: no rospy registration
+    return sub, got
+
+
+def test_the_subscription_applies_the_time_filter_a_reader_does_not() -> None:
+    from micros_rt.qos import SubscribeQoSOptions
+
+    sub, got = _subscription(SubscribeQoSOptions(time_filter_duration=30.0))
+    filtering = _FilteringReader("FAKE", 100, sub.inbox.wake, blocking=False)
+    sub.pushed = sub.pushed + (filtering,)
+    try:
+        for i in range(5):
+            sub.tcp_in.put(String(data=f"tcp {i}"))     # TCPROS enforces nothing: one per 30 s passes
+        harness.wait_until(lambda: sub.statistics().received == 5, 10, message="five TCPROS messages taken")
+        for i in range(5):
+            filtering.put(String(data=f"fake {i}"))     # the transport filtered already: all delivered
+        harness.wait_until(lambda: len(got) == 6, 10, message="the filtered transport's five delivered")
+        assert got == ["tcp 0"] + [f"fake {i}" for i in range(5)]
+        stats = sub.statistics()
+        assert (stats.received, stats.delivered, stats.dropped_filtered) == (10, 6, 4)
+    finally:
+        sub.close()
+
+
+def test_drops_of_a_shared_thread_reader_are_in_the_subscriptions_statistics() -> None:
+    from micros_rt.qos import SubscribeQoSOptions
+
+    sub, got = _subscription(SubscribeQoSOptions(), depth=2)
+    feed = PushReader("MQTT", 2, lambda: None, blocking=False)  # not woken: its queue overflows first
+    sub.pushed = sub.pushed + (feed,)
+    try:
+        for i in range(7):
+            feed.put(String(data=str(i)))
+        sub.inbox.wake()
+        harness.wait_until(lambda: len(got) == 2, 10, message="the newest two delivered")
+        assert got == ["5", "6"]
+        stats = sub.statistics()
+        assert (stats.received, stats.delivered, stats.dropped_queue_full) == (7, 2, 5)
+    finally:
+        sub.close()
