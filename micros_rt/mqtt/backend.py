@@ -20,7 +20,9 @@ from its own ROS graph, which reach it over DDS/TCPROS, so each message is deliv
 QoS: best effort -> MQTT QoS 0, reliable -> 1 (a rule's ``qos`` may choose 2); ``latch`` -> retained;
 ``msg_valid_period`` -> MQTT 5 message expiry (whole seconds, rounded up); ``transport_priority`` -> IP
 TOS on the client's socket (the process's highest). Codecs: ``ros1`` (mqtt_client's framing, with its
-type announcement: mqtt_client bridges read it), ``json``, ``primitive``.
+type announcement: mqtt_client bridges read it), ``json``, ``primitive``. ``ros1`` writes the generation of
+the section's ``mqtt_client_version`` (2, the default, or 1) and reads both; a payload that arrives before
+its topic's type announcement is held (up to :data:`PENDING_LIMIT`) until the announcement says its form.
 """
 
 from __future__ import annotations
@@ -30,9 +32,10 @@ import dataclasses
 import io
 import math
 import re
+import collections
 import threading
 import fnmatch
-from typing import Any, Callable, Dict, List, Optional, Pattern, Tuple
+from typing import Any, Callable, Deque, Dict, List, Optional, Pattern, Tuple
 
 import genpy
 
@@ -43,7 +46,7 @@ from ..negotiation.ratelimit import RateLimitedLog
 from ..qos import AdvertiseQoSOptions, SubscribeQoSOptions, TransportPriority, priority_tos
 from . import codec
 from .client import MqttConnection
-from .params import MqttParams, ParamsError, _Reader, parse_connection
+from .params import MqttParams, ParamsError, _Reader, parse_connection, parse_wire
 
 __all__ = ["MqttBackend", "MqttRule", "MqttSettings", "MqttTopicReader", "MqttTopicWriter", "parse_mqtt_section",
            "process_backend", "SOURCE_PROPERTY"]
@@ -57,6 +60,8 @@ CODECS = ("ros1", "json", "primitive")
 #: How long the first topic with an MQTT rule waits for the broker (seconds).
 CONNECT_WAIT = 5.0
 DIRECTIONS = ("both", "out", "in")
+#: ``ros1`` payloads held per topic while its type announcement (which says their form) has not come.
+PENDING_LIMIT = 100
 
 
 @dataclasses.dataclass(frozen=True)
@@ -96,6 +101,11 @@ class MqttSettings:
     rules: Tuple[MqttRule, ...]
     source: str
 
+    @property
+    def wire(self) -> codec.WireGeneration:
+        """The mqtt_client generation ``ros1`` topics are written in (``mqtt_client_version``)."""
+        return self.params.wire
+
     def rule_for(self, topic: str, direction: str) -> Optional[MqttRule]:
         """The rule for ``topic`` going ``out`` or ``in``: an exact name beats a pattern, the longest pattern
         wins, then the first in the file."""
@@ -111,15 +121,16 @@ def parse_mqtt_section(data: Any, *, source: str) -> MqttSettings:
     try:
         if not isinstance(data, dict):
             raise ParamsError(f"{source}: mqtt: expected a mapping with 'broker', 'client' and 'topics'")
-        r.check_keys(data, ("broker", "client", "topics"), "")
+        r.check_keys(data, ("broker", "client", "topics", "mqtt_client_version"), "")
         broker, client = parse_connection(r, data)
+        wire = parse_wire(r, data, "mqtt_client_version")
         topics = data.get("topics") or {}         # none: only services over MQTT
         if not isinstance(topics, dict):
             raise ParamsError(f"{source}: mqtt: 'topics' must map topic names/patterns to MQTT options")
         rules = tuple(_rule(r, str(key), value or {}, k) for k, (key, value) in enumerate(topics.items()))
     except ParamsError as exc:
         raise ProfileError(str(exc)) from None
-    return MqttSettings(MqttParams(broker, client, (), ()), rules, source)
+    return MqttSettings(MqttParams(broker, client, (), (), wire), rules, source)
 
 
 def _rule(r: _Reader, key: str, value: Any, order: int) -> MqttRule:
@@ -231,7 +242,7 @@ class MqttTopicWriter:
             return codec.msg_to_text(msg).encode("utf-8"), None
         buf = io.BytesIO()
         msg.serialize(buf)
-        return codec.encode_ros_payload(buf.getvalue()), type(msg)
+        return codec.encode_ros_payload(buf.getvalue(), wire=self.backend.settings.wire), type(msg)
 
     def send(self, prepared: Tuple[bytes, Any]) -> None:
         """Publish what :meth:`prepare` made (buffered on disk while disconnected, if configured)."""
@@ -240,7 +251,9 @@ class MqttTopicWriter:
         if msg_class is not None and self._announced != self.backend.generation:
             self._announced = self.backend.generation  # mqtt_client's type announcement, once per connection
             conn.publish(codec.ROS_MSG_TYPE_PREFIX + self.mqtt_topic,
-                         codec.encode_msg_type(codec.RosMsgType.of(msg_class)), qos=self.qos, retain=True)
+                         codec.encode_msg_type(codec.RosMsgType.of(msg_class).for_wire(self.backend.settings.wire,
+                                                                                       stamped=False)),
+                         qos=self.qos, retain=True)
         try:
             if conn.publish(self.mqtt_topic, payload, qos=self.qos, retain=self.retain, properties=self._properties()):
                 self.sent += 1
@@ -264,8 +277,12 @@ class MqttTopicReader:
         best_effort = options is not None and options.using_best_effort_protocol
         self.qos = rule.qos if rule.qos is not None else (0 if best_effort else 1)
         self._deliver = deliver
+        self._lock = threading.Lock()
         self.announced_md5 = ""
-        self.delivered = self.same_graph = self.malformed = 0
+        self.announced = False               # the payload form is known (from the type announcement)
+        self.stamped: Optional[bool] = None  # announced stamped field; None: 1.x (flag byte)
+        self.pending: Deque[Tuple[str, bytes, Any]] = collections.deque()
+        self.delivered = self.same_graph = self.malformed = self.held_dropped = 0
         params = backend.settings.params.broker
         self.uri = f"mqtt://{params.host}:{params.port}/{self.mqtt_topic}"
         backend.connection.subscribe(self.mqtt_topic, self.qos, self._on_message)
@@ -276,9 +293,15 @@ class MqttTopicReader:
 
     def _on_type(self, topic: str, payload: bytes, properties: Any) -> None:
         try:
-            self.announced_md5 = codec.decode_msg_type(payload).md5
+            announced = codec.decode_msg_type(payload)
         except codec.CodecError as exc:
             self._bad("bad_type", f"its type announcement does not decode: {exc}")
+            return
+        with self._lock:
+            self.announced_md5, self.stamped, self.announced = announced.md5, announced.stamped, True
+            pending, self.pending = list(self.pending), collections.deque()
+        for held in pending:
+            self._on_message(*held)
 
     def _bad(self, kind: str, text: str) -> None:
         self.malformed += 1
@@ -292,6 +315,18 @@ class MqttTopicReader:
             self.same_graph += 1          # it reaches this subscriber over DDS/TCPROS
             return
         cls = self.spec.data_class
+        if self.rule.codec == "ros1":
+            with self._lock:
+                if not self.announced:     # its form (flag byte, or 2.x stamped or not) is not known yet
+                    if len(self.pending) >= PENDING_LIMIT:
+                        self.pending.popleft()
+                        self.held_dropped += 1
+                        _problems.warning((self.mqtt_topic, "no_type"), f"topic {self.spec.topic}: MQTT topic "
+                                          f"'{self.mqtt_topic}': no type announced yet on '{codec.ROS_MSG_TYPE_PREFIX}"
+                                          f"{self.mqtt_topic}'; holding the newest {PENDING_LIMIT} messages")
+                    self.pending.append((topic, payload, properties))
+                    return
+                stamped = self.stamped
         try:
             if self.rule.codec == "json":
                 msg = codec.json_to_msg(payload.decode("utf-8"), cls)
@@ -302,7 +337,7 @@ class MqttTopicReader:
                     self._bad("type_mismatch", f"announced md5 {self.announced_md5} is not {cls._type}'s "
                                                f"{cls._md5sum}")
                     return
-                _, body = codec.decode_ros_payload(payload)
+                _, body = codec.decode_ros_payload(payload, stamped=stamped)
                 msg = cls()
                 msg.deserialize(bytes(body))
         except Exception as exc:  # codec errors, genpy's struct.error/DeserializationError, UnicodeDecodeError

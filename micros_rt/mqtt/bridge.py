@@ -3,13 +3,16 @@
 ROS -> MQTT: each ``bridge.ros2mqtt`` topic is subscribed with micros_rt (DDS from micros_rt publishers,
 TCPROS from stock nodes) as soon as the master knows its type, and every message is sent to the broker
 in mqtt_client's framing (its type announced, retained, on ``mqtt_client/ros_msg_type/<mqtt_topic>``),
-as primitive text or as JSON.
+as primitive text or as JSON. The framing is one mqtt_client generation, ``bridge/mqtt_client_version``
+(2.x by default: no flag byte, ``RosMsgType.stamped``; or 1.x: a flag byte), logged at start-up.
 
 MQTT -> ROS: each ``bridge.mqtt2ros`` topic is published with micros_rt once its type is known: from the
 announcement (an installed class when the md5 matches, else a class built from the announced
-definition), from ``ros_type``, or from the first primitive text. Unlike mqtt_client, the data topic is
-subscribed from the start and messages that arrive before their type are held (up to
-:data:`PENDING_LIMIT` per topic), so the first message is never lost.
+definition), from ``ros_type``, or from the first primitive text. Either generation is read, whatever
+this bridge writes: the announcement's length says which (2.x has ``stamped``), and the topic's payloads are
+read in the form it announces. Unlike mqtt_client, the data topic is subscribed from the start and
+messages that arrive before their type announcement are held (up to :data:`PENDING_LIMIT` per topic), so
+the first message is never lost.
 
 Bad input (a payload that does not decode, an unknown type, a text that does not fit the topic's type,
 a message too large to send) is logged once per topic and kind in words, then counted; the node keeps
@@ -53,17 +56,23 @@ RESOLVE_INTERVAL = 0.3
 SUBSCRIBER_WAIT = 3.0
 
 
-def is_connected_service_class() -> Type[Any]:
-    """mqtt_client's ``mqtt_client/IsConnected`` service (empty request, ``bool connected``), built at run
-    time with mqtt_client's md5 so that its own clients can call this node."""
+#: The package of mqtt_client's ``IsConnected`` service in each generation (2.x moved it).
+IS_CONNECTED_PACKAGE = {codec.WireGeneration.V1: "mqtt_client", codec.WireGeneration.V2: "mqtt_client_interfaces"}
+
+
+def is_connected_service_class(wire: codec.WireGeneration = codec.WireGeneration.V2) -> Type[Any]:
+    """mqtt_client's ``IsConnected`` service (empty request, ``bool connected``), built at run time with
+    mqtt_client's md5 so that its own clients can call this node. The type is
+    ``mqtt_client_interfaces/IsConnected`` in 2.x, ``mqtt_client/IsConnected`` in 1.x (same md5)."""
+    pkg = IS_CONNECTED_PACKAGE[wire]
     ctx = genmsg.MsgContext.create_default()
-    spec = genmsg.msg_loader.load_srv_from_string(ctx, "---\nbool connected\n", "mqtt_client/IsConnected")
-    request = genpy.dynamic.generate_dynamic("mqtt_client/IsConnectedRequest", "")["mqtt_client/IsConnectedRequest"]
-    response = genpy.dynamic.generate_dynamic("mqtt_client/IsConnectedResponse",
-                                              "bool connected\n")["mqtt_client/IsConnectedResponse"]
+    spec = genmsg.msg_loader.load_srv_from_string(ctx, "---\nbool connected\n", f"{pkg}/IsConnected")
+    request = genpy.dynamic.generate_dynamic(f"{pkg}/IsConnectedRequest", "")[f"{pkg}/IsConnectedRequest"]
+    response = genpy.dynamic.generate_dynamic(f"{pkg}/IsConnectedResponse",
+                                              "bool connected\n")[f"{pkg}/IsConnectedResponse"]
 
     class IsConnected:
-        _type = "mqtt_client/IsConnected"
+        _type = f"{pkg}/IsConnected"
         _md5sum = genmsg.gentools.compute_md5(ctx, spec)
         _request_class = request
         _response_class = response
@@ -137,9 +146,11 @@ class _Ros2Mqtt:
         elif p.json and msg is not None:
             payload = codec.msg_to_json(msg).encode("utf-8")
         else:
+            wire = self.bridge.params.wire
             if self.announced_md5 != t.md5:
-                conn.publish(codec.ROS_MSG_TYPE_PREFIX + p.mqtt_topic, codec.encode_msg_type(t), qos=p.qos,
-                             retain=True)
+                announcement = t.for_wire(wire, stamped=p.inject_timestamp)
+                conn.publish(codec.ROS_MSG_TYPE_PREFIX + p.mqtt_topic, codec.encode_msg_type(announcement),
+                             qos=p.qos, retain=True)
                 self.announced_md5 = t.md5
             if serialized is None:
                 assert msg is not None
@@ -147,7 +158,7 @@ class _Ros2Mqtt:
                 msg.serialize(buf)
                 serialized = buf.getvalue()
             stamp = genpy.Time.from_sec(time.time()) if p.inject_timestamp else None
-            payload = codec.encode_ros_payload(serialized, stamp=stamp)
+            payload = codec.encode_ros_payload(serialized, wire=wire, stamp=stamp)
         try:
             if conn.publish(p.mqtt_topic, payload, qos=p.qos, retain=p.retained):
                 self.sent += 1
@@ -166,6 +177,8 @@ class _Mqtt2Ros:
         self.publisher: Optional[micros_rt.Publisher] = None
         self.data_class: Optional[Type[genpy.Message]] = None
         self.md5 = ""
+        self.announced = False               # a type announcement was accepted: the payload form is known
+        self.stamped: Optional[bool] = None  # its stamped field (None: 1.x, payloads carry a flag byte)
         self.pending: Deque[bytes] = collections.deque()
         self.latency_pub: Optional[micros_rt.Publisher] = None
         self.delivered = 0
@@ -208,21 +221,25 @@ class _Mqtt2Ros:
             problems.report(topic, "bad_type", f"MQTT topic '{topic}': type announcement does not decode: {exc}")
             return
         with self.lock:
-            if announced.md5 == self.md5:
-                return
             if self.p.ros_type and announced.name != self.p.ros_type:
                 problems.report(topic, "type_mismatch",
                                 f"MQTT topic '{self.p.mqtt_topic}' announces {announced.name}, but ros_type is "
                                 f"{self.p.ros_type}: its messages are dropped")
-                self.md5 = ""
+                self.md5, self.announced = "", False
                 return
-            try:
-                cls = _message_class(announced)
-            except Exception as exc:  # genmsg/genpy raise several kinds for a bad definition
-                problems.report(topic, "unknown_type", f"MQTT topic '{self.p.mqtt_topic}': cannot build ROS type "
-                                f"{announced.name} from its announced definition: {exc}")
-                return
-            self._advertise(cls)
+            if announced.md5 != self.md5:
+                try:
+                    cls = _message_class(announced)
+                except Exception as exc:  # genmsg/genpy raise several kinds for a bad definition
+                    problems.report(topic, "unknown_type", f"MQTT topic '{self.p.mqtt_topic}': cannot build ROS "
+                                    f"type {announced.name} from its announced definition: {exc}")
+                    return
+                self._advertise(cls)
+            if not self.announced or self.stamped != announced.stamped:
+                _log.info("MQTT topic '%s': peer speaks mqtt_client %s%s", self.p.mqtt_topic, announced.wire.label,
+                          "" if announced.stamped is None else
+                          (", stamped" if announced.stamped else ", not stamped"))
+            self.announced, self.stamped = True, announced.stamped
             pending, self.pending = list(self.pending), collections.deque()
         for data in pending:
             self.on_data(self.p.mqtt_topic, data)
@@ -233,8 +250,8 @@ class _Mqtt2Ros:
             self._on_text(topic, payload)
             return
         with self.lock:
-            cls = self.data_class
-            if cls is None or (self.p.ros_type and not self.md5):
+            cls, stamped = self.data_class, self.stamped
+            if cls is None or not self.announced:
                 if len(self.pending) >= PENDING_LIMIT:
                     self.pending.popleft()
                     self.bridge.problems.report(topic, "no_type",
@@ -244,14 +261,15 @@ class _Mqtt2Ros:
                 self.pending.append(payload)
                 return
         try:
-            stamp, body = codec.decode_ros_payload(payload)
+            stamp, body = codec.decode_ros_payload(payload, stamped=stamped)
             msg = cls()
             msg.deserialize(bytes(body))
             _check_length(msg, body)
         except Exception as exc:  # genpy raises struct.error, DeserializationError, UnicodeDecodeError...
             self.bridge.problems.report(topic, "malformed",
                                         f"MQTT topic '{topic}': a {len(payload)}-byte payload does not decode as "
-                                        f"mqtt_client's {cls._type}: {exc or type(exc).__name__}")
+                                        f"mqtt_client {'1.x' if stamped is None else '2.x'}'s {cls._type}: "
+                                        f"{exc or type(exc).__name__}")
             return
         if stamp is not None:
             self._latency(stamp)
@@ -337,7 +355,10 @@ class MqttBridge:
             self.connection.subscribe(m.p.mqtt_topic, m.p.qos, m.on_data)
             if not (m.p.primitive or m.p.json):
                 self.connection.subscribe(codec.ROS_MSG_TYPE_PREFIX + m.p.mqtt_topic, m.p.qos, m.on_type)
-        self._service = rospy.Service("~is_connected", is_connected_service_class(), self._is_connected)
+        _log.info("micros_rt mqtt: writing mqtt_client %s payloads and type announcements "
+                  "(bridge/mqtt_client_version: %d); reading 1.x and 2.x", params.wire.label, int(params.wire))
+        self._service_class = is_connected_service_class(params.wire)
+        self._service = rospy.Service("~is_connected", self._service_class, self._is_connected)
         self._resolver = threading.Thread(target=self._resolve_loop, name="micros_rt mqtt types", daemon=True)
 
     def start(self) -> None:
@@ -346,7 +367,7 @@ class MqttBridge:
         self._resolver.start()
 
     def _is_connected(self, request: Any) -> Any:
-        return is_connected_service_class()._response_class(connected=self.connection.is_connected)
+        return self._service_class._response_class(connected=self.connection.is_connected)
 
     def _connection_changed(self, connected: bool) -> None:
         if connected:

@@ -1,19 +1,25 @@
 """Payload formats on MQTT, pure functions (no broker, no ROS graph).
 
-- mqtt_client's ROS 1 framing: ``[1 | ros::Time (uint32 secs, uint32 nsecs) | message]`` when a
-  timestamp is injected, ``[0 | message]`` otherwise, the message in ROS 1 serialization.
-- mqtt_client's type announcement: a serialized ``RosMsgType`` (``string md5``, ``string name``,
-  ``string definition``) on ``mqtt_client/ros_msg_type/<mqtt_topic>``.
+- mqtt_client's ROS 1 framing, in two generations (:class:`WireGeneration`):
+  1.x (1.0-1.1): ``[1 | ros::Time (uint32 secs, uint32 nsecs) | message]`` when a timestamp is injected,
+  ``[0 | message]`` otherwise; 2.x (2.0-2.3 for ROS 1): ``[ros::Time | message]`` or ``[message]``, no flag
+  byte: the type announcement's ``stamped`` field says which. The message is in ROS 1 serialization.
+- mqtt_client's type announcement: a serialized ``RosMsgType`` on ``mqtt_client/ros_msg_type/<mqtt_topic>``:
+  1.x ``string md5, string name, string definition``; 2.x the same and ``bool stamped`` (one byte). The
+  two are told apart by length.
 - Primitive text: ``std_msgs`` primitives as their value; text from MQTT probed as bool, then integer,
   then float, then string (mqtt_client's order).
 - JSON: every field (time as ``{"secs", "nsecs"}``, ``uint8[]`` as a list of numbers).
 
->>> encode_ros_payload(b"\\x02\\x00\\x00\\x00hi")
+>>> encode_ros_payload(b"\\x02\\x00\\x00\\x00hi", wire=WireGeneration.V1)
 b'\\x00\\x02\\x00\\x00\\x00hi'
+>>> encode_ros_payload(b"\\x02\\x00\\x00\\x00hi", wire=WireGeneration.V2)
+b'\\x02\\x00\\x00\\x00hi'
 """
 
 from __future__ import annotations
 
+import enum
 import json
 import math
 import struct
@@ -29,6 +35,7 @@ __all__ = [
     "PRIMITIVE_TYPES",
     "ROS_MSG_TYPE_PREFIX",
     "RosMsgType",
+    "WireGeneration",
     "decode_msg_type",
     "decode_ros_payload",
     "encode_msg_type",
@@ -75,62 +82,107 @@ class CodecError(MicrosRtError, ValueError):
 # ----------------------------------------------------------------------------- mqtt_client framing
 
 
-def encode_ros_payload(serialized: bytes, *, stamp: Optional[genpy.Time] = None) -> bytes:
-    """mqtt_client's payload for an already serialized ROS 1 message (``stamp``: the injected time)."""
-    if stamp is None:
-        return b"\x00" + serialized
-    return b"\x01" + _TIME.pack(int(stamp.secs), int(stamp.nsecs)) + serialized
+class WireGeneration(enum.IntEnum):
+    """Which mqtt_client wire a payload or type announcement follows (1.x: flag byte; 2.x: ``stamped``)."""
+
+    V1 = 1
+    V2 = 2
+
+    @property
+    def label(self) -> str:
+        """As a person names it: ``1.x`` or ``2.x``."""
+        return f"{int(self)}.x"
 
 
-def decode_ros_payload(payload: bytes) -> Tuple[Optional[genpy.Time], memoryview]:
-    """(injected stamp or None, serialized message) of an mqtt_client payload."""
-    if not payload:
-        raise CodecError("empty payload (mqtt_client payloads start with a 0 or 1 byte)")
-    flag = payload[0]
-    if flag == 0:
-        return None, memoryview(payload)[1:]
-    if flag == 1:
-        if len(payload) < 1 + _TIME.size:
-            raise CodecError(f"stamped payload of {len(payload)} bytes is shorter than its 8-byte timestamp")
-        secs, nsecs = _TIME.unpack_from(payload, 1)
-        if nsecs >= 1_000_000_000:
-            raise CodecError(f"injected timestamp has {nsecs} nanoseconds (must be below 1e9)")
-        return genpy.Time(secs, nsecs), memoryview(payload)[1 + _TIME.size:]
-    raise CodecError(f"first byte is {flag}, mqtt_client payloads start with 0 (no timestamp) or 1 (timestamp)")
+def encode_ros_payload(serialized: bytes, *, wire: WireGeneration, stamp: Optional[genpy.Time] = None) -> bytes:
+    """mqtt_client's payload for an already serialized ROS 1 message (``stamp``: the injected time).
+
+    2.x writes no flag byte: its readers learn from the type announcement (``stamped``) whether 8 stamp
+    bytes lead, so a topic's announcement and payloads must agree."""
+    head = _TIME.pack(int(stamp.secs), int(stamp.nsecs)) if stamp is not None else b""
+    if wire is WireGeneration.V2:
+        return head + serialized
+    return (b"\x01" if stamp is not None else b"\x00") + head + serialized
+
+
+def decode_ros_payload(payload: bytes, *, stamped: Optional[bool] = None) -> Tuple[Optional[genpy.Time], memoryview]:
+    """(injected stamp or None, serialized message) of an mqtt_client payload.
+
+    ``stamped`` is the peer's announced ``RosMsgType.stamped``: ``None`` for a 1.x peer (its payload starts
+    with a flag byte), ``True``/``False`` for a 2.x peer (8 stamp bytes lead, or none)."""
+    if stamped is None:
+        if not payload:
+            raise CodecError("empty payload (mqtt_client 1.x payloads start with a 0 or 1 byte)")
+        flag = payload[0]
+        if flag == 0:
+            return None, memoryview(payload)[1:]
+        if flag != 1:
+            raise CodecError(f"first byte is {flag}, mqtt_client 1.x payloads start with 0 (no timestamp) or 1 "
+                             "(timestamp)")
+        return _stamp(payload, 1, "1.x"), memoryview(payload)[1 + _TIME.size:]
+    if not stamped:
+        return None, memoryview(payload)
+    return _stamp(payload, 0, "2.x"), memoryview(payload)[_TIME.size:]
+
+
+def _stamp(payload: bytes, pos: int, generation: str) -> genpy.Time:
+    if len(payload) < pos + _TIME.size:
+        raise CodecError(f"stamped mqtt_client {generation} payload of {len(payload)} bytes is shorter than its "
+                         "8-byte timestamp")
+    secs, nsecs = _TIME.unpack_from(payload, pos)
+    if nsecs >= 1_000_000_000:
+        raise CodecError(f"injected timestamp has {nsecs} nanoseconds (must be below 1e9)")
+    return genpy.Time(secs, nsecs)
 
 
 class RosMsgType:
-    """mqtt_client's ``RosMsgType`` message: a type's md5, name and full definition."""
+    """mqtt_client's ``RosMsgType`` message: a type's md5, name and full definition, and (2.x only)
+    ``stamped``, whether the topic's payloads lead with an injected timestamp. ``stamped is None`` is a
+    1.x announcement (three strings); a bool is a 2.x one (a fourth, one-byte field)."""
 
-    __slots__ = ("md5", "name", "definition")
+    __slots__ = ("md5", "name", "definition", "stamped")
 
-    def __init__(self, md5: str, name: str, definition: str) -> None:
-        self.md5, self.name, self.definition = md5, name, definition
+    def __init__(self, md5: str, name: str, definition: str, stamped: Optional[bool] = None) -> None:
+        self.md5, self.name, self.definition, self.stamped = md5, name, definition, stamped
 
     @classmethod
-    def of(cls, data_class: Type[genpy.Message]) -> "RosMsgType":
+    def of(cls, data_class: Type[genpy.Message], *, stamped: Optional[bool] = None) -> "RosMsgType":
         """The announcement for a genpy message class."""
-        return cls(data_class._md5sum, data_class._type, data_class._full_text)
+        return cls(data_class._md5sum, data_class._type, data_class._full_text, stamped)
+
+    @property
+    def wire(self) -> WireGeneration:
+        """The generation this announcement follows (and its topic's payloads)."""
+        return WireGeneration.V1 if self.stamped is None else WireGeneration.V2
+
+    def for_wire(self, wire: WireGeneration, *, stamped: bool) -> "RosMsgType":
+        """The same type announced in ``wire``'s form (``stamped`` is kept only for 2.x)."""
+        return RosMsgType(self.md5, self.name, self.definition, stamped if wire is WireGeneration.V2 else None)
 
     def __eq__(self, other: object) -> bool:
-        return isinstance(other, RosMsgType) and (self.md5, self.name, self.definition) == (
-            other.md5, other.name, other.definition)
+        return isinstance(other, RosMsgType) and (self.md5, self.name, self.definition, self.stamped) == (
+            other.md5, other.name, other.definition, other.stamped)
 
     def __repr__(self) -> str:
-        return f"RosMsgType(md5={self.md5!r}, name={self.name!r}, definition=<{len(self.definition)} chars>)"
+        return (f"RosMsgType(md5={self.md5!r}, name={self.name!r}, definition=<{len(self.definition)} chars>, "
+                f"stamped={self.stamped!r})")
 
 
 def encode_msg_type(t: RosMsgType) -> bytes:
-    """``RosMsgType`` in ROS 1 serialization (three length-prefixed UTF-8 strings)."""
+    """``RosMsgType`` in ROS 1 serialization: three length-prefixed UTF-8 strings, and for a 2.x
+    announcement (``stamped`` not None) one byte 0 or 1."""
     out = bytearray()
     for s in (t.md5, t.name, t.definition):
         b = s.encode("utf-8")
         out += _LEN.pack(len(b)) + b
+    if t.stamped is not None:
+        out.append(1 if t.stamped else 0)
     return bytes(out)
 
 
 def decode_msg_type(payload: bytes) -> RosMsgType:
-    """Inverse of :func:`encode_msg_type`; checks lengths and that the name looks like ``pkg/Type``."""
+    """Inverse of :func:`encode_msg_type`, either generation (told apart by what follows the three strings:
+    nothing is 1.x, one byte 0/1 is 2.x); checks lengths and that the name looks like ``pkg/Type``."""
     fields = []
     pos = 0
     for what in ("md5", "name", "definition"):
@@ -148,7 +200,16 @@ def decode_msg_type(payload: bytes) -> RosMsgType:
     md5, name, definition = fields
     if name.count("/") != 1 or len(md5) != 32:
         raise CodecError(f"RosMsgType names type {name!r} with md5 {md5!r}: expected 'package/Type' and 32 hex digits")
-    return RosMsgType(md5, name, definition)
+    rest = len(payload) - pos
+    stamped: Optional[bool] = None
+    if rest == 1:
+        if payload[pos] not in (0, 1):
+            raise CodecError(f"RosMsgType's stamped field (mqtt_client 2.x) is {payload[pos]}, must be 0 or 1")
+        stamped = payload[pos] == 1
+    elif rest:
+        raise CodecError(f"RosMsgType has {rest} bytes after its definition: mqtt_client 1.x ends there, 2.x adds "
+                         "one (stamped)")
+    return RosMsgType(md5, name, definition, stamped)
 
 
 # ----------------------------------------------------------------------------- primitive text

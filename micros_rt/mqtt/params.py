@@ -11,6 +11,10 @@ and counted instead of making the broker close the connection, as AimRT's ``max_
 (every field as JSON, for non-ROS clients) and ``bridge.mqtt2ros[].ros_type`` (fix the ROS type, as in
 mqtt_client's ROS 2 version).
 
+``bridge.mqtt_client_version`` (micros_rt; ``2``, the default, or ``1``) chooses the wire the bridge writes:
+mqtt_client 2.x (2.0-2.3 for ROS 1: no flag byte, ``RosMsgType.stamped``) or 1.x (a flag byte, a
+three-string ``RosMsgType``). Both are read whatever it says. mqtt_client itself ignores the key.
+
 >>> params, warnings = parse_params({"bridge": {"mqtt2ros": [{"mqtt_topic": "a", "ros_topic": "/a"}]}})
 >>> params.broker.port, warnings[0]
 (1883, "Parameter 'broker/tls/enabled' not set, defaulting to '0'")
@@ -26,6 +30,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 import yaml
 
 from ..exceptions import MicrosRtError
+from .codec import WireGeneration
 
 __all__ = [
     "BrokerParams",
@@ -118,6 +123,8 @@ class MqttParams:
     client: ClientParams
     ros2mqtt: Tuple[Ros2MqttParams, ...]
     mqtt2ros: Tuple[Mqtt2RosParams, ...]
+    #: the mqtt_client wire written (``bridge/mqtt_client_version``); both are read
+    wire: WireGeneration = WireGeneration.V2
 
 
 class _Reader:
@@ -213,6 +220,12 @@ def parse_connection(r: "_Reader", data: Mapping[str, Any]) -> Tuple[BrokerParam
     will = r.section(c, "last_will", "client/last_will")
     r.check_keys(will, ("topic", "message", "qos", "retained"), "client/last_will")
     ctls = r.section(c, "tls", "client/tls")
+    unsupported = [k for k in ("version", "verify", "alpn_protos") if k in ctls]
+    if unsupported:
+        raise r.fail(f"client/tls/{unsupported[0]}",
+                     "(mqtt_client 2.x) is not supported: micros_rt negotiates the highest TLS version both sides "
+                     "support, always verifies the broker's certificate and host name against 'broker/tls/ca_certificate' and "
+                     "sends no ALPN protocols; remove the key")
     r.check_keys(ctls, ("certificate", "key", "password"), "client/tls")
     client_id = r.get(c, "id", "client/id", str, "")
     if not client_id:
@@ -257,7 +270,8 @@ def parse_params(data: Any, *, source: str = "params") -> Tuple[MqttParams, List
     if bridge is None:
         raise ParamsError(f"{source}: parameter 'bridge' is required")
     bridge = r.section(data, "bridge", "bridge")
-    r.check_keys(bridge, ("ros2mqtt", "mqtt2ros"), "bridge")
+    r.check_keys(bridge, ("ros2mqtt", "mqtt2ros", "mqtt_client_version"), "bridge")
+    wire = parse_wire(r, bridge, "bridge/mqtt_client_version")
     ros2mqtt = tuple(_ros2mqtt(r, e, k) for k, e in enumerate(_entries(r, bridge, "ros2mqtt")))
     mqtt2ros = tuple(_mqtt2ros(r, e, k) for k, e in enumerate(_entries(r, bridge, "mqtt2ros")))
     if not ros2mqtt and not mqtt2ros:
@@ -265,7 +279,20 @@ def parse_params(data: Any, *, source: str = "params") -> Tuple[MqttParams, List
                           "(give 'bridge/ros2mqtt' or 'bridge/mqtt2ros' entries)")
     _no_duplicates(r, [e.ros_topic for e in ros2mqtt], "bridge/ros2mqtt", "ros_topic")
     _no_duplicates(r, [e.mqtt_topic for e in mqtt2ros], "bridge/mqtt2ros", "mqtt_topic")
-    return MqttParams(broker, client, ros2mqtt, mqtt2ros), r.warnings
+    return MqttParams(broker, client, ros2mqtt, mqtt2ros, wire), r.warnings
+
+
+def parse_wire(r: "_Reader", data: Mapping[str, Any], name: str) -> WireGeneration:
+    """``mqtt_client_version``: 2 (default) or 1, also written '2.x'/'1.x'."""
+    value = data.get("mqtt_client_version")
+    if value is None:
+        return WireGeneration.V2
+    text = str(value).strip().lower()
+    for wire in WireGeneration:
+        if not isinstance(value, bool) and text in (str(int(wire)), wire.label, f"{int(wire)}.0"):
+            return wire
+    raise r.fail(name, f"is {value!r}: the mqtt_client wire to write, 2 (mqtt_client 2.0-2.3, the ROS 1 releases "
+                       "installed today; the default) or 1 (mqtt_client 1.0-1.1)")
 
 
 def _entries(r: _Reader, bridge: Mapping[str, Any], key: str) -> List[Mapping[str, Any]]:

@@ -125,7 +125,7 @@ def test_first_message_bad_input_and_is_connected(
     def ros1(text: str) -> bytes:
         buf = io.BytesIO()
         String(data=text).serialize(buf)
-        return codec.encode_ros_payload(buf.getvalue())
+        return codec.encode_ros_payload(buf.getvalue(), wire=codec.WireGeneration.V1)
 
     announcement = codec.encode_msg_type(codec.RosMsgType.of(String))
     # the data arrives before its type: mqtt_client drops it, this bridge holds it until the type comes

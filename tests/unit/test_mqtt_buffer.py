@@ -53,6 +53,6 @@ def test_installed_class_is_used_when_the_md5_matches() -> None:
 
 
 def test_is_connected_has_mqtt_client_md5() -> None:
-    srv = is_connected_service_class()
+    srv = is_connected_service_class(codec.WireGeneration.V1)
     assert srv._type == "mqtt_client/IsConnected" and srv._md5sum == "e0cdaf65159c7f3563426650fb8d3f64"
     assert srv._response_class(connected=True).connected is True

@@ -13,6 +13,8 @@ from std_msgs.msg import Bool, Char, Float32, Float64, Int8, Int32, Int64, Strin
 
 from micros_rt.mqtt import codec
 
+V1, V2 = codec.WireGeneration.V1, codec.WireGeneration.V2
+
 
 def serialized(msg: genpy.Message) -> bytes:
     buf = io.BytesIO()
@@ -24,13 +26,13 @@ def serialized(msg: genpy.Message) -> bytes:
 
 
 def test_unstamped_string_payload_is_zero_then_ros1_serialization() -> None:
-    payload = codec.encode_ros_payload(serialized(String(data="Hello MQTT!")))
+    payload = codec.encode_ros_payload(serialized(String(data="Hello MQTT!")), wire=V1)
     assert payload == bytes.fromhex("00" "0b000000") + b"Hello MQTT!"
 
 
 def test_stamped_payload_is_one_then_time_then_message() -> None:
     stamp = genpy.Time(1_700_000_000, 123_456_789)
-    payload = codec.encode_ros_payload(serialized(Int32(data=42)), stamp=stamp)
+    payload = codec.encode_ros_payload(serialized(Int32(data=42)), wire=V1, stamp=stamp)
     # [1 | secs uint32 LE | nsecs uint32 LE | int32 LE]
     assert payload == bytes.fromhex("01" "00f15365" "15cd5b07" "2a000000")
     got_stamp, body = codec.decode_ros_payload(payload)
@@ -46,7 +48,8 @@ def test_pose_stamped_round_trip_through_the_framing() -> None:
     msg = PoseStamped()
     msg.header.seq, msg.header.stamp, msg.header.frame_id = 7, genpy.Time(5, 6), "map"
     msg.pose.position.x, msg.pose.orientation.w = 1.5, 1.0
-    _, body = codec.decode_ros_payload(codec.encode_ros_payload(serialized(msg), stamp=genpy.Time(1, 2)))
+    _, body = codec.decode_ros_payload(codec.encode_ros_payload(serialized(msg), wire=V1,
+                                                                stamp=genpy.Time(1, 2)))
     back = PoseStamped().deserialize(bytes(body))
     assert back == msg
 
