@@ -24,7 +24,7 @@ from ..qos import (
     reader_qos,
     writer_qos,
 )
-from .endpoints import RELEASED_WRITE_MIN, DDSReader, DDSWriter, make_user_data
+from .endpoints import RELEASED_WRITE_MIN, DDSReader, DDSWriter, make_user_data, socket_congested, wait_for_acks
 from .participant import DDSParticipant
 from .types import DDSType, dds_topic_name, dds_type_for
 from .._logging import nonblocking_logger
@@ -38,6 +38,9 @@ _DDS_RETCODE_TIMEOUT = -10
 #: A large write that takes longer than this (s) waited for socket room behind a slow link: the writer's
 #: next large samples go through its lane's thread (loopback: a 900 KB write takes ~0.5 ms).
 NETWORK_BOUND_SEND = 0.005
+#: A writer with no room waits for acknowledgements in slices of at least this long (s): Cyclone wakes the
+#: wait at the acknowledgement, so a long slice costs nothing and spares the retries of a short one.
+WAIT_FOR_ROOM_MIN = 0.05
 
 
 class DDSTopicWriter:
@@ -91,17 +94,23 @@ class DDSTopicWriter:
             return False
         raise TransportError(f"topic {self.topic}: DDS write failed (Cyclone return code {ret})")
 
+    def wait_for_room(self, timeout: float) -> None:
+        """Wait (GIL released) until the readers acknowledged what was sent, at most ``timeout`` s."""
+        wait_for_acks(self._ref, max(timeout, WAIT_FOR_ROOM_MIN))
+
     def may_wait(self, prepared: bytes) -> bool:
-        """A large sample while the network is what limits this writer: its last large write waited more
-        than :data:`NETWORK_BOUND_SEND` for socket room (a slow link). On loopback a 900 KB write takes
-        ~0.5 ms and stays on the caller's thread, with no hop to the lane's."""
-        return self._network_bound and len(prepared) >= RELEASED_WRITE_MIN
+        """A large sample while the network is what limits this writer (its last large write waited more
+        than :data:`NETWORK_BOUND_SEND` for socket room behind a slow link), or any sample while the
+        process's transmit socket is congested (another topic's large write just waited): a small sample's
+        ``sendmsg`` would wait behind those fragments. On loopback a 900 KB write takes ~0.5 ms and stays
+        on the caller's thread, with no hop to the lane's."""
+        return (self._network_bound and len(prepared) >= RELEASED_WRITE_MIN) or socket_congested()
 
     def send(self, prepared: bytes) -> None:
         """Write, waiting (in Python, other threads running) while a reliable subscriber is behind; raise
         :class:`PublishTimeoutError` after the bound."""
         bound = PUBLISH_BLOCK_TIMEOUT if self.lossless else RELIABLE_MAX_BLOCKING_TIME
-        if not send_with_backoff(self.try_send, prepared, bound, lambda: self._closed):
+        if not send_with_backoff(self.try_send, prepared, bound, lambda: self._closed, self.wait_for_room):
             raise PublishTimeoutError(
                 f"topic {self.topic}: publish() stayed blocked for {bound:.1f} s because a reliable DDS "
                 f"subscriber does not keep up{' (queue_size=None never drops)' if self.lossless else ''}. "

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ctypes
 import threading
+import time
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
 
@@ -42,6 +43,19 @@ class _SampleContainer(ctypes.Structure):
 
 _c_dds_write: Any = None
 
+#: A write through :func:`write_released` that took longer than this (s) waited for room in a socket that a
+#: slow link drains: the process's transmit socket is congested for :data:`CONGESTION_HOLD` seconds, and
+#: meanwhile every write releases the GIL and KEEP_LAST lanes send from their own threads.
+CONGESTED_WRITE = 0.005
+CONGESTION_HOLD = 0.1
+_congested_until = [0.0]
+_last_slow = [0.0]  # how long the last large write that waited took (0.0: it did not wait)
+
+
+def socket_congested() -> bool:
+    """True while a recent large write waited on the network (see :data:`CONGESTED_WRITE`)."""
+    return time.monotonic() < _congested_until[0]
+
 
 def write_released(ref: int, data: Any) -> int:
     """``ddspy_write(ref, data)`` without holding Python's GIL: the binding's own call holds it for the whole
@@ -63,14 +77,46 @@ def write_released(ref: int, data: Any) -> int:
     else:  # the codec's bytearray (writable: ctypes views it without a copy)
         address = ctypes.addressof((ctypes.c_char * len(data)).from_buffer(data))
     container = _SampleContainer(address, len(data))
-    return int(fn(ref, ctypes.byref(container)))
+    t0 = time.monotonic()
+    if _last_slow[0]:  # it will likely wait as long again: congested from now on, not from its end
+        _congested_until[0] = max(_congested_until[0], t0 + _last_slow[0] + CONGESTION_HOLD)
+    ret = int(fn(ref, ctypes.byref(container)))
+    done = time.monotonic()
+    if len(data) >= RELEASED_WRITE_MIN:
+        took = done - t0
+        _last_slow[0] = took if took > CONGESTED_WRITE else 0.0
+        if _last_slow[0]:
+            _congested_until[0] = max(_congested_until[0], done + CONGESTION_HOLD)
+    return ret
 
 
-def sample_write(ref: int, data: bytes, _small: Callable[[int, bytes], int] = ddspy_write,
-                 _limit: int = RELEASED_WRITE_MIN) -> int:
+_c_wait_for_acks: Any = None
+
+
+def wait_for_acks(ref: int, timeout: float) -> int:
+    """``dds_wait_for_acks(ref, timeout)`` with the GIL released: returns when every reader acknowledged
+    what writer ``ref`` sent (0), or after ``timeout`` seconds (Cyclone's timeout code, < 0). Cyclone
+    wakes it at the acknowledgement, so a writer with no room waits no longer than it must."""
+    global _c_wait_for_acks
+    fn = _c_wait_for_acks
+    if fn is None:
+        from cyclonedds.internal import load_cyclonedds
+
+        fn = load_cyclonedds().dds_wait_for_acks
+        fn.argtypes = [ctypes.c_int32, ctypes.c_int64]
+        fn.restype = ctypes.c_int32
+        _c_wait_for_acks = fn
+    return int(fn(ref, int(timeout * 1e9)))
+
+
+def sample_write(ref: int, data: Any, _small: Callable[[int, Any], int] = ddspy_write,
+                 _limit: int = RELEASED_WRITE_MIN, _until: List[float] = _congested_until,
+                 _now: Callable[[], float] = time.monotonic) -> int:
     """Write one serialized sample: the binding's fast call for small ones, :func:`write_released` for
-    large ones (which can wait on the network)."""
-    return _small(ref, data) if len(data) < _limit else write_released(ref, data)
+    large ones and for every one while the socket is congested (they can wait on the network)."""
+    if len(data) < _limit and _now() >= _until[0]:
+        return _small(ref, data)
+    return write_released(ref, data)
 
 
 def make_user_data(**fields: str) -> bytes:

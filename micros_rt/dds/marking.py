@@ -20,6 +20,7 @@ import os
 import socket
 from typing import Dict, Set, Tuple
 from .._logging import nonblocking_logger
+from ..transports.marking import mark_socket_tos
 
 __all__ = ["process_udp_sockets", "mark_udp_sockets"]
 
@@ -75,13 +76,8 @@ def mark_udp_sockets(inodes: Set[int], tos: int, so_priority: int) -> int:
         except OSError:
             continue
         try:
-            if family == socket.AF_INET6:
-                s.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_TCLASS, tos)
-            else:
-                s.setsockopt(socket.IPPROTO_IP, socket.IP_TOS, tos)
-            if hasattr(socket, "SO_PRIORITY"):
-                s.setsockopt(socket.SOL_SOCKET, socket.SO_PRIORITY, so_priority)
-            marked += 1
+            if mark_socket_tos(s, tos, so_priority, family=family):
+                marked += 1
         except OSError as exc:
             _log.warning("micros_rt: cannot mark a DDS socket with TOS 0x%02x: %s", tos, exc)
         finally:

@@ -109,17 +109,20 @@ BACKOFF_MAX = 0.002
 
 
 def send_with_backoff(try_send: Callable[[Any], bool], prepared: Any, timeout: float,
-                      closed: Callable[[], bool] = lambda: False) -> bool:
-    """Try ``try_send(prepared)`` until it succeeds or ``timeout`` seconds passed (False then), sleeping
-    between tries. The waiting happens here, in Python, so the interpreter's other threads run meanwhile:
-    Cyclone's own blocking write waits holding the GIL and stalls the whole process (measured: a thread
-    counting got 0.3 % of its rate while a write waited 1.5 s for a stopped reader's acknowledgements)."""
+                      closed: Callable[[], bool] = lambda: False,
+                      wait: Optional[Callable[[float], None]] = None) -> bool:
+    """Try ``try_send(prepared)`` until it succeeds or ``timeout`` seconds passed (False then), waiting
+    between tries with ``wait(seconds)`` (the transport's own wait for room, which returns as soon as there
+    is some; a sleep when it has none). The waiting never holds the GIL: Cyclone's own blocking write does,
+    and stalls the whole process (measured: a thread counting got 0.3 % of its rate while a write waited
+    1.5 s for a stopped reader's acknowledgements)."""
     if try_send(prepared):
         return True
     deadline = time.monotonic() + timeout
     pause = BACKOFF_FIRST
+    pausing = time.sleep if wait is None else wait
     while not closed():
-        time.sleep(pause)
+        pausing(pause)
         if try_send(prepared):
             return True
         if time.monotonic() >= deadline:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any, List
+from typing import Any, List, Tuple
 
 import pytest
 
@@ -241,3 +241,34 @@ def test_superseded_while_in_flight_is_counted_once(depth: int) -> None:
     assert lane.dropped == (0 if "old" in valve.sent else 1)
     assert valve.sent[-depth:] == list(range(depth))
     lane.close()
+
+
+def test_a_large_write_that_waits_marks_the_socket_congested_then_small_writes_release_the_gil(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The heuristic behind HIGH-beside-LOW on one socket: a large write that waited on the network makes
+    every write release the GIL (and KEEP_LAST lanes send from their threads) until it has been quiet."""
+    from micros_rt.dds import endpoints
+
+    calls: List[Tuple[str, int]] = []
+
+    def c_write(ref: int, container: Any) -> int:      # the C dds_write, waiting for socket room
+        calls.append(("released", ref))
+        time.sleep(0.02)
+        return 0
+
+    def binding_write(ref: int, data: bytes) -> int:   # cyclonedds-python's own call
+        calls.append(("binding", ref))
+        return 0
+
+    monkeypatch.setattr(endpoints, "_c_dds_write", c_write)
+    monkeypatch.setattr(endpoints, "_congested_until", [0.0])
+    monkeypatch.setattr(endpoints, "_last_slow", [0.0])
+    small, large = bytes(64), bytearray(endpoints.RELEASED_WRITE_MIN)
+    assert endpoints.sample_write(1, small, _small=binding_write, _until=endpoints._congested_until) == 0
+    assert not endpoints.socket_congested()
+    assert endpoints.sample_write(2, large, _small=binding_write, _until=endpoints._congested_until) == 0
+    assert endpoints.socket_congested()
+    endpoints.sample_write(3, small, _small=binding_write, _until=endpoints._congested_until)
+    harness.wait_until(lambda: not endpoints.socket_congested(), 10, message="quiet again")
+    endpoints.sample_write(4, small, _small=binding_write, _until=endpoints._congested_until)
+    assert calls == [("binding", 1), ("released", 2), ("released", 3), ("binding", 4)]
