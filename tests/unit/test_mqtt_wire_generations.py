@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import io
 import types
-from typing import Any, Dict, List, Tuple
+from typing import Any, Dict, List, Tuple, cast
 
 import genpy
 import pytest
@@ -229,3 +229,62 @@ def test_writer_writes_its_generation(wire: codec.WireGeneration, type_tail: byt
     writer.send(writer.prepare(String(data="hi")))
     assert backend.connection.published == [
         ("mqtt_client/ros_msg_type/t", V1_STRING_TYPE + type_tail, True), ("t", payload, False)]
+
+
+# ------------------------------------------------------------------ the bridge's MQTT -> ROS side
+
+
+class FakePublisher:
+    def __init__(self, topic: str, cls: type) -> None:
+        self.topic, self.cls = topic, cls
+        self.sent: List[Any] = []
+
+    def publish(self, msg: Any) -> None:
+        self.sent.append(msg)
+
+    def unregister(self) -> None:
+        pass
+
+
+class FakeNodeHandle:
+    def __init__(self) -> None:
+        self.publishers: Dict[str, FakePublisher] = {}
+
+    def advertise(self, topic: str, cls: type, queue_size: int, latch: bool = False) -> FakePublisher:
+        self.publishers[topic] = FakePublisher(topic, cls)
+        return self.publishers[topic]
+
+
+def bridge_topic(monkeypatch: pytest.MonkeyPatch, **entry: Any) -> Tuple[Any, FakeNodeHandle]:
+    from micros_rt.mqtt import bridge as bridge_module
+    from micros_rt.mqtt.params import Mqtt2RosParams
+
+    monkeypatch.setattr(bridge_module, "_await_subscribers", lambda pub: None)   # no ROS master here
+    nh = FakeNodeHandle()
+    fake_bridge = types.SimpleNamespace(nh=nh, problems=bridge_module._Problems())
+    topic = bridge_module._Mqtt2Ros(cast(Any, fake_bridge), Mqtt2RosParams(mqtt_topic="t", ros_topic="/t", **entry))
+    return topic, nh
+
+
+def test_bridge_holds_real_230_payload_then_reads_it_stamped_with_latency(monkeypatch: pytest.MonkeyPatch) -> None:
+    topic, nh = bridge_topic(monkeypatch)
+    topic.on_data("t", REAL_230_STAMPED_HI)
+    assert nh.publishers == {}                                       # no type yet: held
+    topic.on_type("mqtt_client/ros_msg_type/t", REAL_230_STRING_TYPE)
+    assert [m.data for m in nh.publishers["/t"].sent] == ["hi"]
+    latency = nh.publishers["~latencies/t"].sent
+    assert len(latency) == 1 and latency[0].data > 0                 # now minus the stamp (2026-11-24 05:08:59 UTC)
+    assert topic.bridge.problems.counts == {}
+
+
+def test_bridge_with_ros_type_still_waits_for_the_announcement(monkeypatch: pytest.MonkeyPatch) -> None:
+    """ros_type fixes the class, not the form: a 2.x Int32(1) (01 00 00 00) read as 1.x would be a stamp."""
+    topic, nh = bridge_topic(monkeypatch, ros_type="std_msgs/Int32")
+    topic.on_data("t", bytes.fromhex("01000000"))
+    assert nh.publishers["/t"].sent == []
+    topic.on_type("", codec.encode_msg_type(codec.RosMsgType.of(Int32, stamped=False)))
+    topic.on_data("t", bytes.fromhex("02000000"))
+    topic.on_type("", codec.encode_msg_type(codec.RosMsgType.of(Int32)))            # the peer is now 1.x
+    topic.on_data("t", bytes.fromhex("00" "03000000"))
+    assert [m.data for m in nh.publishers["/t"].sent] == [1, 2, 3]
+    assert "~latencies/t" not in nh.publishers and topic.bridge.problems.counts == {}
