@@ -34,7 +34,6 @@ import math
 import re
 import collections
 import threading
-import fnmatch
 from typing import Any, Callable, Deque, Dict, List, Optional, Pattern, Tuple
 
 import genpy
@@ -43,7 +42,8 @@ from .._logging import nonblocking_logger
 from ..transports.base import EndpointSpec
 from ..exceptions import ProfileError
 from ..negotiation.ratelimit import RateLimitedLog
-from ..qos import AdvertiseQoSOptions, SubscribeQoSOptions, TransportPriority, priority_tos
+from ..qos.topic_rules import TopicPattern, best_match
+from ..qos import AdvertiseQoSOptions, SubscribeQoSOptions, TransportPriority, priority_socket_priority, priority_tos
 from . import codec
 from .client import MqttConnection
 from .params import MqttParams, ParamsError, _Reader, parse_connection, parse_wire
@@ -77,16 +77,16 @@ class MqttRule:
     codec: str = "ros1"
     regex: Optional[Pattern[str]] = None
 
+    @property
+    def pattern(self) -> TopicPattern:
+        return TopicPattern(self.key, self.regex)
+
     def matches(self, topic: str) -> bool:
-        if self.regex is not None:
-            return self.regex.fullmatch(topic) is not None
-        if any(c in self.key for c in "*?["):
-            return fnmatch.fnmatchcase(topic, self.key)
-        return topic == self.key
+        return self.pattern.matches(topic)
 
     @property
     def exact(self) -> bool:
-        return self.regex is None and not any(c in self.key for c in "*?[")
+        return self.pattern.exact
 
     def mqtt_name(self, ros_topic: str) -> str:
         """The MQTT topic for a ROS topic (``{ros_topic}``: the ROS name without its leading slash)."""
@@ -109,10 +109,7 @@ class MqttSettings:
     def rule_for(self, topic: str, direction: str) -> Optional[MqttRule]:
         """The rule for ``topic`` going ``out`` or ``in``: an exact name beats a pattern, the longest pattern
         wins, then the first in the file."""
-        found = [r for r in self.rules if r.direction in ("both", direction) and r.matches(topic)]
-        if not found:
-            return None
-        return min(found, key=lambda r: (not r.exact, -len(r.key), r.order))
+        return best_match(((r.pattern, r) for r in self.rules if r.direction in ("both", direction)), topic)
 
 
 def parse_mqtt_section(data: Any, *, source: str) -> MqttSettings:
@@ -138,13 +135,11 @@ def _rule(r: _Reader, key: str, value: Any, order: int) -> MqttRule:
     if not isinstance(value, dict):
         raise r.fail(name, f"must be a mapping of MQTT options, got {value!r}")
     r.check_keys(value, ("mqtt_topic", "direction", "qos", "retained", "codec"), name)
-    regex = None
-    if key.startswith("^") and key.endswith("$"):
-        try:
-            regex = re.compile(key)
-        except re.error as exc:
-            raise r.fail(name, f"is not a valid regular expression: {exc}") from None
-    elif not key.startswith("/"):
+    try:
+        regex = TopicPattern.parse(key).regex
+    except re.error as exc:
+        raise r.fail(name, f"is not a valid regular expression: {exc}") from None
+    if regex is None and not key.startswith("/"):
         raise r.fail(name, "must be a resolved ROS name ('/...'), a glob, or a '^...$' regular expression")
     rule = MqttRule(
         key=key, order=order, regex=regex,
@@ -192,7 +187,7 @@ class MqttBackend:
             self._priorities.append(options.transport_priority)
             top = max(self._priorities, key=int)
         if top != TransportPriority.NORMAL:
-            self.connection.set_tos(priority_tos(top))
+            self.connection.set_tos(priority_tos(top), priority_socket_priority(top))
         return MqttTopicWriter(self, rule, spec, options)
 
     def open_feed(self, spec: EndpointSpec, options: Optional[SubscribeQoSOptions],

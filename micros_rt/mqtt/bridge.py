@@ -25,7 +25,7 @@ import collections
 import io
 import threading
 import time
-from typing import Any, Callable, Deque, Dict, Optional, Type
+from typing import Any, Callable, Deque, Dict, Optional, Tuple, Type
 
 import genmsg  # type: ignore[import-untyped]
 import genmsg.gentools  # type: ignore[import-untyped]
@@ -168,6 +168,67 @@ class _Ros2Mqtt:
                                         f"MQTT topic '{p.mqtt_topic}': {exc}")
 
 
+#: Messages of one MQTT topic that wait for its worker thread (the oldest are dropped beyond, counted).
+WORKER_BACKLOG = 1000
+
+
+class _TopicWorker:
+    """One MQTT topic's handling, in arrival order, on a thread of its own instead of paho's network thread.
+
+    Handling a type announcement advertises the ROS topic: that registers with the master and waits (up to
+    SUBSCRIBER_WAIT) for the subscribers it lists; publishing can wait on a lossless ROS subscriber. On
+    paho's thread, which every MQTT topic of the bridge shares, either stalled all of them."""
+
+    def __init__(self, name: str, on_overflow: Callable[[int], None]) -> None:
+        self.name = name
+        self._items: Deque[Tuple[Callable[..., None], Tuple[Any, ...], bool]] = collections.deque()
+        self._cond = threading.Condition()
+        self._thread: Optional[threading.Thread] = None
+        self._closed = False
+        self._on_overflow = on_overflow
+        self.dropped = 0
+
+    def put(self, fn: Callable[..., None], *args: Any, droppable: bool = True) -> None:
+        """From paho's thread: never waits. Beyond WORKER_BACKLOG the oldest droppable item goes, counted."""
+        with self._cond:
+            if self._closed:
+                return
+            self._items.append((fn, args, droppable))
+            if len(self._items) > WORKER_BACKLOG:
+                for i, (_fn, _args, may_drop) in enumerate(self._items):
+                    if may_drop:
+                        del self._items[i]
+                        self.dropped += 1
+                        self._on_overflow(self.dropped)
+                        break
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name=f"micros_rt mqtt {self.name}", daemon=True)
+                self._thread.start()
+            self._cond.notify()
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._items and not self._closed:
+                    self._cond.wait()
+                if self._closed:
+                    return
+                fn, args, _ = self._items.popleft()
+            try:
+                fn(*args)
+            except Exception:
+                _log.exception("micros_rt mqtt: handling a message of MQTT topic '%s' failed (continuing)", self.name)
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._items.clear()
+            self._cond.notify()
+        thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(2.0)
+
+
 class _Mqtt2Ros:
     """One MQTT topic published on ROS."""
 
@@ -182,6 +243,9 @@ class _Mqtt2Ros:
         self.pending: Deque[bytes] = collections.deque()
         self.latency_pub: Optional[micros_rt.Publisher] = None
         self.delivered = 0
+        self.worker = _TopicWorker(p.mqtt_topic, lambda n: bridge.problems.report(
+            p.mqtt_topic, "backlog", f"MQTT topic '{p.mqtt_topic}': more than {WORKER_BACKLOG} messages waited for "
+                                     f"the ROS side; dropped the oldest ({n} in all)"))
         if p.ros_type:
             cls = roslib.message.get_message_class(p.ros_type)
             if cls is None:
@@ -211,7 +275,13 @@ class _Mqtt2Ros:
             self.latency_pub = self.bridge.nh.advertise("~latencies/" + self.p.ros_topic.lstrip("/"), Float64, 1)
         self.latency_pub.publish(Float64(data=time.time() - stamp.to_sec()))
 
-    # -- MQTT side (paho's network thread)
+    # -- MQTT side: paho's network thread hands over (never waits), the worker handles in order
+
+    def feed_type(self, topic: str, payload: bytes, properties: Any = None) -> None:
+        self.worker.put(self.on_type, topic, payload, droppable=False)
+
+    def feed_data(self, topic: str, payload: bytes, properties: Any = None) -> None:
+        self.worker.put(self.on_data, topic, payload)
 
     def on_type(self, topic: str, payload: bytes, properties: Any = None) -> None:
         problems = self.bridge.problems
@@ -352,9 +422,9 @@ class MqttBridge:
         for m in self.mqtt2ros:
             kind = "primitive " if m.p.primitive else "JSON " if m.p.json else ""
             _log.info("Bridging MQTT topic '%s' to %sROS topic '%s'", m.p.mqtt_topic, kind, m.p.ros_topic)
-            self.connection.subscribe(m.p.mqtt_topic, m.p.qos, m.on_data)
+            self.connection.subscribe(m.p.mqtt_topic, m.p.qos, m.feed_data)
             if not (m.p.primitive or m.p.json):
-                self.connection.subscribe(codec.ROS_MSG_TYPE_PREFIX + m.p.mqtt_topic, m.p.qos, m.on_type)
+                self.connection.subscribe(codec.ROS_MSG_TYPE_PREFIX + m.p.mqtt_topic, m.p.qos, m.feed_type)
         _log.info("micros_rt mqtt: writing mqtt_client %s payloads and type announcements "
                   "(bridge/mqtt_client_version: %d); reading 1.x and 2.x", params.wire.label, int(params.wire))
         self._service_class = is_connected_service_class(params.wire)
@@ -415,6 +485,7 @@ class MqttBridge:
                 if sub is not None:
                     sub.unregister()
         for m in self.mqtt2ros:
+            m.worker.close()
             for pub in (m.publisher, m.latency_pub):
                 if pub is not None:
                     pub.unregister()

@@ -34,6 +34,7 @@ from .._logging import nonblocking_logger
 from ..negotiation.ratelimit import RateLimitedLog
 from .params import MqttParams, resolve_path
 from ..exceptions import MicrosRtError
+from ..transports.marking import mark_socket_tos
 
 __all__ = ["ConnectionCounters", "DiskBuffer", "MqttConfigError", "MqttConnection", "MessageHandler",
            "properties_from_dict", "properties_to_dict"]
@@ -199,6 +200,7 @@ class MqttConnection:
                                       max_age=c.buffer_max_age)
         self.mqtt5 = mqtt5
         self.tos = 0
+        self.so_priority: Optional[int] = None
         if mqtt5:   # MQTT 5: user properties, message expiry, shared subscriptions
             self._client = _PahoClient(CallbackAPIVersion.VERSION2, client_id=c.id, protocol=paho.MQTTv5)
         else:       # mqtt_client's protocol
@@ -366,17 +368,19 @@ class MqttConnection:
         if self._on_connection_change is not None:
             self._on_connection_change(True)
 
-    def set_tos(self, tos: int) -> None:
-        """IP TOS (DSCP) of the connection's socket, now and after every reconnect."""
+    def set_tos(self, tos: int, so_priority: Optional[int] = None) -> None:
+        """IP TOS (DSCP) and socket priority of the connection's socket (IPv4 or IPv6), now and after every
+        reconnect."""
         self.tos = tos
+        self.so_priority = so_priority
         if self._connected:
             self._mark_socket()
 
     def _mark_socket(self) -> None:
         sock = self._client.socket()
         try:
-            if isinstance(sock, socket.socket) and sock.family == socket.AF_INET:
-                sock.setsockopt(socket.IPPROTO_IP, socket.IP_TOS, self.tos)
+            if isinstance(sock, socket.socket):
+                mark_socket_tos(sock, self.tos, self.so_priority)
         except OSError as exc:
             _log.warning("micros_rt mqtt: cannot set IP TOS 0x%02x on the connection to %s: %s", self.tos, self.uri,
                          exc)

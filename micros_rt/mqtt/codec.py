@@ -29,6 +29,7 @@ import genmsg.msgs  # type: ignore[import-untyped]
 import genpy
 
 from ..exceptions import MicrosRtError
+from ..rostypes import INT_RANGES
 
 __all__ = [
     "CodecError",
@@ -68,11 +69,7 @@ PRIMITIVE_TYPES: Dict[str, str] = {
     "std_msgs/Float32": "float32", "std_msgs/Float64": "float64",
 }
 
-_INT_RANGES: Dict[str, Tuple[int, int]] = {
-    "char": (0, 255), "uint8": (0, 2**8 - 1), "uint16": (0, 2**16 - 1), "uint32": (0, 2**32 - 1),
-    "uint64": (0, 2**64 - 1), "int8": (-2**7, 2**7 - 1), "int16": (-2**15, 2**15 - 1),
-    "int32": (-2**31, 2**31 - 1), "int64": (-2**63, 2**63 - 1),
-}
+_INT_RANGES: Dict[str, Tuple[int, int]] = INT_RANGES  # the one table (micros_rt.rostypes)
 
 
 class CodecError(MicrosRtError, ValueError):

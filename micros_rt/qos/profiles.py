@@ -8,9 +8,10 @@ Format::
     subscribers:
       /chatter: {time_filter_duration: 1.0, deadline: 0.5}
 
-Keys are resolved topic names or :mod:`fnmatch` glob patterns (``*``, ``?``, ``[...]``; note that
-``*`` also matches ``/``). Lookup: an exact name beats any pattern; among matching patterns the
-longest wins; equally long patterns: the first in the file wins. Values are the options'
+Keys are resolved topic names, :mod:`fnmatch` glob patterns (``*``, ``?``, ``[...]``; note that
+``*`` also matches ``/``) or ``^...$`` regular expressions (:mod:`micros_rt.qos.topic_rules`, the
+matcher every profile section uses). Lookup: an exact name beats any pattern; among matching patterns
+the longest wins; equally long patterns: the first in the file wins. Values are the options'
 ``to_dict`` forms (durations in seconds, ``inf``/``.inf`` for forever, priority names or 0..6).
 Deadline callbacks cannot be given in YAML; pass ``deadline_cb`` in code.
 
@@ -24,8 +25,8 @@ file.)
 from __future__ import annotations
 
 import dataclasses
-import fnmatch
 import os
+import re
 from dataclasses import dataclass
 from typing import Any, Mapping, TypeVar, Union
 
@@ -33,6 +34,7 @@ import yaml
 
 from micros_rt.exceptions import MicrosRtError, ProfileError, UnsupportedQoSError
 from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions
+from micros_rt.qos.topic_rules import TopicPattern, best_match
 
 __all__ = ["QoSProfile", "merge_advertise", "merge_subscribe"]
 
@@ -40,7 +42,7 @@ _SECTIONS: dict[str, type[AdvertiseQoSOptions] | type[SubscribeQoSOptions]] = {
     "publishers": AdvertiseQoSOptions,
     "subscribers": SubscribeQoSOptions,
 }
-_GLOB_CHARS = frozenset("*?[")
+
 
 _Options = TypeVar("_Options", AdvertiseQoSOptions, SubscribeQoSOptions)
 
@@ -132,6 +134,11 @@ class QoSProfile:
                 path = f"{section}[{topic!r}]"
                 if not topic:
                     raise ProfileError(f"{_where(source, topic_node)}: {section}: empty topic key")
+                try:
+                    TopicPattern.parse(topic)
+                except re.error as exc:
+                    raise ProfileError(f"{_where(source, topic_node)}: {section}: key {topic!r} is not a valid "
+                                       f"regular expression: {exc}") from None
                 if section == "publishers":
                     publishers[topic] = _parse_options(
                         AdvertiseQoSOptions, options_node, source, path
@@ -153,22 +160,11 @@ class QoSProfile:
         return _lookup(self._subscribers, topic)
 
 
-def _is_glob(key: str) -> bool:
-    return any(c in _GLOB_CHARS for c in key)
-
-
 def _lookup(section: Mapping[str, _Options], topic: str) -> _Options | None:
     exact = section.get(topic)
-    if exact is not None and not _is_glob(topic):
+    if exact is not None:
         return exact
-    best: tuple[int, int] | None = None  # (-length, file order): smaller is better
-    found: _Options | None = None
-    for order, (key, options) in enumerate(section.items()):
-        if _is_glob(key) and fnmatch.fnmatchcase(topic, key):
-            rank = (-len(key), order)
-            if best is None or rank < best:
-                best, found = rank, options
-    return found
+    return best_match(((TopicPattern.parse(key), options) for key, options in section.items()), topic)
 
 
 def _where(source: str, node: yaml.Node) -> str:
