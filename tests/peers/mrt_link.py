@@ -138,7 +138,7 @@ def main() -> int:
         emit("done")
         return 0
 
-    got: Dict[str, Any] = {"control": 0, "image": 0, "latency": [], "transports": set()}
+    got: Dict[str, Any] = {"control": 0, "image": 0, "latency": [], "image_latency": [], "transports": set()}
     lock = threading.Lock()
 
     def on_control(msg: Any) -> None:
@@ -149,8 +149,10 @@ def main() -> int:
             got["transports"].add((getattr(msg, "_connection_header", None) or {}).get("transport", "TCPROS"))
 
     def on_image(msg: Any) -> None:
+        now = time.time()
         with lock:
             got["image"] += 1
+            got["image_latency"].append(now - msg.header.stamp.to_sec())
 
     if args.stock:
         rospy.Subscriber("/control", PointStamped, on_control, queue_size=1000, tcp_nodelay=True)
@@ -171,8 +173,11 @@ def main() -> int:
             break  # the stream ended
     with lock:
         lat = [x * 1e3 for x in got["latency"]]
+        ordered = sorted(lat)
+        cdf = [ordered[min(len(ordered) - 1, int(i * len(ordered) / 200))] for i in range(200)] if ordered else []
         emit("summary", control=got["control"], image=got["image"], transports=sorted(got["transports"]),
-             p50_ms=percentile(lat, 0.5), p99_ms=percentile(lat, 0.99), max_ms=max(lat) if lat else None)
+             p50_ms=percentile(lat, 0.5), p99_ms=percentile(lat, 0.99), max_ms=max(lat) if lat else None,
+             image_p50_ms=percentile([x * 1e3 for x in got["image_latency"]], 0.5), control_cdf_ms=cdf)
     return 0
 
 

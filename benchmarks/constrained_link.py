@@ -1,0 +1,230 @@
+"""Constrained-link benchmark: a 1 kHz control topic and a 30 Hz 640x480 camera from one process, across a
+shaped link between two hosts (network namespaces this script makes and removes), stock rospy TCPROS and
+micros_rt in the same run (issue 19's scenarios; run as root).
+
+    .venv/bin/python benchmarks/constrained_link.py                  # both links, 10 s per run, 1 round
+    .venv/bin/python benchmarks/constrained_link.py --seconds 6 --links tbf
+
+Links (the publisher host's egress; the subscriber host's is unshaped):
+  tbf   40 Mbit/s, a 50 ms FIFO queue (tbf): a radio link's bottleneck
+  htb   40 Mbit/s, DSCP honoured: htb with two classes, AF4x/EF/CS5-7 first (as Wi-Fi WMM or a DiffServ
+        router), each class with a 50 ms pfifo
+
+micros_rt: /control at TransportPriority.HIGH (DSCP AF41), /image at LOW; rospy: tcp_nodelay subscribers.
+Both in their default configuration otherwise. Each endpoint is its own process
+(tests/peers/mrt_link.py). Results: benchmarks/results/latest.json under "constrained_link" (the rest of
+the file is left as it is), constrained_link.md and constrained_link.png (control latency distribution
+per link and stack). Nothing leaves the namespaces: the script checks eth0's tx_packets.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any, Dict, List, Optional
+
+ROOT = Path(__file__).resolve().parents[1]
+PEER = ROOT / "tests" / "peers" / "mrt_link.py"
+MRT_PYTHON = str(ROOT / ".venv" / "bin" / "python")
+STOCK_PYTHON = "/usr/bin/python3"
+RESULTS = ROOT / "benchmarks" / "results"
+# the classes the htb link serves first: DSCP AF41-43, CS5, EF, CS6, CS7 (TOS byte, mask 0xfc)
+PRIORITY_TOS = ("0x88", "0x90", "0x98", "0xa0", "0xb8", "0xc0", "0xe0")
+
+
+def sh(*argv: str) -> None:
+    subprocess.run(list(argv), check=True, capture_output=True, timeout=20)
+
+
+class Link:
+    """Two hosts joined by a veth pair; the publisher host's egress shaped as ``kind`` says."""
+
+    def __init__(self, kind: str) -> None:
+        pid = os.getpid()
+        self.kind = kind
+        self.ns = [f"mrtCL{i}_{pid}" for i in range(2)]
+        self.dev = [f"cl{i}_{pid}"[:15] for i in range(2)]
+        self.ip = [f"10.79.{pid % 200 + 20}.{i + 1}" for i in range(2)]
+        self.master: Optional["subprocess.Popen[bytes]"] = None
+
+    def up(self) -> "Link":
+        for ns in self.ns:
+            sh("ip", "netns", "add", ns)
+        sh("ip", "link", "add", self.dev[0], "type", "veth", "peer", "name", self.dev[1])
+        for i in range(2):
+            sh("ip", "link", "set", self.dev[i], "netns", self.ns[i])
+            sh("ip", "-n", self.ns[i], "addr", "add", f"{self.ip[i]}/24", "dev", self.dev[i])
+            sh("ip", "-n", self.ns[i], "link", "set", self.dev[i], "up")
+            sh("ip", "-n", self.ns[i], "link", "set", "lo", "up")
+        tc = ["ip", "netns", "exec", self.ns[0], "tc"]
+        dev = self.dev[0]
+        if self.kind == "tbf":
+            sh(*tc, "qdisc", "add", "dev", dev, "root", "tbf", "rate", "40mbit", "burst", "32kbit", "latency", "50ms")
+        else:
+            sh(*tc, "qdisc", "add", "dev", dev, "root", "handle", "1:", "htb", "default", "20")
+            sh(*tc, "class", "add", "dev", dev, "parent", "1:", "classid", "1:1", "htb", "rate", "40mbit")
+            for cls, prio in (("1:10", "0"), ("1:20", "1")):
+                sh(*tc, "class", "add", "dev", dev, "parent", "1:1", "classid", cls, "htb", "rate", "20mbit",
+                   "ceil", "40mbit", "prio", prio)
+                # 50 ms at 40 Mbit/s of 1,500 B packets
+                sh(*tc, "qdisc", "add", "dev", dev, "parent", cls, "pfifo", "limit", "166")
+            for tos in PRIORITY_TOS:
+                sh(*tc, "filter", "add", "dev", dev, "parent", "1:", "protocol", "ip", "prio", "1", "u32", "match",
+                   "ip", "tos", tos, "0xfc", "flowid", "1:10")
+        self.master = subprocess.Popen(
+            ["ip", "netns", "exec", self.ns[0], "/usr/bin/rosmaster", "--core", "-p", "11311"],
+            env=self.env(0), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:
+            probe = subprocess.run(["ip", "netns", "exec", self.ns[0], STOCK_PYTHON, "-c",
+                                    f"import xmlrpc.client as x; x.ServerProxy('http://{self.ip[0]}:11311')"
+                                    f".getPid('/t')"], capture_output=True, timeout=10)
+            if probe.returncode == 0:
+                return self
+            time.sleep(0.2)
+        raise SystemExit("rosmaster did not come up in the publisher's namespace")
+
+    def env(self, i: int) -> Dict[str, str]:
+        env = {k: v for k, v in os.environ.items()
+               if not k.startswith(("ROS_", "CYCLONEDDS", "PYTHONPATH", "MICROS_RT"))}
+        env.update(ROS_MASTER_URI=f"http://{self.ip[0]}:11311", ROS_IP=self.ip[i],
+                   ROS_DOMAIN_ID=str(os.getpid() % 200 + 20), PYTHONUNBUFFERED="1",
+                   ROS_HOME=f"/tmp/{self.ns[0]}", ROS_LOG_DIR=f"/tmp/{self.ns[0]}")
+        return env
+
+    def run(self, i: int, argv: List[str]) -> "subprocess.Popen[str]":
+        return subprocess.Popen(["ip", "netns", "exec", self.ns[i], *argv], env=self.env(i), text=True,
+                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+
+    def down(self) -> None:
+        if self.master is not None:
+            self.master.terminate()
+            try:
+                self.master.wait(5)
+            except subprocess.TimeoutExpired:
+                self.master.kill()
+        for ns in self.ns:
+            subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=20)
+
+
+def events(proc: "subprocess.Popen[str]", timeout: float) -> List[Dict[str, Any]]:
+    """Every JSON line ``proc`` prints until it exits (killed after ``timeout`` s)."""
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, _ = proc.communicate()
+    found = []
+    for line in out.splitlines():
+        try:
+            found.append(json.loads(line))
+        except ValueError:
+            continue
+    return found
+
+
+def one_run(kind: str, stack: str, seconds: float) -> Dict[str, Any]:
+    link = Link(kind).up()
+    try:
+        python = STOCK_PYTHON if stack == "rospy" else MRT_PYTHON
+        extra = ["--stock"] if stack == "rospy" else []
+        sub = link.run(1, [python, str(PEER), "sub", "--seconds", str(seconds + 60), *extra])
+
+        pub = link.run(0, [python, str(PEER), "pub", "--seconds", str(seconds), *extra])
+        published = next((e for e in events(pub, seconds + 120) if e.get("event") == "published"), None)
+        summary = next((e for e in events(sub, 90) if e.get("event") == "summary"), None)
+    finally:
+        link.down()
+    if published is None or summary is None:
+        return {"error": f"no {'published' if published is None else 'summary'} event"}
+    intended = published["intended_control"]
+    return {"control_published": published["control"], "control_intended": intended,
+            "control_published_share": published["control"] / intended,
+            "control_delivered": summary["control"], "control_p50_ms": summary["p50_ms"],
+            "control_p99_ms": summary["p99_ms"], "control_max_ms": summary["max_ms"],
+            "images_published": published["image"], "images_delivered": summary["image"],
+            "image_p50_ms": summary["image_p50_ms"], "transports": summary["transports"],
+            "publisher_statistics": published.get("statistics") or {}, "control_cdf_ms": summary["control_cdf_ms"]}
+
+
+def eth0_tx() -> Optional[int]:
+    try:
+        return int(Path("/sys/class/net/eth0/statistics/tx_packets").read_text())
+    except OSError:
+        return None
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seconds", type=float, default=10.0)
+    ap.add_argument("--links", default="tbf,htb")
+    ap.add_argument("--rounds", type=int, default=1)
+    ap.add_argument("--out", default=str(RESULTS))
+    args = ap.parse_args()
+    if os.geteuid() != 0:
+        raise SystemExit("constrained_link.py makes network namespaces and qdiscs: run it as root")
+    tx_before = eth0_tx()
+    t0 = time.monotonic()
+    results: Dict[str, Dict[str, List[Dict[str, Any]]]] = {}
+    for r in range(args.rounds):
+        for kind in args.links.split(","):
+            for stack in (("rospy", "micros_rt") if r % 2 == 0 else ("micros_rt", "rospy")):
+                print(f"round {r + 1}/{args.rounds}: {kind} link, {stack} ...", flush=True)
+                results.setdefault(kind, {}).setdefault(stack, []).append(one_run(kind, stack, args.seconds))
+    tx_after = eth0_tx()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    report = {"seconds": args.seconds, "rounds": args.rounds, "wall_s": round(time.monotonic() - t0, 1),
+              "command": " ".join([".venv/bin/python", "benchmarks/constrained_link.py", *sys.argv[1:]]),
+              "eth0_tx_packets_during_run": None if tx_before is None or tx_after is None else tx_after - tx_before,
+              "links": results}
+    latest = out / "latest.json"
+    data = json.loads(latest.read_text()) if latest.exists() else {}
+    data["constrained_link"] = report
+    latest.write_text(json.dumps(data, indent=1))
+    lines = ["| link | stack | control published | delivered | p50 ms | p99 ms | images published / delivered |"
+             " image p50 ms |", "|---|---|---|---|---|---|---|---|"]
+    for kind, stacks in results.items():
+        for stack, runs in stacks.items():
+            for run in runs:
+                if "error" in run:
+                    lines.append(f"| {kind} | {stack} | {run['error']} | | | | | |")
+                    continue
+                lines.append(f"| {kind} | {stack} | {run['control_published']:,} of {run['control_intended']:,} "
+                             f"({run['control_published_share']:.1%}) | {run['control_delivered']:,} | "
+                             f"{run['control_p50_ms']:.1f} | {run['control_p99_ms']:.1f} | "
+                             f"{run['images_published']} / {run['images_delivered']} | {run['image_p50_ms']:.0f} |")
+    (out / "constrained_link.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    print(f"eth0 tx packets during the run: {report['eth0_tx_packets_during_run']}")
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, axes = plt.subplots(1, len(results), figsize=(6 * len(results), 4), squeeze=False)
+        for ax, (kind, stacks) in zip(axes[0], results.items()):
+            for stack, runs in stacks.items():
+                for run in runs:
+                    cdf = run.get("control_cdf_ms") or []
+                    if cdf:
+                        ax.plot(cdf, [i / len(cdf) for i in range(len(cdf))], label=stack)
+            ax.set_title(f"{kind} 40 Mbit/s: 1 kHz control latency beside a camera")
+            ax.set_xlabel("ms")
+            ax.set_ylabel("fraction of control messages")
+            ax.set_xscale("log")
+            ax.legend()
+        fig.tight_layout()
+        fig.savefig(out / "constrained_link.png", dpi=90)
+    except ImportError:
+        print("matplotlib missing: no plot")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
