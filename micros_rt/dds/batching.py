@@ -44,6 +44,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 from .._logging import nonblocking_logger
 
 __all__ = ["BURST_AGE", "BURST_GAP", "BURST_IDLE", "BURST_TAIL", "MAX_BATCH_WINDOW", "Flusher", "adaptive_write",
+           "c_function",
            "batch_window", "batching_writer_class", "budget_write", "close_flusher", "flush_writer", "flusher"]
 
 _log = nonblocking_logger("rosout.micros_rt.dds")
@@ -72,7 +73,8 @@ def batch_window(latency_budget: float) -> float:
     return min(latency_budget * 0.5, MAX_BATCH_WINDOW) if latency_budget > 0 else 0.0
 
 
-def _c_function(name: str, argtypes: List[Any], restype: Any) -> Any:
+def c_function(name: str, argtypes: List[Any], restype: Any) -> Any:
+    """Cyclone's C function ``name`` through ctypes (which releases the GIL during the call)."""
     from cyclonedds.internal import load_cyclonedds
 
     fn = getattr(load_cyclonedds(), name)
@@ -86,7 +88,7 @@ def flush_writer(ref: int) -> int:
     global _flush_fn
     fn = _flush_fn
     if fn is None:
-        fn = _flush_fn = _c_function("dds_write_flush", [ctypes.c_int32], ctypes.c_int32)
+        fn = _flush_fn = c_function("dds_write_flush", [ctypes.c_int32], ctypes.c_int32)
     return int(fn(ref))
 
 
@@ -158,7 +160,7 @@ def batching_writer_class() -> Any:
     if _writer_class is None:
         from cyclonedds.pub import DataWriter
 
-        qset = _c_function("dds_qset_writer_batching", [ctypes.c_void_p, ctypes.c_bool], None)
+        qset = c_function("dds_qset_writer_batching", [ctypes.c_void_p, ctypes.c_bool], None)
 
         class BatchingDataWriter(DataWriter):  # type: ignore[type-arg]
             def _create_writer(self, publisher: Any, topic: Any, qos: Any, listener: Any) -> Any:

@@ -18,7 +18,7 @@ from cyclonedds.core import DDSException, InstanceState, Listener, ReadCondition
 from cyclonedds.sub import DataReader
 
 from ..exceptions import DDSUnavailableError
-from .batching import adaptive_write, batch_window, batching_writer_class, budget_write, flusher
+from .batching import adaptive_write, batch_window, batching_writer_class, budget_write, c_function, flusher
 from .participant import DDSParticipant, delete_entity
 from .types import DDSType
 from .._logging import nonblocking_logger
@@ -66,12 +66,7 @@ def write_released(ref: int, data: Any) -> int:
     global _c_dds_write
     fn = _c_dds_write
     if fn is None:
-        from cyclonedds.internal import load_cyclonedds
-
-        fn = load_cyclonedds().dds_write
-        fn.argtypes = [ctypes.c_int32, ctypes.c_void_p]
-        fn.restype = ctypes.c_int32
-        _c_dds_write = fn
+        fn = _c_dds_write = c_function("dds_write", [ctypes.c_int32, ctypes.c_void_p], ctypes.c_int32)
     if isinstance(data, bytes):
         address = ctypes.cast(ctypes.c_char_p(data), ctypes.c_void_p).value
     else:  # the codec's bytearray (writable: ctypes views it without a copy)
@@ -100,12 +95,7 @@ def wait_for_acks(ref: int, timeout: float) -> int:
     global _c_wait_for_acks
     fn = _c_wait_for_acks
     if fn is None:
-        from cyclonedds.internal import load_cyclonedds
-
-        fn = load_cyclonedds().dds_wait_for_acks
-        fn.argtypes = [ctypes.c_int32, ctypes.c_int64]
-        fn.restype = ctypes.c_int32
-        _c_wait_for_acks = fn
+        fn = _c_wait_for_acks = c_function("dds_wait_for_acks", [ctypes.c_int32, ctypes.c_int64], ctypes.c_int32)
     return int(fn(ref, int(timeout * 1e9)))
 
 
