@@ -239,7 +239,7 @@ class McuBridge:
     def _call_board(self, entry: ServiceEntry, request: Any) -> Any:
         """A ROS client calls a service the board serves."""
         response_class = entry.service_class._response_class
-        params = wire.codec_for(entry.service_class._request_class).to_wire_list(request)
+        params = wire.codec_for(entry.service_class._request_class).to_wire(request)
         try:
             answer = self.link.call(entry, params)
             response = wire.codec_for(response_class).from_wire(answer)
@@ -254,7 +254,7 @@ class McuBridge:
 
     def _call_ros(self, entry: ServiceEntry, params: List[Any]) -> Dict[str, Any]:
         """The board calls a ROS service (on one of the link's call threads)."""
-        request = wire.codec_for(entry.service_class._request_class).from_wire(params)
+        request = wire.codec_for(entry.service_class._request_class).from_request(params)
         outcome: Dict[str, Any] = {}
 
         def call() -> None:

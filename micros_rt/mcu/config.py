@@ -5,6 +5,8 @@
     microcontroller: {address: 127.0.0.2, topic_port: 20000, service_port: 20001}   # the board
     bind: {address: 127.0.0.1, topic_port: 20000, service_port: 20001}              # the bridge
     mtu: 1472                                    # payload bytes per datagram
+    wire_form: cvra                              # what is written: cvra ([name, {fields}], the default) or
+                                                 # readme (name then {fields}; requests [name, *fields])
     stats_period: 1.0                            # seconds between ~stats messages
     to_microcontroller:                          # ROS topics sent to the board
       - {topic: /cmd_vel, type: geometry_msgs/Twist, qos: {time_filter_duration: 0.05}}
@@ -38,6 +40,7 @@ from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions
 from micros_rt.qos.profiles import _construct, _expect_mapping, _is_null, _kind, _pairs, _parse_options, _where
 
 from .errors import McuConfigError
+from .wire import WireForm
 
 __all__ = ["Address", "TopicEntry", "ServiceEntry", "McuConfig", "load_config", "parse_config",
            "DEFAULT_TOPIC_PORT", "DEFAULT_SERVICE_PORT", "DEFAULT_MTU", "MAX_MTU"]
@@ -109,6 +112,7 @@ class McuConfig:
     bind: Address = Address("0.0.0.0")
     mtu: int = DEFAULT_MTU
     stats_period: float = 1.0
+    wire_form: WireForm = WireForm.CVRA
     to_microcontroller: Tuple[TopicEntry, ...] = ()
     from_microcontroller: Tuple[TopicEntry, ...] = ()
     services_on_microcontroller: Tuple[ServiceEntry, ...] = ()
@@ -150,7 +154,7 @@ class _Parser:
             raise McuConfigError(f"{self.source}: empty configuration; at least 'microcontroller: "
                                  f"{{address: ...}}' is needed")
         _expect_mapping(root, self.source, "the top level", "a mapping")
-        known = ("microcontroller", "bind", "mtu", "stats_period", "to_microcontroller", "from_microcontroller",
+        known = ("microcontroller", "bind", "mtu", "stats_period", "wire_form", "to_microcontroller", "from_microcontroller",
                  "services_on_microcontroller", "services_for_microcontroller")
         values: Dict[str, Any] = {"source": self.source}
         board: Optional[Address] = None
@@ -166,6 +170,8 @@ class _Parser:
                 values[key] = self.integer(node, key, 8, MAX_MTU)
             elif key == "stats_period":
                 values[key] = self.seconds(node, key)
+            elif key == "wire_form":
+                values[key] = self.wire_form(node, key)
             elif key in ("to_microcontroller", "from_microcontroller"):
                 values[key] = self.topics(node, key)
             else:
@@ -202,6 +208,15 @@ class _Parser:
         if not isinstance(value, str) or not value.strip():
             raise self.error(node, path, f"{value!r} is invalid: expected a non-empty string")
         return value.strip()
+
+    def wire_form(self, node: yaml.Node, path: str) -> WireForm:
+        value = self.scalar(node, path)
+        for form in WireForm:
+            if value == form.value:
+                return form
+        raise self.error(node, path, f"{value!r} is invalid: expected cvra (write [name, {{fields}}], CVRA's "
+                                     f"cvra_rpc form, the default) or readme (write the name then {{fields}}, "
+                                     f"and service requests as [name, *fields])")
 
     def address(self, node: yaml.Node, path: str, *, required_address: bool) -> Address:
         _expect_mapping(node, self.source, path, "a mapping with address, topic_port, service_port")

@@ -53,7 +53,7 @@ MAX_CONCURRENT_CALLS = 4
 READER_QUEUE = 1000
 
 #: (name of the service entry, its params) -> the response's fields, or raise McuServiceError/WireError.
-ServiceHandler = Callable[[ServiceEntry, List[Any]], Dict[str, Any]]
+ServiceHandler = Callable[[ServiceEntry, List[Any]], Dict[str, Any]]  # (entry, what follows the name)
 
 
 class LinkStats:
@@ -125,7 +125,7 @@ class UdpWriter:
     def prepare(self, msg: Any) -> bytes:
         """The datagram for ``msg``; ``DatagramTooLargeError`` when it exceeds the mtu,
         ``genpy.SerializationError`` on a bad field value."""
-        data = wire.encode_datagram(self.entry.name, self.codec.to_wire(msg))
+        data = wire.encode_datagram(self.entry.name, self.codec.to_wire(msg), form=self._link.config.wire_form)
         if len(data) > self._link.config.mtu:
             raise DatagramTooLargeError(self.entry.topic, len(data), self._link.config.mtu)
         return data
@@ -438,8 +438,9 @@ class McuLink:
             self._slots.release()
 
     # -- services: calls to the board
-    def call(self, entry: ServiceEntry, params: List[Any]) -> Any:
-        """Call the board's service ``entry`` with ``params``; the undecoded answer (a map or list).
+    def call(self, entry: ServiceEntry, params: Dict[str, Any]) -> Any:
+        """Call the board's service ``entry`` with the request's fields ``params`` (written in the link's
+        ``wire_form``); the undecoded answer (a map or list).
 
         Raises :class:`McuServiceError` naming the board and the service when it cannot connect, does not
         answer within ``entry.timeout`` or answers garbage.
@@ -455,7 +456,7 @@ class McuLink:
                 _set_tos(sock, entry.advertise.transport_priority, self._family)
                 sock.settimeout(max(deadline - time.monotonic(), 0.001))
                 sock.connect(board.service())
-                sock.sendall(wire.encode_request(entry.name, params))
+                sock.sendall(wire.encode_request(entry.name, params, form=self.config.wire_form))
                 chunks: List[bytes] = []
                 size = 0
                 while True:

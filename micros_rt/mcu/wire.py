@@ -1,15 +1,21 @@
 """The microcontroller link's wire format (seed 003, the CVRA ROS MessagePack bridge): pure functions.
 
-**Topic datagram** (one UDP datagram per message)::
+**Topic datagram** (one UDP datagram per message), read in any of three forms::
 
-    msgpack(name) + msgpack({field: value, ...})        # map form: a string, then a map
-    msgpack([name, field1, field2, ...])                 # array form (accepted on input)
+    msgpack([name, {field: value, ...}])                 # CVRA's form (cvra_rpc message.encode): written by default
+    msgpack(name) + msgpack({field: value, ...})        # the seed README's form: a string, then a map
+    msgpack([name, field1, field2, ...])                 # positional form (accepted on input)
+
+An array of exactly two whose second element is a map is CVRA's form; ``[name, nil]`` (CVRA's
+``encode(name)`` without arguments) is an empty map. Which form is written is :class:`WireForm`.
 
 Nested messages are nested maps (or, on input, arrays in definition order), arrays are arrays,
 ``time``/``duration`` are ``[secs, nsecs]``, ``uint8[]``/``char[]`` are MessagePack bin.
 
-**Service call** (one TCP connection per call): the client sends ``msgpack([name, *request fields])``
-as a *serial datagram* -- the payload, its CRC32 (zlib's, big-endian) appended, SLIP-escaped
+**Service call** (one TCP connection per call): the client sends ``msgpack([name, params])``, ``params``
+one object -- a map of the request fields, or an array of them in definition order (CVRA's
+``service_call.encode_call``; written as a map by default) -- or, in the README's form, ``msgpack([name,
+*request fields])`` (still read where unambiguous, see :meth:`MessageCodec.from_request`), as a *serial datagram* -- the payload, its CRC32 (zlib's, big-endian) appended, SLIP-escaped
 (END 0xC0 -> ESC 0xDB + 0xDC, ESC -> ESC + 0xDD) and closed by END; the server answers
 ``msgpack({response field: value})`` unframed and closes the connection.
 
@@ -17,15 +23,18 @@ Every ROS message type works: codecs are built from genpy's ``__slots__``/``_slo
 
 >>> from std_msgs.msg import String
 >>> encode_datagram("chatter", MessageCodec(String).to_wire(String(data="hi")))
+b'\\x92\\xa7chatter\\x81\\xa4data\\xa2hi'
+>>> encode_datagram("chatter", {"data": "hi"}, form=WireForm.README)
 b'\\xa7chatter\\x81\\xa4data\\xa2hi'
 """
 
 from __future__ import annotations
 
+import enum
 import struct
 import threading
 import zlib
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Type
+from typing import Any, Callable, Dict, List, Optional, Tuple, Type
 
 import genpy
 import msgpack
@@ -34,7 +43,7 @@ import roslib.message
 from .errors import WireError
 
 __all__ = [
-    "END", "ESC", "ESC_END", "ESC_ESC", "MessageCodec", "codec_for", "encode_datagram", "split_datagram",
+    "WireForm", "Float32", "pack", "END", "ESC", "ESC_END", "ESC_ESC", "MessageCodec", "codec_for", "encode_datagram", "split_datagram",
     "frame", "unframe", "FrameReader", "encode_request", "decode_request", "encode_response",
     "decode_response",
 ]
@@ -53,6 +62,61 @@ _INT_RANGES: Dict[str, Tuple[int, int]] = {
 }
 _FLOATS = ("float32", "float64")
 _NSEC = 1_000_000_000
+
+
+class WireForm(enum.Enum):
+    """What the link writes (it reads every form whatever this is): the ``wire_form`` config key."""
+
+    #: CVRA's cvra_rpc: a topic is ``[name, {fields}]``, a service request ``[name, {fields}]``.
+    CVRA = "cvra"
+    #: The seed README's: a topic is ``name`` then ``{fields}`` (two objects), a request ``[name, *fields]``.
+    README = "readme"
+
+
+class Float32(float):
+    """A float32 field's value: :func:`pack` writes it as MessagePack float32 (0xCA), as the field's type is."""
+
+    __slots__ = ()
+
+
+def pack(obj: Any) -> bytes:
+    """``msgpack.packb(obj, use_bin_type=True)``, except that :class:`Float32` values are packed as float32.
+
+    >>> pack({"data": Float32(1.5)}).hex()
+    '81a464617461ca3fc00000'
+    """
+    if not _has_float32(obj):
+        packed: bytes = msgpack.packb(obj, use_bin_type=True)
+        return packed
+    out = bytearray()
+    _pack_into(out, obj, msgpack.Packer(use_bin_type=True))
+    return bytes(out)
+
+
+def _has_float32(obj: Any) -> bool:
+    if isinstance(obj, Float32):
+        return True
+    if isinstance(obj, dict):
+        return any(_has_float32(v) for v in obj.values())
+    if isinstance(obj, list):
+        return any(_has_float32(v) for v in obj)
+    return False
+
+
+def _pack_into(out: bytearray, obj: Any, packer: msgpack.Packer) -> None:
+    if isinstance(obj, Float32):
+        out += b"\xca" + struct.pack(">f", obj)
+    elif isinstance(obj, dict):
+        out += packer.pack_map_header(len(obj))
+        for k, v in obj.items():
+            _pack_into(out, k, packer)
+            _pack_into(out, v, packer)
+    elif isinstance(obj, list):
+        out += packer.pack_array_header(len(obj))
+        for v in obj:
+            _pack_into(out, v, packer)
+    else:
+        out += packer.pack(obj)
 
 # Encoder and decoder of one field: to_wire(value, path) and from_wire(obj, path).
 _Enc = Callable[[Any, str], Any]
@@ -113,9 +177,17 @@ def _int_codec(base: str) -> Tuple[_Enc, _Dec]:
 
 def _float_codec(base: str) -> Tuple[_Enc, _Dec]:
     def enc(v: Any, path: str) -> Any:
+        if hasattr(v, "dtype") and hasattr(v, "item"):  # numpy scalars (numpy_msg arrays' elements)
+            v = v.item()
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise genpy.SerializationError(f"field '{path}': {v!r} is not a number ({base})")
-        return float(v)
+        if base == "float64":
+            return float(v)
+        try:
+            struct.pack(">f", v)
+        except OverflowError:
+            raise genpy.SerializationError(f"field '{path}': {v!r} is out of float32's range") from None
+        return Float32(v)
 
     def dec(obj: Any, path: str) -> Any:
         if isinstance(obj, bool) or not isinstance(obj, (int, float)):
@@ -265,6 +337,32 @@ class MessageCodec:
         """A message from a map of fields or an array of them in definition order."""
         return self._dec(obj, "")
 
+    def from_request(self, rest: List[Any]) -> genpy.Message:
+        """A service request from what follows its name (:func:`decode_request`).
+
+        ``[params]`` with ``params`` a map, an array in definition order or nil is CVRA's form; else the
+        README's ``[*fields]``. One map or array is ambiguous only for a one-field request (e.g. ``int32[]
+        values``): CVRA's reading is tried first, the README's if that fails.
+
+        >>> codec_for(roslib.message.get_service_class("std_srvs/SetBool")._request_class).from_request([[True]])
+        data: True
+        """
+        if len(rest) == 1:
+            params = rest[0]
+            if params is None:
+                return self.from_wire({})
+            if isinstance(params, (dict, list)):
+                try:
+                    return self.from_wire(params)
+                except WireError as cvra_error:
+                    if len(self._codecs) != 1:
+                        raise
+                    try:
+                        return self.from_wire(rest)
+                    except WireError:
+                        raise cvra_error from None
+        return self.from_wire(rest)
+
     def _enc(self, msg: Any, path: str) -> Any:
         if not isinstance(msg, self.data_class):
             raise genpy.SerializationError(
@@ -312,10 +410,12 @@ def codec_for(data_class: Type[genpy.Message]) -> MessageCodec:
 
 # --------------------------------------------------------------------------- topic datagrams
 
-def encode_datagram(name: str, fields: Dict[str, Any]) -> bytes:
-    """One topic datagram in the seed's map form: the stream name, then the map of fields."""
-    packed: bytes = msgpack.packb(name, use_bin_type=True) + msgpack.packb(fields, use_bin_type=True)
-    return packed
+def encode_datagram(name: str, fields: Dict[str, Any], *, form: WireForm = WireForm.CVRA) -> bytes:
+    """One topic datagram: ``[name, {fields}]`` (CVRA's form), or with ``form=WireForm.README`` the stream
+    name then the map of fields, two objects."""
+    if form is WireForm.README:
+        return pack(name) + pack(fields)
+    return pack([name, fields])
 
 
 def _unpack_all(data: bytes, at_most: int) -> List[Any]:
@@ -346,8 +446,10 @@ def split_datagram(data: bytes) -> Tuple[str, Any]:
 
     >>> split_datagram(bytes.fromhex("a3696d7581a17801"))
     ('imu', {'x': 1})
-    >>> split_datagram(bytes.fromhex("92a3696d7501"))
-    ('imu', [1])
+    >>> split_datagram(bytes.fromhex("92a3696d7581a17801"))
+    ('imu', {'x': 1})
+    >>> split_datagram(bytes.fromhex("93a3696d750102"))
+    ('imu', [1, 2])
     """
     objects = _unpack_all(data, 2)
     first = objects[0]
@@ -357,9 +459,16 @@ def split_datagram(data: bytes) -> Tuple[str, Any]:
                                          f"got {_shown(objects[1])}")
         return first, objects[1]
     if len(objects) == 1 and isinstance(first, list) and first and isinstance(first[0], str):
+        # CVRA's [name, {fields}] (or [name, nil]: no arguments) is told from [name, field1, ...] by shape;
+        # a one-field type whose field is a message, sent positionally, therefore reads as CVRA's form.
+        if len(first) == 2 and isinstance(first[1], dict):
+            return first[0], first[1]
+        if len(first) == 2 and first[1] is None:
+            return first[0], {}
         return first[0], first[1:]
-    raise WireError("bad_shape", "expected a stream name (string) followed by a map of fields, or an array "
-                                 f"[name, field1, field2, ...]; got {' + '.join(_shown(o) for o in objects)}")
+    raise WireError("bad_shape", "expected an array [name, {fields}], a stream name (string) followed by a map "
+                                 "of fields, or an array [name, field1, field2, ...]; got "
+                                 f"{' + '.join(_shown(o) for o in objects)}")
 
 
 # --------------------------------------------------------------------------- serial datagrams (SLIP + CRC32)
@@ -438,28 +547,33 @@ class FrameReader:
 
 # --------------------------------------------------------------------------- service calls
 
-def encode_request(name: str, params: Sequence[Any]) -> bytes:
-    """A service request as sent on the wire: the serial datagram of ``[name, *params]``.
+def encode_request(name: str, fields: Dict[str, Any], *, form: WireForm = WireForm.CVRA) -> bytes:
+    """A service request as sent on the wire: the serial datagram of ``[name, {fields}]`` (CVRA's form), or
+    with ``form=WireForm.README`` of ``[name, *fields]`` (values in definition order).
 
-    >>> encode_request("reset", []).hex()
+    >>> encode_request("reset", {}).hex()
+    '92a57265736574809b51fdb0c0'
+    >>> encode_request("reset", {}, form=WireForm.README).hex()
     '91a572657365740bbd6afbc0'
     """
-    return frame(msgpack.packb([name, *params], use_bin_type=True))
+    call = [name, *fields.values()] if form is WireForm.README else [name, fields]
+    return frame(pack(call))
 
 
 def decode_request(body: bytes) -> Tuple[str, List[Any]]:
-    """``(name, params)`` from a received frame body (before END)."""
+    """``(name, rest)`` from a received frame body (before END): ``rest`` is what follows the name, undecoded
+    (``[params]`` in CVRA's form, the fields in the README's); :meth:`MessageCodec.from_request` reads it."""
     objects = _unpack_all(unframe(body), 1)
     call = objects[0]
     if not isinstance(call, list) or not call or not isinstance(call[0], str):
-        raise WireError("bad_shape", f"a service request must be an array [name, param1, ...], got {_shown(call)}")
+        raise WireError("bad_shape", f"a service request must be an array [name, params] (or [name, param1, "
+                                     f"...]), got {_shown(call)}")
     return call[0], call[1:]
 
 
 def encode_response(fields: Dict[str, Any]) -> bytes:
     """A service answer: the response's fields as a MessagePack map (not framed)."""
-    packed: bytes = msgpack.packb(fields, use_bin_type=True)
-    return packed
+    return pack(fields)
 
 
 def decode_response(data: bytes) -> Any:

@@ -9,6 +9,7 @@ import pytest
 
 from micros_rt import TransportPriority
 from micros_rt.mcu.config import load_config, parse_config
+from micros_rt.mcu.wire import WireForm
 from micros_rt.mcu.errors import McuConfigError
 
 ISSUE_EXAMPLE = """\
@@ -45,6 +46,12 @@ def test_defaults() -> None:
     assert cfg.microcontroller.topic_port == 20000 and cfg.microcontroller.service_port == 20001
     assert cfg.bind.address == "0.0.0.0" and cfg.bind.topic_port == 20000 and cfg.mtu == 1472
     assert cfg.to_microcontroller == () and cfg.stats_period == 1.0
+    assert cfg.wire_form is WireForm.CVRA   # CVRA's [name, {fields}] unless the board wants the README's form
+
+
+def test_wire_form_per_board() -> None:
+    assert parse_config("microcontroller: {address: 10.0.0.7}\nwire_form: readme").wire_form is WireForm.README
+    assert parse_config("microcontroller: {address: 10.0.0.7}\nwire_form: cvra").wire_form is WireForm.CVRA
 
 
 def test_qos_on_entries() -> None:
@@ -91,6 +98,8 @@ BAD = [
     ("microcontroller: {address: 10.0.0.7}\nto_microcontroller:\n  - {topic: 'bad name', type: std_msgs/String}\n",
      "mcu.yaml:3: to_microcontroller[0].topic: 'bad name' is not a legal ROS name"),
     ("microcontroller: {address: 10.0.0.7}\nbind: {address: '::1'}\n", "must both be IPv4 or both IPv6"),
+    ("microcontroller: {address: 10.0.0.7}\nwire_form: array\n",
+     "mcu.yaml:2: wire_form: 'array' is invalid: expected cvra (write [name, {fields}]"),
     ("microcontroller: {address: 10.0.0.7}\nto_microcontroller:\n  - {topic: /cmd, type: geometry_msgs/Twist,"
      " qos: {data_centric_update: true}}\n", "mcu.yaml:3: to_microcontroller[0].qos.data_centric_update: does not"),
 ]

@@ -63,7 +63,7 @@ def test_oversized_message_is_refused_with_topic_and_sizes(board: socket.socket)
         writer = link.open_writer(cfg.to_microcontroller[0])
         with pytest.raises(DatagramTooLargeError) as info:
             writer.prepare(String(data="x" * 100))
-        assert "/text: the message encodes to 110 bytes, more than the microcontroller link's mtu of 64" \
+        assert "/text: the message encodes to 111 bytes, more than the microcontroller link's mtu of 64" \
             in str(info.value)
         assert writer.offer(String(data="x" * 100)) == "oversized"
         assert writer.offer(String(data="short")) == "sent"

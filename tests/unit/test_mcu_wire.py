@@ -1,7 +1,12 @@
 """The microcontroller link's wire format, byte for byte (seed 003): datagrams and serial datagrams.
 
 Fixtures are written out by hand from the MessagePack spec and the CRC32 check value, not produced by
-the code under test.
+the code under test. The CVRA_* fixtures are the bytes CVRA's own implementation produces: cvra_rpc's
+``message.encode``/``service_call.encode_call`` and ``serial_datagram.encode`` from cvra/robot-software at
+commit a5061d965ffeeca5f8466b65f7961a8b3951ac1f (the parent of 2e463e01b977, which removed them), paths
+lib/simplerpc/python/cvra_rpc/{message,service_call}.py and lib/serial-datagram/python/serial_datagram.py,
+run on this venv's msgpack (it reports version (1, 2, 4); their ``encoding='ascii'`` changed to ``raw=False``, nothing else); their code is not
+part of this repository.
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ import random
 import genpy
 import msgpack
 import pytest
+import roslib.message
 from geometry_msgs.msg import Twist, Vector3
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Duration, Header, String, UInt8MultiArray
@@ -40,22 +46,26 @@ def twist() -> Twist:
 
 
 def test_twist_datagram_is_name_then_map_of_nested_maps() -> None:
-    assert wire.encode_datagram("cmd_vel", wire.codec_for(Twist).to_wire(twist())) == TWIST_DATAGRAM
+    readme = wire.WireForm.README
+    assert wire.encode_datagram("cmd_vel", wire.codec_for(Twist).to_wire(twist()), form=readme) == TWIST_DATAGRAM
+    # the default (CVRA's form) is the same name and map inside one array of two
+    assert wire.encode_datagram("cmd_vel", wire.codec_for(Twist).to_wire(twist())) == b"\x92" + TWIST_DATAGRAM
 
 
 def test_time_is_secs_nsecs_array() -> None:
     msg = Header(seq=7, stamp=genpy.Time(1, 500), frame_id="a")
-    assert wire.encode_datagram("hdr", wire.codec_for(Header).to_wire(msg)) == HEADER_DATAGRAM
+    assert wire.encode_datagram("hdr", wire.codec_for(Header).to_wire(msg), form=wire.WireForm.README) \
+        == HEADER_DATAGRAM
     name, body = wire.split_datagram(HEADER_DATAGRAM)
     assert name == "hdr" and wire.codec_for(Header).from_wire(body) == msg
 
 
 def test_negative_duration_and_uint8_array_as_bin() -> None:
     dur = wire.encode_datagram("d", wire.codec_for(Duration).to_wire(Duration(data=genpy.Duration(-1, 5))))
-    assert dur == bytes.fromhex("a164" "81" "a464617461" "92ff05")
+    assert dur == bytes.fromhex("92" "a164" "81" "a464617461" "92ff05")
     arr = UInt8MultiArray(data=b"\x01\x02\x03")
     got = wire.encode_datagram("u", wire.codec_for(UInt8MultiArray).to_wire(arr))
-    assert got == bytes.fromhex("a175" "82" "a66c61796f7574" "82" "a364696d" "90" "ab646174615f6f6666736574" "00"
+    assert got == bytes.fromhex("92" "a175" "82" "a66c61796f7574" "82" "a364696d" "90" "ab646174615f6f6666736574" "00"
                                 "a464617461" "c403010203")
     assert wire.codec_for(UInt8MultiArray).from_wire(wire.split_datagram(got)[1]).data == b"\x01\x02\x03"
 
@@ -63,7 +73,8 @@ def test_negative_duration_and_uint8_array_as_bin() -> None:
 def test_array_form_is_accepted_with_nested_maps_or_arrays() -> None:
     as_arrays = msgpack.packb(["cmd_vel", [1.5, 0, 0], [0, 0, -0.5]])
     as_maps = msgpack.packb(["cmd_vel", {"x": 1.5, "y": 0, "z": 0}, {"x": 0, "y": 0, "z": -0.5}])
-    for data in (as_arrays, as_maps):
+    cvra = msgpack.packb(["cmd_vel", {"linear": {"x": 1.5, "y": 0, "z": 0}, "angular": {"x": 0, "y": 0, "z": -0.5}}])
+    for data in (as_arrays, as_maps, cvra, TWIST_DATAGRAM):
         name, body = wire.split_datagram(data)
         assert name == "cmd_vel" and wire.codec_for(Twist).from_wire(body) == twist()
 
@@ -146,10 +157,11 @@ def test_serial_datagram_escapes_payload_and_crc() -> None:
 
 def test_service_request_is_framed_name_and_params() -> None:
     req = SetBoolRequest(data=True)
-    params = wire.codec_for(SetBool._request_class).to_wire_list(req)
-    assert wire.encode_request("set_mode", params) == bytes.fromhex(
-        "92" "a87365745f6d6f6465" "c3" "b3779734" "c0")
-    assert wire.decode_request(wire.encode_request("set_mode", params)[:-1]) == ("set_mode", [True])
+    fields = wire.codec_for(SetBool._request_class).to_wire(req)
+    readme = wire.encode_request("set_mode", fields, form=wire.WireForm.README)
+    assert readme == bytes.fromhex("92" "a87365745f6d6f6465" "c3" "b3779734" "c0")
+    assert wire.decode_request(readme[:-1]) == ("set_mode", [True])
+    assert wire.codec_for(SetBool._request_class).from_request([True]) == req
 
 
 def test_service_response_is_a_plain_map() -> None:
@@ -184,7 +196,10 @@ def test_fuzzed_datagrams_and_frames_only_ever_raise_wire_error() -> None:
     imu = wire.codec_for(Imu)
     request = wire.codec_for(SetBool._request_class)
     seeds = [wire.encode_datagram("imu", imu.to_wire(Imu())), bytes(msgpack.packb(["imu", *imu.to_wire_list(Imu())])),
-             wire.encode_request("set_mode", [True]), bytes.fromhex("a3696d7581910102")]  # a map key that is an array
+             wire.encode_datagram("imu", imu.to_wire(Imu()), form=wire.WireForm.README),
+             wire.encode_request("set_mode", {"data": True}), CVRA_CALL_SET_MODE_LIST,
+             wire.encode_request("set_mode", {"data": True}, form=wire.WireForm.README),
+             bytes.fromhex("a3696d7581910102")]  # a map key that is an array
     kinds: dict[str, int] = {}
     for i in range(20_000):
         data = bytearray(os.urandom(rnd.randint(0, 40)) if i % 5 == 0 else rnd.choice(seeds))
@@ -193,7 +208,7 @@ def test_fuzzed_datagrams_and_frames_only_ever_raise_wire_error() -> None:
         try:
             if data.endswith(b"\xc0"):
                 name, params = wire.decode_request(bytes(data[:-1]))
-                request.from_wire(params)
+                request.from_request(params)
             else:
                 name, body = wire.split_datagram(bytes(data))
                 imu.from_wire(body)
@@ -217,3 +232,135 @@ def test_numpy_and_array_values_go_out_as_the_list_would() -> None:
     msg.orientation_covariance = numpy.zeros((3, 3))
     with pytest.raises(genpy.SerializationError, match="orientation_covariance"):
         wire.codec_for(Imu).to_wire(msg)
+
+
+# --------------------------------------------------------------------------- CVRA's cvra_rpc, byte for byte
+# Each fixture is what CVRA's code writes for the call in its comment (see the module docstring for where
+# the code is). The shapes of their own tests (test_messages.py, test_service_call.py): encode("foo"),
+# encode("foo", [1, 2, 3]), encode_call("bar", [10]), a float packed single (1. + 1e-8 reads back as 1.0).
+
+CVRA_CHATTER = bytes.fromhex("92" "a763686174746572" "81" "a464617461" "a26869")     # encode("chatter", {"data": "hi"})
+CVRA_SPEED = bytes.fromhex("92" "a57370656564" "81" "a464617461" "ca3fc00000")       # encode("speed", {"data": 1.5})
+CVRA_SPEED_01 = bytes.fromhex("92" "a57370656564" "81" "a464617461" "ca3dcccccd")    # encode("speed", {"data": 0.1})
+CVRA_NO_ARGS = bytes.fromhex("92" "a3666f6f" "c0")                                   # encode("foo")
+CVRA_POSITIONAL_ARGS = bytes.fromhex("92" "a3666f6f" "93010203")                     # encode("foo", [1, 2, 3])
+CVRA_TWIST = bytes.fromhex(                        # encode("cmd_vel", {"linear": {x: 1.5, ..}, "angular": {.., z: -0.5}})
+    "92" "a7636d645f76656c" "82"
+    "a66c696e656172" "83" "a178ca3fc00000" "a179ca00000000" "a17aca00000000"
+    "a7616e67756c6172" "83" "a178ca00000000" "a179ca00000000" "a17acabf000000")
+CVRA_CALL_RESET_X = bytes.fromhex("92" "a57265736574" "81a17801" "77864a51" "c0")    # encode_call("reset", {"x": 1})
+CVRA_CALL_SET_MODE_LIST = bytes.fromhex("92" "a87365745f6d6f6465" "91c3" "79e5" "dbdc" "73" "c0")  # (.., [True])
+CVRA_CALL_SET_MODE_MAP = bytes.fromhex("92" "a87365745f6d6f6465" "81a464617461c3" "efbdb857" "c0")  # (.., {"data": True})
+CVRA_CALL_NO_PARAMS = bytes.fromhex("92" "a57265736574" "dbdc" "ed8dbc20" "c0")      # encode_call("reset", None)
+CVRA_CALL_BAR_10 = bytes.fromhex("92" "a3626172" "910a" "c521811b" "c0")            # encode_call("bar", [10])
+
+
+def cvra_decode(data: bytes) -> tuple[Any, Any]:
+    """What cvra_rpc's message.decode returns: the first object of the datagram, as (obj[0], obj[1])."""
+    unpacker = msgpack.Unpacker(raw=False)
+    unpacker.feed(data)
+    first = next(unpacker)
+    return first[0], first[1]
+
+
+def cvra_decode_call(frame: bytes) -> tuple[Any, Any]:
+    """What cvra_rpc's service_call.decode_call returns (serial_datagram.decode, then as cvra_decode)."""
+    return cvra_decode(wire.unframe(frame[:-1]))
+
+
+def test_cvra_topic_datagrams_read_as_their_messages() -> None:
+    from std_msgs.msg import Empty, Float32, Float64
+    name, body = wire.split_datagram(CVRA_CHATTER)      # read as the positional form before: "should be a string"
+    assert (name, wire.codec_for(String).from_wire(body)) == ("chatter", String(data="hi"))
+    name, body = wire.split_datagram(CVRA_SPEED_01)     # float32 on the wire, for a float64 field too
+    assert wire.codec_for(Float64).from_wire(body).data == pytest.approx(0.1, abs=1e-8)
+    assert wire.codec_for(Float32).from_wire(body).data == pytest.approx(0.1, abs=1e-8)
+    name, body = wire.split_datagram(CVRA_TWIST)
+    assert (name, wire.codec_for(Twist).from_wire(body)) == ("cmd_vel", twist())
+    assert wire.split_datagram(CVRA_NO_ARGS) == ("foo", {})   # no arguments: an empty message
+    assert wire.codec_for(Empty).from_wire(wire.split_datagram(CVRA_NO_ARGS)[1]) == Empty()
+    assert wire.split_datagram(CVRA_POSITIONAL_ARGS) == ("foo", [[1, 2, 3]])  # one positional field, an array
+
+
+def test_written_topic_datagrams_are_cvra_bytes_and_read_by_cvra() -> None:
+    from std_msgs.msg import Float32, Float64
+    assert wire.encode_datagram("chatter", wire.codec_for(String).to_wire(String(data="hi"))) == CVRA_CHATTER
+    # a float32 field is written as MessagePack float32, as CVRA's use_single_float=True does
+    assert wire.encode_datagram("speed", wire.codec_for(Float32).to_wire(Float32(data=1.5))) == CVRA_SPEED
+    assert wire.encode_datagram("speed", wire.codec_for(Float32).to_wire(Float32(data=0.1))) == CVRA_SPEED_01
+    # a float64 field stays float64 (CVRA's decoder reads either)
+    f64 = wire.encode_datagram("speed", wire.codec_for(Float64).to_wire(Float64(data=0.1)))
+    assert f64 == bytes.fromhex("92" "a57370656564" "81" "a464617461" "cb3fb999999999999a")
+    assert cvra_decode(f64) == ("speed", {"data": 0.1})
+    # CVRA's decoder read the README form as name 'c', args 'h'; the default form it reads as sent
+    readme = wire.encode_datagram("chatter", {"data": "hi"}, form=wire.WireForm.README)
+    assert cvra_decode(readme) == ("c", "h")
+    assert cvra_decode(wire.encode_datagram("chatter", {"data": "hi"})) == ("chatter", {"data": "hi"})
+
+
+def test_float32_fields_are_float32_also_in_arrays_and_nested() -> None:
+    from sensor_msgs.msg import LaserScan
+    scan = LaserScan(angle_min=-1.5, ranges=[0.5, 2.0], intensities=[])
+    data = wire.encode_datagram("scan", wire.codec_for(LaserScan).to_wire(scan))
+    assert bytes.fromhex("a9616e676c655f6d696e" "cabfc00000") in data        # angle_min: float32 -1.5
+    assert bytes.fromhex("a672616e676573" "92" "ca3f000000" "ca40000000") in data  # ranges: [0.5, 2.0] as float32
+    assert b"\xcb" not in data                                             # no float64 anywhere
+    assert wire.codec_for(LaserScan).from_wire(wire.split_datagram(data)[1]) == scan
+    from std_msgs.msg import Float32
+    with pytest.raises(genpy.SerializationError, match="float32's range"):
+        wire.codec_for(Float32).to_wire(Float32(data=1e40))
+
+
+def test_cvra_service_calls_read_as_requests() -> None:
+    from std_srvs.srv import Trigger
+    set_mode = wire.codec_for(SetBool._request_class)
+    for frame in (CVRA_CALL_SET_MODE_LIST, CVRA_CALL_SET_MODE_MAP):
+        name, rest = wire.decode_request(frame[:-1])
+        assert name == "set_mode" and set_mode.from_request(rest) == SetBoolRequest(data=True)
+    name, rest = wire.decode_request(CVRA_CALL_NO_PARAMS[:-1])
+    assert name == "reset" and wire.codec_for(Trigger._request_class).from_request(rest) == Trigger._request_class()
+    # a params map naming a field the request does not have is refused by name, not read positionally
+    name, rest = wire.decode_request(CVRA_CALL_RESET_X[:-1])
+    with pytest.raises(WireError, match="no field the string 'x'"):
+        wire.codec_for(Trigger._request_class).from_request(rest)
+
+
+def test_requests_in_both_forms_with_several_and_one_nested_field() -> None:
+    logger = wire.codec_for(roslib.message.get_service_class("roscpp/SetLoggerLevel")._request_class)
+    want = logger.data_class(logger="ros", level="debug")
+    cvra_map = wire.decode_request(wire.encode_request("lvl", {"logger": "ros", "level": "debug"})[:-1])[1]
+    cvra_list = [["ros", "debug"]]                                  # encode_call("lvl", ["ros", "debug"])
+    readme = wire.decode_request(wire.encode_request("lvl", logger.to_wire(want), form=wire.WireForm.README)[:-1])[1]
+    assert readme == ["ros", "debug"]
+    for rest in (cvra_map, cvra_list, readme):
+        assert logger.from_request(rest) == want
+    # CVRA's call written by default: [name, {fields}], which CVRA's decode_call gives its handler as one map
+    assert cvra_decode_call(wire.encode_request("lvl", logger.to_wire(want))) == ("lvl", {"logger": "ros",
+                                                                                            "level": "debug"})
+    assert cvra_decode_call(wire.encode_request("reset", {})) == ("reset", {})
+    # one field that is a message: CVRA's {camera_info: {...}} and the README's [name, {...}] both read
+    cam_class = roslib.message.get_service_class("sensor_msgs/SetCameraInfo")._request_class
+    cam = wire.codec_for(cam_class)
+    req = cam_class()
+    req.camera_info.width = 640
+    inner = cam.to_wire(req)["camera_info"]
+    assert cam.from_request([{"camera_info": inner}]) == req      # CVRA's form
+    assert cam.from_request([inner]) == req                       # README's [name, field1]
+    with pytest.raises(WireError, match="'camera_info.width'"):
+        cam.from_request([{"camera_info": {**inner, "width": "wide"}}])  # CVRA's error when neither reads
+
+
+def test_cvra_test_shapes_both_directions() -> None:
+    # their test_decoding_method / test_correct_callback_called: encode_call("bar", [10]) is [name, [10]]
+    assert wire.decode_request(CVRA_CALL_BAR_10[:-1]) == ("bar", [[10]])
+    assert wire.codec_for(SetBool._request_class).from_request([[1]]) == SetBoolRequest(data=True)
+    # ours, read by their decode_call: the request's fields as one object
+    assert cvra_decode_call(wire.encode_request("set_mode", {"data": True})) == ("set_mode", {"data": True})
+    assert wire.encode_request("set_mode", {"data": True}) == CVRA_CALL_SET_MODE_MAP
+    # their single-float check: 1. + 1e-8 written into a float32 field reads back as 1.0
+    from std_msgs.msg import Float32
+    data = wire.encode_datagram("foo", wire.codec_for(Float32).to_wire(Float32(data=1.0 + 1e-8)))
+    assert cvra_decode(data) == ("foo", {"data": 1.0})
+    # answers unchanged: a plain map, which their call() unpacks as is
+    assert msgpack.unpackb(wire.encode_response({"success": True, "message": "ok"})) == {"success": True,
+                                                                                         "message": "ok"}
