@@ -118,7 +118,7 @@ def test_twist_commands_reach_the_c_board_field_for_field_and_oversized_is_refus
     assert stats["to_microcontroller"]["cmd_vel"]["sent"] == 20
     assert stats["to_microcontroller"]["text"] == {"sent": 2, "oversized": 2, "expired": 0, "filtered": 0,
                                                    "send_failed": 0}
-    assert len(refusal) == 1 and "2,014 bytes" in refusal[0] and "mtu of 1,472" in refusal[0]
+    assert len(refusal) == 1 and "2,015 bytes" in refusal[0] and "mtu of 1,472" in refusal[0]
 
 
 def test_services_both_ways_with_rosservice_and_the_c_board(
@@ -157,7 +157,46 @@ def test_services_both_ways_with_rosservice_and_the_c_board(
     assert imu["published"] > 0 and imu["filtered"] > 0 and imu["published"] <= imu["received"] / 3
     assert stats["bad_input"]["total"] == 0
     served = board.events("served")
-    assert [s["name"] for s in served] == ["reset", "slow", "reset"] and served[0]["params"] == []
+    # CVRA's form both ways: the board's call was [set_mode, [true]], the bridge's calls [reset, {}]
+    assert [s["name"] for s in served] == ["reset", "slow", "reset"] and served[0]["params"] == {}
+
+
+def test_a_board_speaking_the_readme_form_with_wire_form_readme(
+        standin: Path, ros_master: harness.RosMaster, spawn: harness.Spawner, tmp_path: Path) -> None:
+    """wire_form: readme keeps the seed README's form working: topics as name then {fields} both ways,
+    service requests as [name, *fields] both ways; a board in that form understands nothing else."""
+    ports = Ports.pick()
+    server = spawn([harness.STOCK_PYTHON, str(mcu_harness.ROS_SERVICE_PEER), "--service", "/mcu_r/set_mode"])
+    server.wait_for("ready", 60)
+    bridge = start_bridge(spawn, tmp_path, ports, "stats_period: 0.5\nwire_form: readme\n"
+                          "from_microcontroller:\n  - {topic: /mcu_r/imu, type: sensor_msgs/Imu, name: imu}\n"
+                          "to_microcontroller:\n  - {topic: /mcu_r/text, type: std_msgs/String, name: text}\n"
+                          "services_on_microcontroller:\n  - {service: /mcu_r/reset, type: std_srvs/Trigger,"
+                          " name: reset}\n"
+                          "services_for_microcontroller:\n"
+                          "  - {service: /mcu_r/set_mode, type: std_srvs/SetBool, name: set_mode}\n", "mcu_bridge_r")
+    board = spawn(standin_argv(standin, ports, "--form", "readme", "--rate", 20, "--call", "set_mode",
+                               "--call-arg", "true", "--call-after", 0.5, "--duration", 90))
+    result = board.wait_for("call_result", 30)
+    called = server.wait_for("called", 10)
+    reset = mcu_harness.rosservice(ros_master, "call", "/mcu_r/reset")
+    talker = spawn(mrt_peer_argv("talk", "--topic", "/mcu_r/text", "--data-json", json.dumps({"data": "r {i}"}),
+                                 "--count", 3, "--rate", 5, "--wait-subscribers", 1, "--wait-dds-readers", 1,
+                                 "--linger", 0.5, "--node-name", "mcu_r_talker"))
+    assert talker.wait(60) == 0
+    harness.wait_until(lambda: len(board.events("recv")) >= 3, 20, message="3 texts at the README-form board")
+    stats = wait_stats(bridge, lambda s: s["from_microcontroller"]["imu"]["published"] >= 10
+                       and s["to_microcontroller"]["text"]["sent"] == 3, 30)
+    texts = board.events("recv")
+    served = board.events("served")
+    print(f"\nREADME-form board: call {result['response']}; rosservice call /mcu_r/reset: {reset.stdout.strip()!r}, "
+          f"the board got {served}; texts at the board {[(t['name'], t['fields']) for t in texts]}; "
+          f"imu {stats['from_microcontroller']['imu']}")
+    assert result["response"] == {"success": True, "message": "mode on"} and called["data"] is True
+    assert reset.returncode == 0 and "reset done (1)" in reset.stdout
+    assert [(s["name"], s["params"]) for s in served] == [("reset", [])]   # [name, *fields] of an empty request
+    assert [(t["name"], t["fields"]) for t in texts] == [("text", {"data": f"r {i}"}) for i in range(3)]
+    assert stats["bad_input"]["total"] == 0
 
 
 def _malformed(kind: str, i: int) -> bytes:

@@ -2,13 +2,19 @@
  * A microcontroller stand-in for micros_rt's mcu-bridge: what firmware on a motor or sensor board would
  * do, in C, with Debian's libmsgpack-dev (seed 003, the CVRA ROS MessagePack bridge).
  *
- *  - streams sensor_msgs/Imu datagrams ("imu" + map of fields, or with --array-form the array form)
- *    to the bridge at --rate Hz, optionally pausing once (--pause-after N --pause SECONDS);
+ * It speaks one form (--form), as a real board does, and understands nothing else:
+ *    cvra (default): CVRA's cvra_rpc -- a topic datagram is [name, {fields}], a service request [name, params]
+ *                    with params one object (its calls send an array of --call-arg values, or nil without);
+ *    readme:         the seed README's -- a topic datagram is name then {fields}, a request [name, *params].
+ * --array-form writes its Imu datagrams as [name, field1, ...] instead (nested messages as arrays too).
+ *  - streams sensor_msgs/Imu datagrams ("imu") to the bridge at --rate Hz, optionally pausing once
+ *    (--pause-after N --pause SECONDS);
  *  - prints every datagram it receives (e.g. geometry_msgs/Twist commands) as a JSON line with each
- *    field and the IP TOS it arrived with;
+ *    field and the IP TOS it arrived with (name and fields null when the datagram is not in its form);
  *  - serves one service (--service-name, default "reset", std_srvs/Trigger's response) on its TCP
  *    service port: a serial datagram (SLIP + CRC32 big-endian) in, a MessagePack map out, then close;
  *    (--hang-name NAME: a call of NAME is never answered, the board holds the connection up to 3 s);
+ *    a request not in its form is a bad_frame event and gets no answer;
  *  - can call a service through the bridge (--call NAME [--call-arg VALUE]... --call-after SECONDS).
  *
  * Build: gcc -O2 -Wall -o mcu_standin mcu_standin.c -lmsgpackc
@@ -48,8 +54,10 @@ struct options {
     int topic_port, service_port, bridge_topic_port, bridge_service_port;
     double rate, duration, pause, call_after, linger;
     long count, pause_after;
-    int array_form;
+    int form, array_form;
 };
+
+enum { FORM_CVRA = 0, FORM_README = 1 };
 
 static double now_mono(void) {
     struct timespec ts;
@@ -180,7 +188,7 @@ static void pack_covariance(msgpack_packer *pk, double diag) {
 }
 
 /* One sensor_msgs/Imu datagram: sample i, stamped with the wall clock. */
-static void pack_imu(msgpack_packer *pk, const char *name, long i, int array_form) {
+static void pack_imu(msgpack_packer *pk, const char *name, long i, int form, int array_form) {
     static const char *xyz[] = {"x", "y", "z"};
     static const char *xyzw[] = {"x", "y", "z", "w"};
     struct timespec ts;
@@ -189,6 +197,7 @@ static void pack_imu(msgpack_packer *pk, const char *name, long i, int array_for
     const double w[3] = {0.5, -0.25, 0.001 * (double)i};
     const double a[3] = {0.0, 0.0, 9.81};
     if (array_form) { msgpack_pack_array(pk, 8); pack_str(pk, name); }
+    else if (form == FORM_CVRA) { msgpack_pack_array(pk, 2); pack_str(pk, name); msgpack_pack_map(pk, 7); }
     else { pack_str(pk, name); msgpack_pack_map(pk, 7); }
     pack_key(pk, "header", array_form);
     if (array_form) msgpack_pack_array(pk, 3); else msgpack_pack_map(pk, 3);
@@ -258,7 +267,7 @@ static long read_until(int fd, unsigned char *buf, size_t cap, double timeout, i
     }
 }
 
-static void receive_datagram(int udp) {
+static void receive_datagram(int udp, int form) {
     unsigned char buf[65536];
     char control[64];
     struct sockaddr_in from;
@@ -277,9 +286,15 @@ static void receive_datagram(int udp) {
     msgpack_unpacked_init(&second);
     size_t off = 0;
     printf("{\"event\": \"recv\", \"bytes\": %zd, \"tos\": %d, ", n, tos);
-    if (msgpack_unpack_next(&first, (const char *)buf, (size_t)n, &off) == MSGPACK_UNPACK_SUCCESS &&
-        first.data.type == MSGPACK_OBJECT_STR &&
-        msgpack_unpack_next(&second, (const char *)buf, (size_t)n, &off) == MSGPACK_UNPACK_SUCCESS) {
+    int ok = msgpack_unpack_next(&first, (const char *)buf, (size_t)n, &off) == MSGPACK_UNPACK_SUCCESS;
+    if (ok && form == FORM_CVRA && first.data.type == MSGPACK_OBJECT_ARRAY && first.data.via.array.size == 2 &&
+        first.data.via.array.ptr[0].type == MSGPACK_OBJECT_STR) {  /* as CVRA's message_process: argc == 2 */
+        printf("\"name\": ");
+        json_string(first.data.via.array.ptr[0].via.str.ptr, first.data.via.array.ptr[0].via.str.size);
+        printf(", \"fields\": ");
+        json_object(&first.data.via.array.ptr[1]);
+    } else if (ok && form != FORM_CVRA && first.data.type == MSGPACK_OBJECT_STR &&
+               msgpack_unpack_next(&second, (const char *)buf, (size_t)n, &off) == MSGPACK_UNPACK_SUCCESS) {
         printf("\"name\": ");
         json_string(first.data.via.str.ptr, first.data.via.str.size);
         printf(", \"fields\": ");
@@ -295,7 +310,7 @@ static void receive_datagram(int udp) {
 
 static long served = 0;
 
-static void serve_one(int listener, const char *service_name, const char *hang_name) {
+static void serve_one(int listener, const char *service_name, const char *hang_name, int form) {
     unsigned char buf[MAX_FRAME];
     int conn = accept(listener, NULL, NULL);
     if (conn < 0) return;
@@ -306,6 +321,7 @@ static void serve_one(int listener, const char *service_name, const char *hang_n
     size_t off = 0;
     if (len < 0 || msgpack_unpack_next(&req, (const char *)buf, (size_t)len, &off) != MSGPACK_UNPACK_SUCCESS ||
         req.data.type != MSGPACK_OBJECT_ARRAY || req.data.via.array.size < 1 ||
+        (form == FORM_CVRA && req.data.via.array.size != 2) ||  /* as CVRA's service_call_process */
         req.data.via.array.ptr[0].type != MSGPACK_OBJECT_STR) {
         printf("{\"event\": \"bad_frame\", \"bytes\": %ld}\n", n);
         fflush(stdout);
@@ -319,9 +335,10 @@ static void serve_one(int listener, const char *service_name, const char *hang_n
     printf("{\"event\": \"served\", \"name\": ");
     json_string(name->ptr, name->size);
     printf(", \"params\": ");
-    msgpack_object params = req.data;
+    msgpack_object params = req.data;  /* cvra: the one params object; readme: the array after the name */
     params.via.array.ptr++;
     params.via.array.size--;
+    if (form == FORM_CVRA) params = req.data.via.array.ptr[1];
     json_object(&params);
     printf(", \"known\": %s}\n", ours ? "true" : "false");
     fflush(stdout);
@@ -362,8 +379,14 @@ static void call_bridge(const struct options *o) {
     msgpack_packer pk;
     msgpack_sbuffer_init(&sb);
     msgpack_packer_init(&pk, &sb, msgpack_sbuffer_write);
-    msgpack_pack_array(&pk, 1 + o->n_call_args);
-    pack_str(&pk, o->call_name);
+    if (o->form == FORM_CVRA) {  /* encode_call(name, [args...]), or encode_call(name) -> [name, nil] */
+        msgpack_pack_array(&pk, 2);
+        pack_str(&pk, o->call_name);
+        if (o->n_call_args) msgpack_pack_array(&pk, o->n_call_args); else msgpack_pack_nil(&pk);
+    } else {
+        msgpack_pack_array(&pk, 1 + o->n_call_args);
+        pack_str(&pk, o->call_name);
+    }
     for (int i = 0; i < o->n_call_args; i++) pack_arg(&pk, o->call_args[i]);
     size_t flen = slip_frame((const unsigned char *)sb.data, sb.size, frame);
     msgpack_sbuffer_destroy(&sb);
@@ -396,7 +419,7 @@ static void call_bridge(const struct options *o) {
 static void usage(void) {
     fprintf(stderr,
             "mcu_standin [--address A] [--topic-port P] [--service-port P] [--bridge A] [--bridge-topic-port P]\n"
-            "            [--bridge-service-port P] [--rate HZ] [--count N] [--stream-name NAME] [--array-form]\n"
+            "            [--bridge-service-port P] [--rate HZ] [--count N] [--stream-name NAME] [--form cvra|readme] [--array-form]\n"
             "            [--pause-after N --pause S] [--service-name NAME] [--hang-name NAME] [--call NAME [--call-arg V]...\n"
             "            --call-after S] [--duration S] [--linger S]\n");
     exit(2);
@@ -404,7 +427,7 @@ static void usage(void) {
 
 int main(int argc, char **argv) {
     struct options o = {"127.0.0.2", "127.0.0.1", "imu", "reset", "", NULL, {0}, 0,
-                        20000, 20001, 20000, 20001, 100.0, 60.0, 0.0, 0.5, 1.0, 0, 0, 0};
+                        20000, 20001, 20000, 20001, 100.0, 60.0, 0.0, 0.5, 1.0, 0, 0, FORM_CVRA, 0};
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
         const char *v = i + 1 < argc ? argv[i + 1] : NULL;
@@ -429,6 +452,11 @@ int main(int argc, char **argv) {
         else if (strcmp(a, "--call-after") == 0) o.call_after = atof(v);
         else if (strcmp(a, "--duration") == 0) o.duration = atof(v);
         else if (strcmp(a, "--linger") == 0) o.linger = atof(v);
+        else if (strcmp(a, "--form") == 0) {
+            if (strcmp(v, "cvra") == 0) o.form = FORM_CVRA;
+            else if (strcmp(v, "readme") == 0) o.form = FORM_README;
+            else usage();
+        }
         else usage();
     }
     signal(SIGINT, on_signal);
@@ -466,7 +494,7 @@ int main(int argc, char **argv) {
         int streaming = period > 0 && resume_at < 0 && finished_at < 0;
         if (streaming && t >= next_send) {
             msgpack_sbuffer_clear(&sb);
-            pack_imu(&pk, o.stream_name, sent, o.array_form);
+            pack_imu(&pk, o.stream_name, sent, o.form, o.array_form);
             sendto(udp, sb.data, sb.size, 0, (struct sockaddr *)&bridge, sizeof bridge);
             sent++;
             next_send += period;
@@ -492,8 +520,8 @@ int main(int argc, char **argv) {
         if (ms > 100) ms = 100;
         struct pollfd fds[2] = {{udp, POLLIN, 0}, {listener, POLLIN, 0}};
         if (poll(fds, 2, ms) > 0) {
-            if (fds[0].revents & POLLIN) receive_datagram(udp);
-            if (fds[1].revents & POLLIN) serve_one(listener, o.service_name, o.hang_name);
+            if (fds[0].revents & POLLIN) receive_datagram(udp, o.form);
+            if (fds[1].revents & POLLIN) serve_one(listener, o.service_name, o.hang_name, o.form);
         }
     }
     msgpack_sbuffer_destroy(&sb);
