@@ -32,6 +32,7 @@ from micros_rt.transports.base import RemoteWriter, Sample
 from micros_rt.exceptions import TransportError
 from micros_rt.negotiation.ratelimit import RateLimitedLog
 from micros_rt.qos.enforcement import TimeFilter, is_expired
+from micros_rt.transports.marking import mark_socket
 from micros_rt.qos.options import TransportPriority, priority_tos
 
 from . import wire
@@ -493,12 +494,7 @@ def _unknown(kind: str, section: str, name: str, known: Dict[str, Any]) -> WireE
 
 
 def _set_tos(sock: socket.socket, priority: TransportPriority, family: int) -> None:
-    tos = priority_tos(priority)
-    if tos:
-        if family == socket.AF_INET6:
-            sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_TCLASS, tos)
-        else:
-            sock.setsockopt(socket.IPPROTO_IP, socket.IP_TOS, tos)
+    mark_socket(sock, priority, family=family)  # DSCP and SO_PRIORITY, IPv4 or IPv6: the one helper
 
 
 def _read_frame(conn: socket.socket, deadline: float) -> bytes:

@@ -40,6 +40,8 @@ import genpy
 import msgpack
 import roslib.message
 
+from micros_rt.rostypes import FLOAT_TYPES, INT_RANGES
+
 from .errors import WireError
 
 __all__ = [
@@ -53,14 +55,8 @@ ESC = 0xDB
 ESC_END = 0xDC
 ESC_ESC = 0xDD
 
-_INT_RANGES: Dict[str, Tuple[int, int]] = {
-    "int8": (-2**7, 2**7 - 1), "byte": (-2**7, 2**7 - 1),
-    "uint8": (0, 2**8 - 1), "char": (0, 2**8 - 1),
-    "int16": (-2**15, 2**15 - 1), "uint16": (0, 2**16 - 1),
-    "int32": (-2**31, 2**31 - 1), "uint32": (0, 2**32 - 1),
-    "int64": (-2**63, 2**63 - 1), "uint64": (0, 2**64 - 1),
-}
-_FLOATS = ("float32", "float64")
+_INT_RANGES: Dict[str, Tuple[int, int]] = INT_RANGES  # the one table (micros_rt.rostypes)
+_FLOATS = FLOAT_TYPES
 _NSEC = 1_000_000_000
 
 
