@@ -26,7 +26,7 @@ from ._publication import Publisher, _Publication
 from ._runtime import _graph_id, _log, _node, _require_node, dds_backend, start_dds_early, wait_dds_started
 from ._subscription import DeadlineMissed, Subscriber, _Subscription
 from ._logging import flush as flush_logs
-from .transports.base import ProfileBackend, profile_backends
+from .transports.base import ProfileBackend, close_profile_backends, profile_backends
 from .dds.participant import close_participant
 from .exceptions import QoSTypeError
 from .negotiation.hints import TransportHints
@@ -154,6 +154,7 @@ def _close_all() -> None:
     wait_dds_started()
     _node.publications.close_all()
     _node.subscriptions.close_all()
+    close_profile_backends()  # MQTT: disconnect cleanly now, not at interpreter exit
     with _node.lock:
         _node.dds = None
     close_participant()

@@ -5,13 +5,14 @@
 - :mod:`.client`: the paho-mqtt connection (TLS, auth, last will, reconnect, disk buffer).
 - :mod:`.bridge`: the node. See docs/mqtt.md.
 - :mod:`.backend`: MQTT as a back end of any micros_rt topic, chosen in the YAML profile's ``mqtt`` section
-  (a :class:`micros_rt.backends.ProfileBackend`: :func:`profile_backend` is what ``micros_rt.backends``
-  calls for a profile with an ``mqtt`` section; nothing here is imported otherwise).
+  (a :class:`micros_rt.transports.base.ProfileBackend`: :func:`profile_backend` is what
+  ``micros_rt.transports.base`` calls for a profile with an ``mqtt`` section, :func:`close_profile_backend`
+  what the node calls at shutdown; nothing here is imported otherwise).
 """
 
 from typing import Any
 
-__all__ = ["MqttParams", "ParamsError", "load_params", "parse_params", "profile_backend"]
+__all__ = ["MqttParams", "ParamsError", "close_profile_backend", "load_params", "parse_params", "profile_backend"]
 
 
 def profile_backend(profile: Any, *, graph: str, node: str) -> Any:
@@ -19,6 +20,13 @@ def profile_backend(profile: Any, *, graph: str, node: str) -> Any:
     from .backend import process_backend
 
     return process_backend(profile, graph=graph, node=node)
+
+
+def close_profile_backend() -> None:
+    """Disconnect the process's MQTT back end, if one was made (at node shutdown; harmless twice)."""
+    from .backend import close_process_backend
+
+    close_process_backend()
 
 
 def __getattr__(name: str) -> Any:  # the bridge's names, imported when used

@@ -49,7 +49,7 @@ from .client import MqttConnection
 from .params import MqttParams, ParamsError, _Reader, parse_connection, parse_wire
 
 __all__ = ["MqttBackend", "MqttRule", "MqttSettings", "MqttTopicReader", "MqttTopicWriter", "parse_mqtt_section",
-           "process_backend", "SOURCE_PROPERTY"]
+           "process_backend", "close_process_backend", "SOURCE_PROPERTY"]
 
 _log = nonblocking_logger("rosout.micros_rt.mqtt")
 _problems = RateLimitedLog(_log, interval=30.0)
@@ -368,5 +368,14 @@ def process_backend(profile: Any, *, graph: str, node: str) -> MqttBackend:
             settings = parse_mqtt_section(profile.mqtt, source=str(getattr(profile, "source", "profile")))
             backend = MqttBackend(settings, graph=graph, node=node)
             _process = (profile, backend)
-            atexit.register(backend.close)
+            atexit.register(backend.close)  # a process that never shuts its node down (close is harmless twice)
         return _process[1]
+
+
+def close_process_backend() -> None:
+    """Close the process's back end (the node shuts down); the next topic with an MQTT rule makes a new one."""
+    global _process
+    with _process_lock:
+        current, _process = _process, None
+    if current is not None:
+        current[1].close()

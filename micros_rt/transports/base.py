@@ -39,7 +39,7 @@ from ..qos import AdvertiseQoSOptions, SubscribeQoSOptions
 
 __all__ = ["BACKOFF_FIRST", "BACKOFF_MAX", "BackPressuredWriter", "send_with_backoff", "Backend", "EndpointSpec", "Feed", "MirrorWriter", "PROFILE_BACKENDS", "ProfileBackend", "PushInfo",
            "PushReader", "ReaderBackend", "RemoteWriter", "Sample", "TIME_FILTER", "LIFESPAN", "TransportReader",
-           "TransportWriter", "WriterBackend", "profile_backends"]
+           "TransportWriter", "WriterBackend", "close_profile_backends", "profile_backends"]
 
 #: Names of the subscriber QoS a reader can enforce natively (:attr:`TransportReader.enforces`).
 TIME_FILTER = "time_filter"
@@ -312,6 +312,18 @@ class ProfileBackend(Protocol):
 #: profile section -> module whose ``profile_backend(profile, graph=..., node=...)`` returns the
 #: :class:`ProfileBackend` for it. Imported only when a node's profile has that section.
 PROFILE_BACKENDS: Dict[str, str] = {"mqtt": "micros_rt.mqtt"}
+
+
+def close_profile_backends() -> None:
+    """Close the profile transports this process opened (at node shutdown): each section's module that
+    was imported closes its own (``close_profile_backend()``)."""
+    import sys
+
+    for module in PROFILE_BACKENDS.values():
+        loaded = sys.modules.get(module)
+        close = getattr(loaded, "close_profile_backend", None)
+        if close is not None:
+            close()
 
 
 def profile_backends(profile: Any, *, graph: str, node: str) -> Tuple[ProfileBackend, ...]:

@@ -352,3 +352,28 @@ def test_drops_of_a_shared_thread_reader_are_in_the_subscriptions_statistics() -
         assert (stats.received, stats.delivered, stats.dropped_queue_full) == (7, 2, 5)
     finally:
         sub.close()
+
+
+def test_node_shutdown_closes_the_profile_transports_it_opened(monkeypatch: pytest.MonkeyPatch) -> None:
+    import sys
+    import types
+
+    from micros_rt.transports import base
+
+    closed: List[str] = []
+    fake = types.ModuleType("micros_rt_fake_profile_transport")
+    fake.close_profile_backend = lambda: closed.append("fake")  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, fake.__name__, fake)
+    monkeypatch.setattr(base, "PROFILE_BACKENDS", {"fake": fake.__name__, "never_imported": "micros_rt_not_loaded"})
+    base.close_profile_backends()
+    assert closed == ["fake"] and "micros_rt_not_loaded" not in sys.modules
+
+
+def test_the_mqtt_profile_transport_says_how_to_close_it() -> None:
+    import micros_rt.mqtt
+
+    from micros_rt.transports.base import PROFILE_BACKENDS
+
+    assert PROFILE_BACKENDS["mqtt"] == "micros_rt.mqtt"
+    micros_rt.mqtt.close_profile_backend()   # none was made: harmless
+    micros_rt.mqtt.close_profile_backend()
