@@ -17,7 +17,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Dict, List
+from typing import Any, Dict, Iterator, List
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
@@ -61,17 +61,16 @@ def main() -> int:
             out, _ = board.communicate(timeout=args.duration + 30)
             robot.wait(30)
             commands = 0
-            for line in out.splitlines():
-                event = json.loads(line)
+            for event in _json_lines(out, "board"):
                 if event["event"] == "recv":
                     commands += 1
                     if commands == 1:
                         print(f"board: first command {event['name']} {event['fields']} (IP TOS {event['tos']})")
                 elif event["event"] != "ready":
-                    print(f"board: {line}")
+                    print(f"board: {json.dumps(event)}")
             print(f"board: received {commands} commands", flush=True)
             stop(bridge)
-            last = [json.loads(line) for line in bridge.stdout.read().decode().splitlines()]
+            last = list(_json_lines(bridge.stdout.read().decode(), "bridge"))
             stats = [e for e in last if e.get("event") == "stats"]
             if stats:
                 print(f"bridge counters: {json.dumps({k: v for k, v in stats[-1].items() if k != 'event'})}")
@@ -82,6 +81,20 @@ def main() -> int:
         finally:
             for p in reversed(started):
                 stop(p)
+
+
+def _json_lines(text: str, who: str) -> Iterator[Dict[str, Any]]:
+    """The JSON events in ``text``; any other line (a library's print to stdout) is shown as it is, not fatal
+    (one run ended in JSONDecodeError on such a line)."""
+    for line in text.splitlines():
+        try:
+            event = json.loads(line)
+        except ValueError:
+            if line.strip():
+                print(f"{who}: {line}")
+            continue
+        if isinstance(event, dict) and "event" in event:
+            yield event
 
 
 if __name__ == "__main__":
