@@ -49,7 +49,7 @@ class Lane:
         self.topic = topic
         self.depth = depth                      # None: lossless, publish() waits instead of queueing
         self.dropped = 0                        # superseded before they left (KEEP_LAST)
-        self.delayed = 0                        # samples that had to wait for room
+        self.delayed = 0                        # KEEP_LAST samples handed to the lane's thread
         self._queue: Deque[Any] = collections.deque()
         self._active = False                    # samples wait here: publish() must queue behind them
         self._inflight: Any = None              # the sample the lane's thread is trying to send
@@ -66,10 +66,7 @@ class Lane:
     def send(self, prepared: Any) -> None:
         """From ``publish()`` (under the publication's lock: calls come one at a time)."""
         if self.depth is None:
-            if not self._active and self.writer.try_send(prepared):
-                return
-            self.delayed += 1
-            # lossless: nothing is ever queued here, so order holds; wait (bounded) in Python
+            # lossless: nothing is ever queued here, so order holds; the writer waits (bounded) in Python
             self.writer.send(prepared)
             return
         if not self._active and not self.writer.may_wait(prepared) and self.writer.try_send(prepared):

@@ -78,23 +78,21 @@ class _Publication:
         spec = EndpointSpec(topic, data_class, queue_size, latch, tag)
         self.mirrors: Tuple[TransportWriter, ...] = tuple(
             w for w in (b.open_writer(spec, options) for b in extra) if w is not None)
+        # the DDS writer, then the mirrors, each behind a lane when it can say "no room now" (DDS): one topic's
+        # back-pressure never holds another topic's publish(), and a KEEP_LAST publish() never waits (as rospy's)
+        depth = None if is_lossless(queue_size) else queue_size
+        self.senders: Tuple[TransportWriter, ...] = tuple(
+            Lane(w, topic=topic, depth=depth) if isinstance(w, BackPressuredWriter) else w
+            for w in ((self.dds,) if self.dds is not None else ()) + self.mirrors)
+        self.lanes = tuple(s for s in self.senders if isinstance(s, Lane))
         #: every writer of the topic, in sending order: TCPROS first (rospy serializes inside its send and
-        #: raises before writing), then the negotiated DDS writer, then the mirrors; lanes in front of those
-        #: that can refuse a sample for want of room
+        #: raises before writing), then the senders
         self.writers: Tuple[TransportWriter, ...] = ()
-        self.lanes: Tuple[Lane, ...] = ()
 
     def start(self) -> None:
         self.tcpros = compat.TcprosWriter(self.topic, self.data_class, self.queue_size, self.latch,
                                           pseudo_links=self.connections.__len__)
-        # a lane in front of every writer that can say "no room now" (DDS): one topic's back-pressure never
-        # holds another topic's publish(), and a KEEP_LAST topic's publish() never waits (as rospy's)
-        self.lanes = tuple(Lane(w, topic=self.topic, depth=None if is_lossless(self.queue_size) else self.queue_size)
-                           for w in ((self.dds,) if self.dds is not None else ()) + self.mirrors
-                           if isinstance(w, BackPressuredWriter))
-        by_writer = {id(lane.writer): lane for lane in self.lanes}
-        self.writers = (self.tcpros,) + tuple(by_writer.get(id(w), w) for w in
-                                              ((self.dds,) if self.dds is not None else ()) + self.mirrors)
+        self.writers = (self.tcpros,) + self.senders
 
     # -- negotiation (XML-RPC threads) -------------------------------------
     def facts(self) -> PublicationFacts:
@@ -248,13 +246,10 @@ class _Publication:
             conns = list(self.connections.values())
         for conn in conns:
             conn.close()
-        dds, self.dds = self.dds, None
-        mirrors, self.mirrors = self.mirrors, ()
-        lanes = {id(lane.writer): lane for lane in self.lanes}
-        self.writers = ()
-        for writer in mirrors + ((dds,) if dds is not None else ()):
-            lane = lanes.get(id(writer))
-            (lane or writer).close()  # a lane lets what it holds leave first
+        self.dds, self.mirrors = None, ()
+        senders, self.senders, self.writers = self.senders, (), ()
+        for sender in reversed(senders):
+            sender.close()  # a lane lets what it holds leave first, then closes its writer
         if self.tcpros is not None:
             try:
                 self.tcpros.close()

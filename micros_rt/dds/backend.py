@@ -24,7 +24,8 @@ from ..qos import (
     reader_qos,
     writer_qos,
 )
-from .endpoints import RELEASED_WRITE_MIN, DDSReader, DDSWriter, make_user_data, socket_congested, wait_for_acks
+from .endpoints import (RELEASED_WRITE_MIN, DDSReader, DDSWriter, make_user_data, network_bound, socket_congested,
+                        wait_for_acks)
 from .participant import DDSParticipant
 from .types import DDSType, dds_topic_name, dds_type_for
 from .._logging import nonblocking_logger
@@ -35,9 +36,6 @@ _log = nonblocking_logger("rosout.micros_rt.dds")
 
 _DDS_RETCODE_TIMEOUT = -10
 
-#: A large write that takes longer than this (s) waited for socket room behind a slow link: the writer's
-#: next large samples go through its lane's thread (loopback: a 900 KB write takes ~0.5 ms).
-NETWORK_BOUND_SEND = 0.005
 #: A writer with no room waits for acknowledgements in slices of at least this long (s): Cyclone wakes the
 #: wait at the acknowledgement, so a long slice costs nothing and spares the retries of a short one.
 WAIT_FOR_ROOM_MIN = 0.05
@@ -63,7 +61,6 @@ class DDSTopicWriter:
         self._encode = self.dds_type.encode  # raises genpy.SerializationError on a bad field value
         self._latch = spec.latch
         self._closed = False
-        self._network_bound = False  # the last large write waited on the network (see may_wait)
         backend.announce(add_writer=self.guid)
         prio = options.transport_priority
         backend.participant.mark_priority(int(prio), priority_tos(prio), priority_socket_priority(prio))
@@ -82,12 +79,7 @@ class DDSTopicWriter:
     def try_send(self, prepared: bytes) -> bool:
         """Write at once, or return False when Cyclone has no room (more unacknowledged data than the
         writer's window): the writer's max_blocking_time is 0, so Cyclone never waits holding the GIL."""
-        if len(prepared) >= RELEASED_WRITE_MIN:
-            t0 = time.monotonic()
-            ret = self._write(prepared)
-            self._network_bound = time.monotonic() - t0 > NETWORK_BOUND_SEND
-        else:
-            ret = self._write(prepared)
+        ret = self._write(prepared)
         if ret >= 0:
             return True
         if ret == _DDS_RETCODE_TIMEOUT:
@@ -99,12 +91,12 @@ class DDSTopicWriter:
         wait_for_acks(self._ref, max(timeout, WAIT_FOR_ROOM_MIN))
 
     def may_wait(self, prepared: bytes) -> bool:
-        """A large sample while the network is what limits this writer (its last large write waited more
-        than :data:`NETWORK_BOUND_SEND` for socket room behind a slow link), or any sample while the
-        process's transmit socket is congested (another topic's large write just waited): a small sample's
-        ``sendmsg`` would wait behind those fragments. On loopback a 900 KB write takes ~0.5 ms and stays
-        on the caller's thread, with no hop to the lane's."""
-        return (self._network_bound and len(prepared) >= RELEASED_WRITE_MIN) or socket_congested()
+        """A large sample while the network is what limits this writer (its last large write waited for
+        socket room behind a slow link: :func:`~micros_rt.dds.endpoints.network_bound`), or any sample while
+        the process's transmit socket is congested (another topic's large write just waited): a small
+        sample's ``sendmsg`` would wait behind those fragments. On loopback a 900 KB write takes ~0.5 ms
+        and stays on the caller's thread, with no hop to the lane's."""
+        return (len(prepared) >= RELEASED_WRITE_MIN and network_bound(self._ref)) or socket_congested()
 
     def send(self, prepared: bytes) -> None:
         """Write, waiting (in Python, other threads running) while a reliable subscriber is behind; raise

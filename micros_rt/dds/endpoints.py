@@ -10,7 +10,7 @@ from __future__ import annotations
 import ctypes
 import threading
 import time
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
 
 from cyclonedds._clayer import ddspy_take, ddspy_write
@@ -50,11 +50,17 @@ CONGESTED_WRITE = 0.005
 CONGESTION_HOLD = 0.1
 _congested_until = [0.0]
 _last_slow = [0.0]  # how long the last large write that waited took (0.0: it did not wait)
+_slow_writers: Set[int] = set()  # writers whose last large write waited on the network
 
 
 def socket_congested() -> bool:
     """True while a recent large write waited on the network (see :data:`CONGESTED_WRITE`)."""
     return time.monotonic() < _congested_until[0]
+
+
+def network_bound(ref: int) -> bool:
+    """True when writer ``ref``'s last large write waited on the network (a slow link drains its socket)."""
+    return ref in _slow_writers
 
 
 def write_released(ref: int, data: Any) -> int:
@@ -79,9 +85,13 @@ def write_released(ref: int, data: Any) -> int:
     done = time.monotonic()
     if len(data) >= RELEASED_WRITE_MIN:
         took = done - t0
-        _last_slow[0] = took if took > CONGESTED_WRITE else 0.0
-        if _last_slow[0]:
+        if took > CONGESTED_WRITE:
+            _last_slow[0] = took
+            _slow_writers.add(ref)
             _congested_until[0] = max(_congested_until[0], done + CONGESTION_HOLD)
+        else:
+            _last_slow[0] = 0.0
+            _slow_writers.discard(ref)
     return ret
 
 
@@ -212,6 +222,7 @@ class DDSWriter:
             return
         self.closed = True
         flusher().forget(self._ref)  # what waits in the datagram leaves before the writer goes
+        _slow_writers.discard(self._ref)
         delete_entity(self._writer)
         self._participant.release_topic(self.topic_name)
 
