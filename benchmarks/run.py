@@ -57,7 +57,7 @@ CONFIG = {
     "micros_rt_dds": "advertise(queue_size=None) / subscribe(queue_size=None), default QoS (reliable); "
                      "no CYCLONEDDS_URI, ROS_IP=127.0.0.1 (micros_rt's own loopback Cyclone config)",
     "micros_rt_dds_budget": "as micros_rt_dds, with advertise_with_qos(..., latency_budget=0.001): samples share "
-                            "datagrams, sent within 0.5 ms (half the budget; micros_rt.dds.batching); throughput figures only",
+                            "datagrams, sent within 0.5 ms (half the budget; micros_rt.transports.dds.batching); throughput figures only",
     "micros_rt_tcpros": "advertise(queue_size=None); subscribe(queue_size=None, TransportHints().tcp())",
     "rospy_tcpros": "Publisher(queue_size=None) (synchronous), Subscriber(queue_size=None, tcp_nodelay=True)",
     "cyclonedds_python": "reliable (max_blocking 10 s), KEEP_ALL; struct {sequence<octet> data} written "

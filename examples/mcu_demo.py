@@ -46,7 +46,7 @@ def main() -> int:
                 deadline = time.monotonic() + 20
                 while not master_reachable(env["ROS_MASTER_URI"]) and time.monotonic() < deadline:
                     time.sleep(0.1)
-            bridge = subprocess.Popen([sys.executable, "-m", "micros_rt.mcu", "--config",
+            bridge = subprocess.Popen([sys.executable, "-m", "micros_rt.bridges.mcu", "--config",
                                        str(HERE / "mcu_bridge.yaml"), "--json"], env=env, stdout=subprocess.PIPE)
             started.append(bridge)
             assert bridge.stdout is not None

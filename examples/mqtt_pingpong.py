@@ -2,7 +2,7 @@
 """mqtt_client's ping-pong demo with micros_rt's bridge: ROS -> MQTT -> ROS through a local mosquitto.
 
 It starts what is missing, all on loopback: a rosmaster (when none answers at ROS_MASTER_URI), mosquitto on
-a free port with a config file in a temporary directory, and the bridge (``python -m micros_rt.mqtt``) with
+a free port with a config file in a temporary directory, and the bridge (``python -m micros_rt.bridges.mqtt``) with
 mqtt_client's demo parameters. A micros_rt node then publishes ``/ping/ros`` (std_msgs/String, stamped for
 latency) and ``/ping/primitive`` (std_msgs/Int32), ``mosquitto_pub -m 69`` writes to the primitive MQTT
 topic as a non-ROS device would, and the node prints what comes back on ``/pong/ros``, ``/pong/primitive``
@@ -89,7 +89,7 @@ def main() -> int:
                 return 1
             params = Path(tmp) / "params.yaml"
             params.write_text(PARAMS.format(port=mqtt_port))
-            started.append(subprocess.Popen([sys.executable, "-m", "micros_rt.mqtt", "--params", str(params)]))
+            started.append(subprocess.Popen([sys.executable, "-m", "micros_rt.bridges.mqtt", "--params", str(params)]))
             return pingpong(mqtt_port, args.duration)
         finally:
             for proc in reversed(started):

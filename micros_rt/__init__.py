@@ -23,16 +23,18 @@ from .exceptions import (
     TypeMappingError,
     UnsupportedQoSError,
 )
-from ._stats import PublisherStatistics, SubscriberStatistics
+from .core.stats import PublisherStatistics, SubscriberStatistics
 from .negotiation.hints import TransportHints
 from .node import (
     DeadlineMissed,
     NodeHandle,
+    NodeInfo,
     Publisher,
     Subscriber,
     init_node,
     is_shutdown,
     ok,
+    node_info,
     shutdown,
     spin,
 )
@@ -53,6 +55,7 @@ __all__ = [
     "DeadlineMissed",
     "MicrosRtError",
     "NodeHandle",
+    "NodeInfo",
     "NodeNotInitializedError",
     "ProfileError",
     "PublishTimeoutError",
@@ -72,6 +75,7 @@ __all__ = [
     "init_node",
     "is_shutdown",
     "ok",
+    "node_info",
     "shutdown",
     "spin",
 ]

@@ -2,10 +2,10 @@
 
 Each micros_rt publication owns a rospy publisher (master registration, TCPROS
 for stock peers) and, when DDS is available, one DataWriter
-(:mod:`micros_rt._publication`). Each subscription owns a rospy subscriber and,
-when its TransportHints allow DDS, a DataReader (:mod:`micros_rt._subscription`).
+(:mod:`micros_rt.core.publication`). Each subscription owns a rospy subscriber and,
+when its TransportHints allow DDS, a DataReader (:mod:`micros_rt.core.subscription`).
 Which one carries data from a given publisher is decided per publisher in
-``requestTopic`` (see :mod:`micros_rt._rospy_compat`).
+``requestTopic`` (see :mod:`micros_rt.core.rospy_compat`).
 """
 
 from __future__ import annotations
@@ -15,20 +15,20 @@ import ctypes.util
 import os
 import threading
 import time
-from typing import Any, Callable, Dict, List, Optional, Tuple, Type, Union
+from typing import Any, Callable, Dict, List, NamedTuple, Optional, Tuple, Type, Union
 
 import genpy
 import rospy
 
-from . import _introspection
-from . import _rospy_compat as compat
-from ._publication import Publisher, _Publication
-from ._runtime import _graph_id, _log, _node, _require_node, dds_backend, start_dds_early, wait_dds_started
-from ._subscription import DeadlineMissed, Subscriber, _Subscription
-from ._logging import flush as flush_logs
+from .core import introspection as _introspection
+from .core import rospy_compat as compat
+from .core.publication import Publisher, _Publication
+from .core.runtime import _graph_id, _log, _node, _require_node, dds_backend, start_dds_early, wait_dds_started
+from .core.subscription import DeadlineMissed, Subscriber, _Subscription
+from .log import flush as flush_logs
 from .transports.base import ProfileBackend, close_profile_backends, profile_backends
-from .dds.participant import close_participant
-from .exceptions import QoSTypeError
+from .transports.dds.participant import close_participant
+from .exceptions import NodeNotInitializedError, QoSTypeError
 from .negotiation.hints import TransportHints
 from .qos import (
     AdvertiseQoSOptions,
@@ -50,6 +50,8 @@ __all__ = [
     "Publisher",
     "Subscriber",
     "DeadlineMissed",
+    "NodeInfo",
+    "node_info",
 ]
 
 
@@ -128,6 +130,21 @@ def _housekeeping_loop() -> None:
             except Exception:
                 _log.exception("micros_rt: topic %s: publisher housekeeping failed (will retry)", p.topic)
         time.sleep(0.5)
+
+
+class NodeInfo(NamedTuple):
+    """What programs built on micros_rt (the bridges, the relay) need to know of this process's node."""
+
+    name: str                        #: the node's resolved name (rospy's caller id)
+    graph: str                       #: this ROS graph's identity (the master's run_id and URI)
+    profile: Optional[QoSProfile]    #: the YAML profile given to init_node, if any
+
+
+def node_info() -> NodeInfo:
+    """This process's node; raises NodeNotInitializedError before :func:`init_node`."""
+    if not _node.initialized:
+        raise NodeNotInitializedError("call micros_rt.init_node(name) first")
+    return NodeInfo(compat.caller_id(), _node.graph, _node.profile)
 
 
 def spin() -> None:

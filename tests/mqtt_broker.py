@@ -182,8 +182,8 @@ def write_params(path: Path, params: Dict[str, object]) -> Path:
 
 
 def bridge_argv(params: Path, *, name: str = "mqtt_client", counters: float = 0.5) -> List[str]:
-    """``python -m micros_rt.mqtt`` (the bridge) with the project's venv, printing its counters."""
-    return [harness.MICROS_RT_PYTHON, "-m", "micros_rt.mqtt", "--params", str(params), "--name", name,
+    """``python -m micros_rt.bridges.mqtt`` (the bridge) with the project's venv, printing its counters."""
+    return [harness.MICROS_RT_PYTHON, "-m", "micros_rt.bridges.mqtt", "--params", str(params), "--name", name,
             "--print-counters", str(counters)]
 
 

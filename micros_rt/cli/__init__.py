@@ -30,8 +30,8 @@ SUBCOMMANDS: dict[str, Tuple[str, str]] = {
     "graph": ("micros_rt.cli.graph", "draw the live graph, links coloured by protocol (--png, --dot)"),
     "doctor": ("micros_rt.cli.doctor", "check the master, network, DDS and profile set-up"),
     "profile": ("micros_rt.cli.profile", "check a YAML QoS profile (and what it matches on a live graph)"),
-    "mqtt-bridge": ("micros_rt.mqtt.__main__", "bridge ROS topics and an MQTT broker (mqtt_client's params)"),
-    "mcu-bridge": ("micros_rt.mcu.__main__", "bridge ROS and a microcontroller (MessagePack over UDP/TCP)"),
+    "mqtt-bridge": ("micros_rt.bridges.mqtt.__main__", "bridge ROS topics and an MQTT broker (mqtt_client's params)"),
+    "mcu-bridge": ("micros_rt.bridges.mcu.__main__", "bridge ROS and a microcontroller (MessagePack over UDP/TCP)"),
 }
 
 

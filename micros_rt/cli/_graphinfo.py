@@ -1,6 +1,6 @@
 """The live ROS graph as the ``micros-rt`` tools see it: the master's view, every node's ``getBusInfo``, and
 for micros_rt nodes their ``microsRtInfo`` (QoS, links, the negotiation's verdicts; see
-:mod:`micros_rt._introspection`). Stock nodes have no ``microsRtInfo``: their links are TCPROS.
+:mod:`micros_rt.core.introspection`). Stock nodes have no ``microsRtInfo``: their links are TCPROS.
 
 Collecting (:func:`snapshot`) does the network calls; joining the answers into links (:func:`build_links`)
 and describing QoS (:func:`describe_publisher_qos`, ...) are pure functions.
@@ -17,9 +17,9 @@ import xmlrpc.client
 from dataclasses import asdict, dataclass, field
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
-from .._introspection import INFO_METHOD
+from ..core.introspection import INFO_METHOD
 # the library's XML-RPC transport with a per-connection timeout (the micros_rt package imports rospy anyway)
-from .._rospy_compat import TimeoutTransport
+from ..core.rospy_compat import TimeoutTransport
 from . import CommandError
 
 __all__ = [

@@ -2,7 +2,7 @@
 
 Checks: the ROS master answers; ``ROS_IP``/``ROS_HOSTNAME`` resolve to this host and agree; which network
 interface and Cyclone configuration micros_rt will use (the same functions the library uses:
-:mod:`micros_rt.dds.participant`) and whether multicast is on; ``ROS_DOMAIN_ID`` is valid; Cyclone starts
+:mod:`micros_rt.transports.dds.participant`) and whether multicast is on; ``ROS_DOMAIN_ID`` is valid; Cyclone starts
 with that configuration; the clocks of the graph's micros_rt nodes agree with this one; the YAML profile
 named by ``MICROS_RT_QOS_PROFILE`` is valid. Exit code 0 only when every check passes.
 """
@@ -60,7 +60,7 @@ def main(argv: List[str]) -> int:
         if c.fix:
             print(f"       {'':<{width}}  fix: {c.fix}")
     if args.verbose:
-        from ..dds.participant import cyclone_config
+        from ..transports.dds.participant import cyclone_config
 
         try:
             print(f"\nCyclone configuration (later sources win):\n  {cyclone_config(os.environ)}")
@@ -202,8 +202,8 @@ def _user_network(uri: str) -> str:
 
 def check_dds_network(env: Mapping[str, str], interfaces: Optional[Mapping[str, str]] = None) -> Check:
     """Which interface and Cyclone configuration micros_rt will use, and multicast (as the library picks
-    them: :func:`micros_rt.dds.participant.cyclone_config`)."""
-    from ..dds import participant
+    them: :func:`micros_rt.transports.dds.participant.cyclone_config`)."""
+    from ..transports.dds import participant
     from ..exceptions import DDSUnavailableError
 
     name = "DDS network"
@@ -230,7 +230,7 @@ def check_dds_network(env: Mapping[str, str], interfaces: Optional[Mapping[str, 
 
 
 def check_domain(env: Mapping[str, str]) -> Check:
-    from ..dds.participant import domain_id_from_env
+    from ..transports.dds.participant import domain_id_from_env
     from ..exceptions import DDSUnavailableError
 
     try:
@@ -244,7 +244,7 @@ def check_domain(env: Mapping[str, str]) -> Check:
 
 def check_cyclone(env: Mapping[str, str]) -> Check:
     """Start a Cyclone participant with micros_rt's configuration (in this process) and close it."""
-    from ..dds.participant import DDSParticipant, cyclone_config, domain_id_from_env
+    from ..transports.dds.participant import DDSParticipant, cyclone_config, domain_id_from_env
     from ..exceptions import DDSUnavailableError
 
     try:

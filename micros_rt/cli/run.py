@@ -2,7 +2,7 @@
 
 The script runs in this process as ``python SCRIPT ARGS...`` would run it (``__name__`` is
 ``"__main__"``, ``sys.argv`` is ``[SCRIPT, *ARGS]``, ``sys.path[0]`` its directory, its exit code and
-traceback are its own), after :func:`micros_rt._drop_in.install` has put micros_rt under
+traceback are its own), after :func:`micros_rt.drop_in.install` has put micros_rt under
 ``rospy.init_node``, ``rospy.Publisher`` and ``rospy.Subscriber``.
 """
 
@@ -17,7 +17,7 @@ import traceback
 import types
 from typing import List, Optional, Tuple
 
-from .. import _drop_in
+from .. import drop_in as _drop_in
 from ..exceptions import MicrosRtError
 from ..negotiation.hints import TransportHints
 from ..qos import QoSProfile

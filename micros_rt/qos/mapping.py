@@ -14,7 +14,7 @@ transport_priority             TransportPriority(level 0..6)
 latency_budget                 LatencyBudget 0 on the writer (readers request infinite, see below);
                                micros_rt batches the writer's samples into shared datagrams and
                                sends them within half the budget, at most 2 ms
-                               (:mod:`micros_rt.dds.batching`):
+                               (:mod:`micros_rt.transports.dds.batching`):
                                Cyclone's own LatencyBudget > 0 mode hands every sample to a send
                                thread, which measured slower than not batching at all
 using_best_effort_protocol     Reliability BEST_EFFORT / RELIABLE
@@ -73,7 +73,7 @@ UNBOUNDED_QUEUE_DEPTH: int = 1000
 #: Seconds a reliable KEEP_LAST writer's blocking ``send`` waits while Cyclone has more unacknowledged
 #: data than the writer's window. Not Cyclone's max_blocking_time (that is 0, :data:`WRITER_MAX_BLOCKING_TIME`):
 #: micros_rt waits in Python, and ``publish()`` of a KEEP_LAST topic does not wait at all (its lane keeps
-#: the newest ``queue_size`` and sends them when there is room, :mod:`micros_rt._lanes`).
+#: the newest ``queue_size`` and sends them when there is room, :mod:`micros_rt.core.lanes`).
 RELIABLE_MAX_BLOCKING_TIME: float = 1.0
 
 #: Cyclone's Reliability max_blocking_time for micros_rt writers: 0, never wait inside ``dds_write``.
@@ -148,7 +148,7 @@ def writer_qos(
     - Durability TRANSIENT_LOCAL if ``latch`` (late joiners get the last message) else VOLATILE.
     - Lifespan(msg_valid_period) only when finite.
     - LatencyBudget 0 (micros_rt batches within ``latency_budget`` itself, see
-      :mod:`micros_rt.dds.batching`) and TransportPriority(level) always.
+      :mod:`micros_rt.transports.dds.batching`) and TransportPriority(level) always.
     - DestinationOrder BY_SOURCE_TIMESTAMP always: the strongest offer, compatible with readers of
       either kind (the subscriber's ``ordered_by_sending_timestamp`` decides).
     - Userdata(user_data) when non-empty (e.g. the graph tag).

@@ -73,7 +73,7 @@ class QoSProfile:
         self.source = source
         self._publishers: dict[str, AdvertiseQoSOptions] = dict(publishers or {})
         self._subscribers: dict[str, SubscribeQoSOptions] = dict(subscribers or {})
-        # the raw ``mqtt`` section (broker and per-topic MQTT rules), validated by micros_rt.mqtt.backend
+        # the raw ``mqtt`` section (broker and per-topic MQTT rules), validated by micros_rt.transports.mqtt.backend
         self.mqtt: Any = None
 
     def __repr__(self) -> str:

@@ -1,8 +1,8 @@
 """The transport interface: what a publication and a subscription ask of every data plane.
 
 Every transport (TCPROS, DDS, MQTT, the microcontroller link) opens one writer per publication and one
-reader per subscription, and the per-topic endpoints (:mod:`micros_rt._publication`,
-:mod:`micros_rt._subscription`) talk to these few methods only, as rospy's ``ProtocolHandler`` and
+reader per subscription, and the per-topic endpoints (:mod:`micros_rt.core.publication`,
+:mod:`micros_rt.core.subscription`) talk to these few methods only, as rospy's ``ProtocolHandler`` and
 httpx's transport interface keep their callers free of per-transport ``if`` chains.
 
 Writers are two-phase so that a bad message is refused before anything is sent on any transport:
@@ -90,7 +90,7 @@ class TransportWriter(Protocol):
 @runtime_checkable
 class BackPressuredWriter(TransportWriter, Protocol):
     """A writer that can say "not now" instead of blocking: the publication puts a lane in front of it
-    (:mod:`micros_rt._lanes`), so one topic's back-pressure never holds another topic's ``publish()``."""
+    (:mod:`micros_rt.core.lanes`), so one topic's back-pressure never holds another topic's ``publish()``."""
 
     def try_send(self, prepared: Any) -> bool:
         """Send at once and return True, or return False (nothing sent) when the transport has no room
@@ -311,7 +311,7 @@ class ProfileBackend(Protocol):
 
 #: profile section -> module whose ``profile_backend(profile, graph=..., node=...)`` returns the
 #: :class:`ProfileBackend` for it. Imported only when a node's profile has that section.
-PROFILE_BACKENDS: Dict[str, str] = {"mqtt": "micros_rt.mqtt"}
+PROFILE_BACKENDS: Dict[str, str] = {"mqtt": "micros_rt.transports.mqtt"}
 
 
 def close_profile_backends() -> None:

@@ -164,7 +164,7 @@ from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.topic import Topic
 from std_msgs.msg import String
-from micros_rt.dds.types import dds_type_for
+from micros_rt.transports.dds.types import dds_type_for
 
 # a foreign (untagged) DDS writer on the micros_rt topic: first broken samples, then good ones
 t = dds_type_for(String)

@@ -39,7 +39,7 @@ def assert_lossless(summary: Dict[str, Any], count: int) -> None:
 
 def test_bursts_without_latency_budget_arrive_whole_and_without_waiting_for_the_next(
         ros_master: harness.RosMaster, spawn: harness.Spawner) -> None:
-    # the default writer batches a burst (micros_rt.dds.batching.adaptive_write): the samples written back to
+    # the default writer batches a burst (micros_rt.transports.dds.batching.adaptive_write): the samples written back to
     # back share datagrams, and the last ones of each burst wait in the writer until the flusher sends them
     # (within 1 ms). Had they to wait for the next write, they would arrive with the next burst, 200 ms on.
     summary = stream(spawn, "/default_bursts", 500, 64, send_args=("--rate", "5", "--burst", "50"),
@@ -60,7 +60,7 @@ def test_queue_size_none_loses_nothing_over_dds(ros_master: harness.RosMaster, s
 
 def test_batched_writer_loses_nothing_and_sends_its_tail(ros_master: harness.RosMaster,
                                                           spawn: harness.Spawner) -> None:
-    # latency_budget > 0: samples share datagrams (micros_rt.dds.batching). A burst must arrive whole
+    # latency_budget > 0: samples share datagrams (micros_rt.transports.dds.batching). A burst must arrive whole
     # with back-pressure (the writer blocks on a full history with samples still in its datagram) ...
     summary = stream(spawn, "/batched_burst", 100_000, 64, send_args=("--latency-budget", "0.005"))
     assert summary["transports"] == ["DDS"]

@@ -1,5 +1,5 @@
 """mcu-bridge with real processes on loopback: the C microcontroller stand-in (built here with gcc against
-Debian's libmsgpack-dev), the bridge (``python -m micros_rt.mcu``), micros_rt and stock ROS peers.
+Debian's libmsgpack-dev), the bridge (``python -m micros_rt.bridges.mcu``), micros_rt and stock ROS peers.
 
 The board is 127.0.0.2, the bridge 127.0.0.1; every test picks its own free ports and topic names.
 """
@@ -285,7 +285,7 @@ def test_cli_refuses_reliable_delivery_and_a_busy_port_in_one_line(
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
         taken.bind((ports.bridge, ports.bridge_topic))
         fine = write_config(tmp_path, ports, "", "fine.yaml")
-        cp = subprocess.run([harness.MICROS_RT_PYTHON, "-m", "micros_rt.mcu", "--config", str(fine), "--name",
+        cp = subprocess.run([harness.MICROS_RT_PYTHON, "-m", "micros_rt.bridges.mcu", "--config", str(fine), "--name",
                              "mcu_bridge_e"], env=ros_master.env, capture_output=True, text=True, timeout=60)
     print(cp.stderr.strip())
     assert cp.returncode == 1 and "Traceback" not in cp.stderr

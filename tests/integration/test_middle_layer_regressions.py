@@ -13,7 +13,7 @@ from helpers import mrt
 STATE = """
 import json, threading, time, sys
 import micros_rt
-from micros_rt._runtime import _node
+from micros_rt.core.runtime import _node
 from cyclonedds.core import Entity, GuardCondition, WaitSet
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
@@ -42,7 +42,7 @@ def test_failed_registration_leaks_nothing(ros_master: harness.RosMaster) -> Non
     # delivery thread or a findable endpoint behind (they were created before rospy was asked)
     report = run_script(ros_master, """
 import rospy
-import micros_rt._rospy_compat as compat
+import micros_rt.core.rospy_compat as compat
 from std_msgs.msg import String
 micros_rt.init_node("leaky")
 nh = micros_rt.NodeHandle()

@@ -17,7 +17,7 @@ import harness
 from helpers import mrt
 from mqtt_broker import MosquittoBroker, bridge_argv, last_counters, write_params
 
-from micros_rt.mqtt import codec
+from micros_rt.transports.mqtt import codec
 
 @pytest.fixture
 def broker(tmp_path: Path) -> Any:
@@ -164,7 +164,7 @@ def test_first_message_bad_input_and_is_connected(
     assert counters["delivered"]["/mq2/data"] == 3 and counters["delivered"]["/mq2/level"] == 1
 
     call = subprocess.run([harness.MICROS_RT_PYTHON, "-c", (
-        "import rospy; from micros_rt.mqtt.bridge import is_connected_service_class as c; "
+        "import rospy; from micros_rt.bridges.mqtt.bridge import is_connected_service_class as c; "
         "rospy.wait_for_service('/mq2_bridge/is_connected', 20); "
         "print(rospy.ServiceProxy('/mq2_bridge/is_connected', c())().connected)")],
         env=ros_master.env, capture_output=True, text=True, timeout=60)

@@ -13,7 +13,7 @@ import harness
 from helpers import mrt, stock_listener, stock_talker
 from mqtt_broker import MOSQUITTO_SUB, MosquittoBroker, bridge_argv, write_params
 
-from micros_rt.mqtt import codec
+from micros_rt.transports.mqtt import codec
 
 N = 10
 

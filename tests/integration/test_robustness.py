@@ -219,7 +219,7 @@ from cyclonedds.pub import DataWriter
 from cyclonedds.topic import Topic
 from std_msgs.msg import String
 from sensor_msgs.msg import LaserScan
-from micros_rt.dds.types import dds_type_for
+from micros_rt.transports.dds.types import dds_type_for
 
 rng = random.Random(7)
 dp = DomainParticipant(int(os.environ["ROS_DOMAIN_ID"]))

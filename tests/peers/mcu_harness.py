@@ -71,8 +71,8 @@ def write_config(directory: Path, ports: Ports, body: str, name: str = "mcu.yaml
 
 
 def bridge_argv(config: Path, node_name: str) -> List[str]:
-    """``python -m micros_rt.mcu --config ... --json`` under the project's venv."""
-    return [harness.MICROS_RT_PYTHON, "-m", "micros_rt.mcu", "--config", str(config), "--name", node_name, "--json"]
+    """``python -m micros_rt.bridges.mcu --config ... --json`` under the project's venv."""
+    return [harness.MICROS_RT_PYTHON, "-m", "micros_rt.bridges.mcu", "--config", str(config), "--name", node_name, "--json"]
 
 
 def standin_argv(binary: Path, ports: Ports, *extra: Any) -> List[str]:

@@ -1,4 +1,4 @@
-"""A micros_rt node serving or calling sensor_msgs/SetCameraInfo over MQTT (micros_rt.mqtt.services).
+"""A micros_rt node serving or calling sensor_msgs/SetCameraInfo over MQTT (micros_rt.bridges.mqtt.services).
 
 Run with the project's venv and MICROS_RT_QOS_PROFILE naming a profile with an 'mqtt' section. JSON lines:
   serve: {"event": "ready"} once served over the broker; {"event": "served", "frame_id"} per request
@@ -19,7 +19,7 @@ import rospy
 from sensor_msgs.srv import SetCameraInfo, SetCameraInfoRequest, SetCameraInfoResponse
 
 import micros_rt
-from micros_rt.mqtt.services import Service, ServiceProxy
+from micros_rt.bridges.mqtt.services import Service, ServiceProxy
 
 _print_lock = threading.Lock()
 

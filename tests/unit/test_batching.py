@@ -1,4 +1,4 @@
-"""The write-batching flusher (micros_rt.dds.batching): a writer with a latency budget is flushed once
+"""The write-batching flusher (micros_rt.transports.dds.batching): a writer with a latency budget is flushed once
 per budget however often it writes, never before its budget, and everything pending leaves at close.
 
 The flush function is a recorder: these test the scheduling, the integration tests the wire."""
@@ -11,7 +11,7 @@ from typing import List, Tuple
 
 import pytest
 
-from micros_rt.dds.batching import BURST_AGE, BURST_GAP, BURST_IDLE, BURST_TAIL, MAX_BATCH_WINDOW, Flusher, adaptive_write, batch_window
+from micros_rt.transports.dds.batching import BURST_AGE, BURST_GAP, BURST_IDLE, BURST_TAIL, MAX_BATCH_WINDOW, Flusher, adaptive_write, batch_window
 
 
 class Recorder:
@@ -131,8 +131,8 @@ def test_only_writers_with_a_budget_batch() -> None:
     from cyclonedds.topic import Topic
     from std_msgs.msg import String
 
-    from micros_rt.dds.batching import batching_writer_class
-    from micros_rt.dds.types import dds_type_for
+    from micros_rt.transports.dds.batching import batching_writer_class
+    from micros_rt.transports.dds.types import dds_type_for
 
     dp = DomainParticipant(int(os.environ.get("ROS_DOMAIN_ID", "0")))
     topic = Topic(dp, "rt/micros_rt_test_batched", dds_type_for(String).idl_class)

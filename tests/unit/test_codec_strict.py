@@ -19,7 +19,7 @@ from geometry_msgs.msg import PoseStamped, Twist
 from sensor_msgs.msg import CameraInfo, Image, Imu, LaserScan, PointCloud2, PointField
 from std_msgs.msg import Float64, Header, Int8, Int32, String, UInt8MultiArray, UInt64
 
-from micros_rt.dds.types import MalformedSampleError, dds_type_for
+from micros_rt.transports.dds.types import MalformedSampleError, dds_type_for
 
 
 def _with(cls: Type[genpy.Message], **fields: Any) -> genpy.Message:

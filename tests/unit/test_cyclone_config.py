@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from micros_rt.dds.participant import (
+from micros_rt.transports.dds.participant import (
     DEFAULT_LEASE_DURATION,
     DEFAULT_NETWORK_LEASE_DURATION,
     LOOPBACK_CONFIG,
@@ -103,7 +103,7 @@ def test_a_users_low_writer_ceiling_still_starts_on_loopback(tmp_path: Path) -> 
 
 def test_large_samples_get_a_receive_buffer_to_land_in() -> None:
     # a 1920x1080 Image is ~100 fragments in one burst: the kernel's default UDP buffer dropped them
-    from micros_rt.dds.participant import RECEIVE_BUFFER_CONFIG, micros_rt_defaults
+    from micros_rt.transports.dds.participant import RECEIVE_BUFFER_CONFIG, micros_rt_defaults
 
     for env in ({"ROS_IP": "127.0.0.1"}, {"ROS_IP": "10.1.2.3"}):
         assert RECEIVE_BUFFER_CONFIG in micros_rt_defaults(env)

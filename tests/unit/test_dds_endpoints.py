@@ -10,9 +10,9 @@ from std_msgs.msg import String
 
 import harness
 
-from micros_rt.dds.endpoints import DDSReader, DDSWriter
-from micros_rt.dds.participant import get_participant
-from micros_rt.dds.types import dds_type_for
+from micros_rt.transports.dds.endpoints import DDSReader, DDSWriter
+from micros_rt.transports.dds.participant import get_participant
+from micros_rt.transports.dds.types import dds_type_for
 from micros_rt.qos.mapping import plain_reader_qos, plain_writer_qos
 
 

@@ -11,7 +11,7 @@ from geometry_msgs.msg import Pose, PoseArray, PoseStamped, Twist
 from sensor_msgs.msg import CameraInfo, Image, LaserScan, PointCloud2, PointField
 from std_msgs.msg import Bool, Byte, Char, Duration, Float64MultiArray, Header, Int8, Int32, String, Time, UInt64
 
-from micros_rt.dds.types import MalformedSampleError, dds_type_for
+from micros_rt.transports.dds.types import MalformedSampleError, dds_type_for
 from micros_rt.exceptions import TypeMappingError
 
 HEADER = Header(seq=7, stamp=genpy.Time(1700000000, 123456789), frame_id="map")

@@ -7,7 +7,7 @@ from typing import List, Optional
 
 import pytest
 
-from micros_rt._stats import LatencyStats
+from micros_rt.core.stats import LatencyStats
 from micros_rt.qos.enforcement import (
     CLOCK_SKEW_WARN_SECONDS,
     ClockSkewCheck,

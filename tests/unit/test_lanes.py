@@ -1,4 +1,4 @@
-"""Lanes (micros_rt/_lanes.py) on a fake back-pressured writer: the fast path sends inline, a KEEP_LAST
+"""Lanes (micros_rt/core/lanes.py) on a fake back-pressured writer: the fast path sends inline, a KEEP_LAST
 lane never makes publish() wait and sends the newest queue_size in order once there is room (superseded
 samples counted, not sent), a lossless lane waits and loses nothing, close gives what waits a bounded
 chance; and, with real Cyclone in this process, a writer whose subscriber stopped acknowledging no longer
@@ -15,7 +15,7 @@ import pytest
 import harness
 
 from micros_rt import PublishTimeoutError
-from micros_rt._lanes import Lane
+from micros_rt.core.lanes import Lane
 from micros_rt.transports.base import BackPressuredWriter, send_with_backoff
 
 
@@ -157,8 +157,8 @@ def test_a_waiting_dds_write_leaves_other_threads_running() -> None:
 
     from std_msgs.msg import String
 
-    from micros_rt.dds.backend import DDSBackend
-    from micros_rt.dds.participant import get_participant
+    from micros_rt.transports.dds.backend import DDSBackend
+    from micros_rt.transports.dds.participant import get_participant
     from micros_rt.qos import AdvertiseQoSOptions
     from micros_rt.transports.base import EndpointSpec
 
@@ -166,8 +166,8 @@ def test_a_waiting_dds_write_leaves_other_threads_running() -> None:
     reader_code = (
         "import sys, time\n"
         "from std_msgs.msg import String\n"
-        "from micros_rt.dds.backend import DDSBackend\n"
-        "from micros_rt.dds.participant import get_participant\n"
+        "from micros_rt.transports.dds.backend import DDSBackend\n"
+        "from micros_rt.transports.dds.participant import get_participant\n"
         "from micros_rt.transports.base import EndpointSpec\n"
         f"spec = EndpointSpec({topic!r}, String, None, False, {{'graph': 'g', 'node': '/r'}})\n"
         "r = DDSBackend(get_participant(), 'r').open_reader(spec, None, lambda: None, lambda p: None)\n"
@@ -247,7 +247,7 @@ def test_a_large_write_that_waits_marks_the_socket_congested_then_small_writes_r
         monkeypatch: pytest.MonkeyPatch) -> None:
     """The heuristic behind HIGH-beside-LOW on one socket: a large write that waited on the network makes
     every write release the GIL (and KEEP_LAST lanes send from their threads) until it has been quiet."""
-    from micros_rt.dds import endpoints
+    from micros_rt.transports.dds import endpoints
 
     calls: List[Tuple[str, int]] = []
 

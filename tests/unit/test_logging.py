@@ -1,4 +1,4 @@
-"""micros_rt's logging (micros_rt/_logging.py): the caller never waits for a handler, records keep the
+"""micros_rt's logging (micros_rt/log.py): the caller never waits for a handler, records keep the
 caller's file, line and function, a full queue drops and counts."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import threading
 import time
 from typing import List
 
-from micros_rt import _logging
+from micros_rt import log as _logging
 
 
 class _Gate(logging.Handler):

@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 
 from micros_rt import TransportPriority
-from micros_rt.mcu.config import load_config, parse_config
-from micros_rt.mcu.wire import WireForm
-from micros_rt.mcu.errors import McuConfigError
+from micros_rt.transports.mcu.config import load_config, parse_config
+from micros_rt.transports.mcu.wire import WireForm
+from micros_rt.transports.mcu.errors import McuConfigError
 
 ISSUE_EXAMPLE = """\
 microcontroller: {address: 127.0.0.2, topic_port: 20000, service_port: 20001}   # the board

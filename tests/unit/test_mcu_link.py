@@ -12,10 +12,10 @@ from geometry_msgs.msg import Twist, TwistStamped
 from std_msgs.msg import String
 
 import harness
-from micros_rt.mcu import wire
-from micros_rt.mcu.config import McuConfig, parse_config
-from micros_rt.mcu.errors import DatagramTooLargeError
-from micros_rt.mcu.link import McuLink
+from micros_rt.transports.mcu import wire
+from micros_rt.transports.mcu.config import McuConfig, parse_config
+from micros_rt.transports.mcu.errors import DatagramTooLargeError
+from micros_rt.transports.mcu.link import McuLink
 
 BOARD = "127.0.0.2"
 

@@ -25,8 +25,8 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Duration, Header, String, UInt8MultiArray
 from std_srvs.srv import SetBool, SetBoolRequest, TriggerResponse
 
-from micros_rt.mcu import wire
-from micros_rt.mcu.errors import WireError
+from micros_rt.transports.mcu import wire
+from micros_rt.transports.mcu.errors import WireError
 
 F0 = "cb" + "00" * 8  # float64 0.0
 

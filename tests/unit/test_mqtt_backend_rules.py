@@ -7,7 +7,7 @@ from typing import Any
 import pytest
 
 from micros_rt import ProfileError, QoSProfile
-from micros_rt.mqtt.backend import parse_mqtt_section
+from micros_rt.transports.mqtt.backend import parse_mqtt_section
 
 SECTION = {
     "broker": {"host": "127.0.0.1", "port": 1884},

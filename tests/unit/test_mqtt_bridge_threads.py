@@ -14,9 +14,9 @@ from std_msgs.msg import String
 
 import harness
 
-from micros_rt.mqtt import bridge as bridge_module
-from micros_rt.mqtt import codec
-from micros_rt.mqtt.params import Mqtt2RosParams
+from micros_rt.bridges.mqtt import bridge as bridge_module
+from micros_rt.transports.mqtt import codec
+from micros_rt.transports.mqtt.params import Mqtt2RosParams
 
 
 class _SlowMasterNodeHandle:

@@ -6,9 +6,9 @@ import io
 import os
 from pathlib import Path
 
-from micros_rt.mqtt import codec
-from micros_rt.mqtt.bridge import _message_class, is_connected_service_class
-from micros_rt.mqtt.client import DiskBuffer, properties_from_dict, properties_to_dict
+from micros_rt.transports.mqtt import codec
+from micros_rt.bridges.mqtt.bridge import _message_class, is_connected_service_class
+from micros_rt.transports.mqtt.client import DiskBuffer, properties_from_dict, properties_to_dict
 
 
 def test_disk_buffer_keeps_order_and_size(tmp_path: Path) -> None:

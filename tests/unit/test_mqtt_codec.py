@@ -11,7 +11,7 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import Image
 from std_msgs.msg import Bool, Char, Float32, Float64, Int8, Int32, Int64, String, UInt8, UInt64
 
-from micros_rt.mqtt import codec
+from micros_rt.transports.mqtt import codec
 
 V1, V2 = codec.WireGeneration.V1, codec.WireGeneration.V2
 

@@ -17,7 +17,7 @@ from micros_rt.negotiation.choose import Choice, NegotiatedTransport, choose_pro
 from micros_rt.negotiation.decide import PublicationFacts, Verdict, decide
 from micros_rt.negotiation.messages import DDSAnswer, DDSOffer, MalformedNegotiationError, is_guid
 from micros_rt.negotiation.protocol import DDS, MAX_FIELD_CHARS, MAX_PENDING_DDS_OFFERS, TCPROS
-from micros_rt.negotiation.ratelimit import RateLimitedLog
+from micros_rt.ratelimit import RateLimitedLog
 from micros_rt.qos import AdvertiseQoSOptions, SubscribeQoSOptions
 from micros_rt.qos.options import TransportPriority
 

@@ -16,7 +16,7 @@ from sensor_msgs.msg import ChannelFloat32, Image, Imu, LaserScan, PointCloud
 from std_msgs.msg import (Float64MultiArray, Int16MultiArray, Int32MultiArray, Int64MultiArray, MultiArrayDimension,
                           UInt64MultiArray)
 
-from micros_rt.dds.types import MalformedSampleError, dds_type_for, is_numpy_msg
+from micros_rt.transports.dds.types import MalformedSampleError, dds_type_for, is_numpy_msg
 
 VALUES = [k * 0.25 for k in range(-5, 1076)]  # float32-exact
 

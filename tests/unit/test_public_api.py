@@ -8,9 +8,9 @@ import pytest
 
 import micros_rt
 from micros_rt import TransportHints
-from micros_rt.dds.endpoints import make_user_data, parse_user_data
-from micros_rt.dds.participant import LOOPBACK_CONFIG, cyclone_config, domain_id_from_env
-from micros_rt.dds.types import dds_topic_name, dds_type_name
+from micros_rt.transports.dds.endpoints import make_user_data, parse_user_data
+from micros_rt.transports.dds.participant import LOOPBACK_CONFIG, cyclone_config, domain_id_from_env
+from micros_rt.transports.dds.types import dds_topic_name, dds_type_name
 from micros_rt.exceptions import DDSUnavailableError, MicrosRtError
 
 

@@ -140,7 +140,7 @@ def test_writer_transport_priority_level(priority: TransportPriority) -> None:
 @pytest.mark.parametrize("budget", [0.0, 0.01, 2.0])
 def test_writer_latency_budget_is_micros_rt_batching_not_cyclone_async_mode(budget: float) -> None:
     # Cyclone's LatencyBudget > 0 sends every sample from its own thread (slower than no batching);
-    # micros_rt batches within the budget itself (micros_rt.dds.batching), so DDS sees 0.
+    # micros_rt batches within the budget itself (micros_rt.transports.dds.batching), so DDS sees 0.
     assert w(AdvertiseQoSOptions(latency_budget=budget))[Policy.LatencyBudget] == Policy.LatencyBudget(budget=0)
 
 

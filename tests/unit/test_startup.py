@@ -8,7 +8,7 @@ from typing import List
 import pytest
 import rospy.impl.init
 
-from micros_rt import _rospy_compat as compat
+from micros_rt.core import rospy_compat as compat
 
 
 def test_registration_poll_starts_fine_and_backs_off_to_rospys_step(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -39,7 +39,7 @@ def test_the_first_topic_waits_for_the_dds_import_started_by_init_node(monkeypat
     # it, and met a half-initialised module (ImportError); the first topic must wait for that thread
     import threading
 
-    from micros_rt import _runtime
+    from micros_rt.core import runtime as _runtime
 
     importing = threading.Thread(target=time.sleep, args=(0.3,), name="slow import stand-in", daemon=True)
     monkeypatch.setattr(_runtime._node, "initialized", True)

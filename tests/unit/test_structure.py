@@ -1,5 +1,5 @@
-"""The tree's boundaries: no import cycle (counting imports inside functions and under TYPE_CHECKING), and
-rospy's internals reached only through micros_rt/_rospy_compat.py."""
+"""The tree's boundaries: layers that import only downwards, no import cycle (counting imports inside functions and under TYPE_CHECKING), and
+rospy's internals reached only through micros_rt/core/rospy_compat.py."""
 
 from __future__ import annotations
 
@@ -90,6 +90,44 @@ def test_cycle_finder_finds_a_cycle() -> None:
 def test_rospy_internals_only_in_the_compat_module() -> None:
     internal = re.compile(r"rospy\.impl|\.impl\.(add_|set_|publish|connections)|from rospy\.impl")
     offenders = [f"{p.relative_to(PACKAGE.parent)}:{i}: {line.strip()}"
-                 for p in PACKAGE.rglob("*.py") if p.name != "_rospy_compat.py"
+                 for p in PACKAGE.rglob("*.py") if p.name != "rospy_compat.py"
                  for i, line in enumerate(p.read_text().splitlines(), 1) if internal.search(line)]
     assert offenders == []
+
+
+#: lowest first; a module may import its own layer and the layers below it, never one above
+LAYERS = (
+    ("support", ("micros_rt.exceptions", "micros_rt.rostypes", "micros_rt.log", "micros_rt.ratelimit")),
+    ("qos and negotiation", ("micros_rt.qos", "micros_rt.negotiation")),
+    ("transports", ("micros_rt.transports",)),
+    ("core", ("micros_rt.core",)),
+    ("public API", ("micros_rt", "micros_rt.node", "micros_rt.drop_in")),
+    ("programs", ("micros_rt.bridges", "micros_rt.cli", "micros_rt.__main__")),
+)
+
+
+def _layer(module: str) -> int:
+    best = (-1, 0)
+    for rank, (_, prefixes) in enumerate(LAYERS):
+        for prefix in prefixes:
+            if (module == prefix or module.startswith(prefix + ".")) and len(prefix) > best[1]:
+                best = (rank, len(prefix))
+    assert best[0] >= 0, f"{module} is in no layer of LAYERS"
+    return best[0]
+
+
+def _upward_imports(graph: Dict[str, Set[str]]) -> List[str]:
+    return sorted(f"{m} ({LAYERS[_layer(m)][0]}) imports {t} ({LAYERS[_layer(t)][0]})"
+                  for m, ts in graph.items() for t in ts if _layer(t) > _layer(m))
+
+
+def test_layers_import_only_downwards() -> None:
+    mods = _modules()
+    graph = {name: _imports(name, path, mods) for name, path in mods.items()}
+    assert _upward_imports(graph) == []
+
+
+def test_layer_check_finds_an_upward_import() -> None:
+    graph = {"micros_rt.transports.dds.backend": {"micros_rt.core.runtime", "micros_rt.qos.options"},
+             "micros_rt.core.lanes": {"micros_rt.transports.base"}}
+    assert _upward_imports(graph) == ["micros_rt.transports.dds.backend (transports) imports micros_rt.core.runtime (core)"]

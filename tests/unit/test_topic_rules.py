@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from micros_rt import ProfileError, QoSProfile, TransportPriority
-from micros_rt.mqtt.backend import parse_mqtt_section
+from micros_rt.transports.mqtt.backend import parse_mqtt_section
 from micros_rt.qos.topic_rules import TopicPattern, best_match
 
 

@@ -35,8 +35,8 @@ Pair = Tuple[TransportWriter, TransportReader, Callable[[], bool], Callable[[Any
 
 
 def _dds_pair(topic: str, latch: bool = False) -> Pair:
-    from micros_rt.dds.backend import DDSBackend
-    from micros_rt.dds.participant import get_participant
+    from micros_rt.transports.dds.backend import DDSBackend
+    from micros_rt.transports.dds.participant import get_participant
 
     participant = get_participant()
     assert participant is not None
@@ -134,7 +134,7 @@ def test_contract_close_twice_is_harmless(pair: Pair) -> None:
 
 
 def test_dds_writer_encodes_nothing_while_no_reader_is_matched() -> None:
-    from micros_rt.dds.backend import DDSTopicWriter
+    from micros_rt.transports.dds.backend import DDSTopicWriter
 
     writer, reader, matched, _ = _dds_pair(f"/micros_rt_contract_unmatched_{int(time.time() * 1e6) % 10**9}")
     assert isinstance(writer, DDSTopicWriter)
@@ -150,8 +150,8 @@ def test_dds_writer_encodes_nothing_while_no_reader_is_matched() -> None:
 
 def test_every_transport_implements_the_interface() -> None:
     """TCPROS, DDS, MQTT and the microcontroller link: the writer and reader classes have the methods."""
-    from micros_rt import _rospy_compat as compat
-    from micros_rt.dds.backend import DDSTopicReader, DDSTopicWriter
+    from micros_rt.core import rospy_compat as compat
+    from micros_rt.transports.dds.backend import DDSTopicReader, DDSTopicWriter
 
     for cls in (compat.TcprosWriter, DDSTopicWriter):
         for name in ("prepare", "send", "close"):
@@ -191,7 +191,7 @@ class _FakeWriter:
 def _publication_with(*writers: _FakeWriter) -> Any:
     import rospy
 
-    from micros_rt._publication import _Publication
+    from micros_rt.core.publication import _Publication
 
     pub = _Publication("/fake", String, 10, False, AdvertiseQoSOptions(), dds=None, tag={})
     pub.tcpros = writers[0]  # type: ignore[assignment]
@@ -289,10 +289,10 @@ def test_unix_sockets_carry_no_tos() -> None:
 
 
 def test_transport_errors_are_in_the_one_exception_tree() -> None:
-    from micros_rt.mcu.errors import McuConfigError, WireError
-    from micros_rt.mqtt.client import MqttConfigError
-    from micros_rt.mqtt.codec import CodecError
-    from micros_rt.mqtt.params import ParamsError
+    from micros_rt.transports.mcu.errors import McuConfigError, WireError
+    from micros_rt.transports.mqtt.client import MqttConfigError
+    from micros_rt.transports.mqtt.codec import CodecError
+    from micros_rt.transports.mqtt.params import ParamsError
 
     for cls in (MqttConfigError, CodecError, ParamsError, McuConfigError, WireError):
         assert issubclass(cls, MicrosRtError) and issubclass(cls, ValueError), cls
@@ -306,7 +306,7 @@ class _FilteringReader(PushReader):
 
 
 def _subscription(options: Any, depth: Optional[int] = 100) -> Any:
-    from micros_rt._subscription import _Subscription
+    from micros_rt.core.subscription import _Subscription
     from micros_rt.negotiation import TransportHints
 
     sub = _Subscription("/admission", String, depth, options, TransportHints().tcp(), dds=None, tag={}, graph="g")
@@ -370,10 +370,10 @@ def test_node_shutdown_closes_the_profile_transports_it_opened(monkeypatch: pyte
 
 
 def test_the_mqtt_profile_transport_says_how_to_close_it() -> None:
-    import micros_rt.mqtt
+    import micros_rt.transports.mqtt
 
     from micros_rt.transports.base import PROFILE_BACKENDS
 
-    assert PROFILE_BACKENDS["mqtt"] == "micros_rt.mqtt"
-    micros_rt.mqtt.close_profile_backend()   # none was made: harmless
-    micros_rt.mqtt.close_profile_backend()
+    assert PROFILE_BACKENDS["mqtt"] == "micros_rt.transports.mqtt"
+    micros_rt.transports.mqtt.close_profile_backend()   # none was made: harmless
+    micros_rt.transports.mqtt.close_profile_backend()

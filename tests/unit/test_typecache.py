@@ -1,4 +1,4 @@
-"""The on-disk cache of Cyclone's XTypes type data (micros_rt.dds.typecache): the bytes it hands to
+"""The on-disk cache of Cyclone's XTypes type data (micros_rt.transports.dds.typecache): the bytes it hands to
 Cyclone are exactly what cyclonedds builds, a damaged file is never used, and it can be turned off."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ from typing import Any, Iterator
 
 import pytest
 
-from micros_rt.dds import typecache
-from micros_rt.dds.typecache import _pack, _unpack, cache_dir
+from micros_rt.transports.dds import typecache
+from micros_rt.transports.dds.typecache import _pack, _unpack, cache_dir
 
 
 @pytest.fixture
@@ -48,7 +48,7 @@ def test_keys_differ_by_type_and_definition() -> None:
     from sensor_msgs.msg import Image, LaserScan
     from std_msgs.msg import Header, String
 
-    from micros_rt.dds.types import dds_type_for
+    from micros_rt.transports.dds.types import dds_type_for
 
     keys = {dds_type_for(c).idl_class.__micros_rt_xtypes_key__ for c in (Image, LaserScan, Header, String)}
     assert len(keys) == 4 and all(len(k) == 64 for k in keys)
@@ -61,8 +61,8 @@ def test_cached_bytes_are_what_cyclonedds_builds(tmp_cache: Path, type_name: str
     # cyclonedds builds from scratch, so a cached start announces the same type as an uncached one
     import roslib.message
 
-    from micros_rt.dds.participant import get_participant
-    from micros_rt.dds.types import dds_type_for
+    from micros_rt.transports.dds.participant import get_participant
+    from micros_rt.transports.dds.types import dds_type_for
 
     idl = dds_type_for(roslib.message.get_message_class(type_name)).idl_class
     participant = get_participant()

@@ -1,0 +1,499 @@
+"""The bridge node: mqtt_client's behaviour (ROS 1) on micros_rt's publish/subscribe.
+
+ROS -> MQTT: each ``bridge.ros2mqtt`` topic is subscribed with micros_rt (DDS from micros_rt publishers,
+TCPROS from stock nodes) as soon as the master knows its type, and every message is sent to the broker
+in mqtt_client's framing (its type announced, retained, on ``mqtt_client/ros_msg_type/<mqtt_topic>``),
+as primitive text or as JSON. The framing is one mqtt_client generation, ``bridge/mqtt_client_version``
+(2.x by default: no flag byte, ``RosMsgType.stamped``; or 1.x: a flag byte), logged at start-up.
+
+MQTT -> ROS: each ``bridge.mqtt2ros`` topic is published with micros_rt once its type is known: from the
+announcement (an installed class when the md5 matches, else a class built from the announced
+definition), from ``ros_type``, or from the first primitive text. Either generation is read, whatever
+this bridge writes: the announcement's length says which (2.x has ``stamped``), and the topic's payloads are
+read in the form it announces. Unlike mqtt_client, the data topic is subscribed from the start and
+messages that arrive before their type announcement are held (up to :data:`PENDING_LIMIT` per topic), so
+the first message is never lost.
+
+Bad input (a payload that does not decode, an unknown type, a text that does not fit the topic's type,
+a message too large to send) is logged once per topic and kind in words, then counted; the node keeps
+running. :meth:`MqttBridge.counters` has the counts; they are logged on close.
+"""
+
+from __future__ import annotations
+
+import collections
+import io
+import threading
+import time
+from typing import Any, Callable, Deque, Dict, Optional, Tuple, Type
+
+import genmsg  # type: ignore[import-untyped]
+import genmsg.gentools  # type: ignore[import-untyped]
+import genmsg.msg_loader  # type: ignore[import-untyped]
+import genpy
+import genpy.dynamic
+import roslib.message
+import rospy
+from std_msgs.msg import Float64
+
+import micros_rt
+
+from ...log import nonblocking_logger
+from ...ratelimit import RateLimitedLog
+from ...transports.mqtt import codec
+from ...transports.mqtt.client import MqttConnection
+from ...transports.mqtt.params import Mqtt2RosParams, MqttParams, Ros2MqttParams
+
+__all__ = ["MqttBridge", "PENDING_LIMIT", "is_connected_service_class"]
+
+_log = nonblocking_logger("rosout.micros_rt.mqtt")
+
+#: Messages held per MQTT topic while its ROS type is not yet known.
+PENDING_LIMIT = 100
+#: How often the master is asked for the types of ROS topics not yet subscribed (seconds).
+RESOLVE_INTERVAL = 0.3
+#: How long a new ROS publisher waits for the subscribers the master knows (seconds).
+SUBSCRIBER_WAIT = 3.0
+
+
+#: The package of mqtt_client's ``IsConnected`` service in each generation (2.x moved it).
+IS_CONNECTED_PACKAGE = {codec.WireGeneration.V1: "mqtt_client", codec.WireGeneration.V2: "mqtt_client_interfaces"}
+
+
+def is_connected_service_class(wire: codec.WireGeneration = codec.WireGeneration.V2) -> Type[Any]:
+    """mqtt_client's ``IsConnected`` service (empty request, ``bool connected``), built at run time with
+    mqtt_client's md5 so that its own clients can call this node. The type is
+    ``mqtt_client_interfaces/IsConnected`` in 2.x, ``mqtt_client/IsConnected`` in 1.x (same md5)."""
+    pkg = IS_CONNECTED_PACKAGE[wire]
+    ctx = genmsg.MsgContext.create_default()
+    spec = genmsg.msg_loader.load_srv_from_string(ctx, "---\nbool connected\n", f"{pkg}/IsConnected")
+    request = genpy.dynamic.generate_dynamic(f"{pkg}/IsConnectedRequest", "")[f"{pkg}/IsConnectedRequest"]
+    response = genpy.dynamic.generate_dynamic(f"{pkg}/IsConnectedResponse",
+                                              "bool connected\n")[f"{pkg}/IsConnectedResponse"]
+
+    class IsConnected:
+        _type = f"{pkg}/IsConnected"
+        _md5sum = genmsg.gentools.compute_md5(ctx, spec)
+        _request_class = request
+        _response_class = response
+
+    return IsConnected
+
+
+class _Problems:
+    """Bad input: the first of each (topic, kind) in words, then counted (and summarised every 30 s)."""
+
+    def __init__(self) -> None:
+        self._log = RateLimitedLog(_log, interval=30.0)
+        self._lock = threading.Lock()
+        self.counts: Dict[str, int] = collections.Counter()
+
+    def report(self, topic: str, kind: str, text: str) -> None:
+        with self._lock:
+            self.counts[kind] += 1
+        self._log.warning((topic, kind), text)
+
+
+class _Ros2Mqtt:
+    """One ROS topic sent to the broker."""
+
+    def __init__(self, bridge: "MqttBridge", p: Ros2MqttParams) -> None:
+        self.bridge, self.p = bridge, p
+        self.subscriber: Optional[micros_rt.Subscriber] = None
+        self.raw_subscriber: Optional[rospy.Subscriber] = None
+        self.data_class: Optional[Type[genpy.Message]] = None
+        self.announced_md5 = ""        # reset on reconnect: the retained announcement may be gone
+        self._built: Dict[str, Type[genpy.Message]] = {}
+        self.sent = 0
+
+    def attach(self, data_class: Type[genpy.Message]) -> None:
+        self.data_class = data_class
+        self.subscriber = self.bridge.nh.subscribe(self.p.ros_topic, data_class, self.on_ros, self.p.queue_size)
+        _log.info("micros_rt mqtt: ROS topic '%s' (%s) subscribed", self.p.ros_topic, data_class._type)
+
+    def attach_raw(self, type_name: str) -> None:
+        """A type whose package is not installed: take the serialized bytes (stock rospy's AnyMsg over
+        TCPROS, as mqtt_client's ShapeShifter) and the type from the connection header."""
+        self.raw_subscriber = rospy.Subscriber(self.p.ros_topic, rospy.AnyMsg, self.on_raw,
+                                               queue_size=self.p.queue_size)
+        _log.info("micros_rt mqtt: ROS topic '%s' (%s, not installed here: bridged as bytes) subscribed",
+                  self.p.ros_topic, type_name)
+
+    def on_raw(self, raw: Any) -> None:
+        header = getattr(raw, "_connection_header", None) or {}
+        t = codec.RosMsgType(header.get("md5sum", ""), header.get("type", ""), header.get("message_definition", ""))
+        msg = None
+        if self.p.primitive or self.p.json:
+            try:
+                cls = self._built.get(t.md5) or _message_class(t)
+                self._built[t.md5] = cls
+                msg = cls()
+                msg.deserialize(raw._buff)
+            except Exception as exc:  # genmsg/genpy: a definition or payload that does not parse
+                self.bridge.problems.report(self.p.ros_topic, "unknown_type", f"ROS topic {self.p.ros_topic}: "
+                                            f"cannot decode {t.name} from its connection header: {exc}")
+                return
+        self._send(t, raw._buff, msg)
+
+    def on_ros(self, msg: genpy.Message) -> None:
+        self._send(codec.RosMsgType.of(type(msg)), None, msg)
+
+    def _send(self, t: codec.RosMsgType, serialized: Optional[bytes], msg: Optional[genpy.Message]) -> None:
+        p = self.p
+        conn = self.bridge.connection
+        if p.primitive and msg is not None:
+            payload = codec.msg_to_text(msg).encode("utf-8")
+        elif p.json and msg is not None:
+            payload = codec.msg_to_json(msg).encode("utf-8")
+        else:
+            wire = self.bridge.params.wire
+            if self.announced_md5 != t.md5:
+                announcement = t.for_wire(wire, stamped=p.inject_timestamp)
+                conn.publish(codec.ROS_MSG_TYPE_PREFIX + p.mqtt_topic, codec.encode_msg_type(announcement),
+                             qos=p.qos, retain=True)
+                self.announced_md5 = t.md5
+            if serialized is None:
+                assert msg is not None
+                buf = io.BytesIO()
+                msg.serialize(buf)
+                serialized = buf.getvalue()
+            stamp = genpy.Time.from_sec(time.time()) if p.inject_timestamp else None
+            payload = codec.encode_ros_payload(serialized, wire=wire, stamp=stamp)
+        try:
+            if conn.publish(p.mqtt_topic, payload, qos=p.qos, retain=p.retained):
+                self.sent += 1
+        except ValueError as exc:   # paho: payload above MQTT's 256 MB limit
+            self.bridge.problems.report(p.ros_topic, "too_large",
+                                        f"ROS topic {p.ros_topic}: a {len(payload)}-byte message cannot be sent to "
+                                        f"MQTT topic '{p.mqtt_topic}': {exc}")
+
+
+#: Messages of one MQTT topic that wait for its worker thread (the oldest are dropped beyond, counted).
+WORKER_BACKLOG = 1000
+
+
+class _TopicWorker:
+    """One MQTT topic's handling, in arrival order, on a thread of its own instead of paho's network thread.
+
+    Handling a type announcement advertises the ROS topic: that registers with the master and waits (up to
+    SUBSCRIBER_WAIT) for the subscribers it lists; publishing can wait on a lossless ROS subscriber. On
+    paho's thread, which every MQTT topic of the bridge shares, either stalled all of them."""
+
+    def __init__(self, name: str, on_overflow: Callable[[int], None]) -> None:
+        self.name = name
+        self._items: Deque[Tuple[Callable[..., None], Tuple[Any, ...], bool]] = collections.deque()
+        self._cond = threading.Condition()
+        self._thread: Optional[threading.Thread] = None
+        self._closed = False
+        self._on_overflow = on_overflow
+        self.dropped = 0
+
+    def put(self, fn: Callable[..., None], *args: Any, droppable: bool = True) -> None:
+        """From paho's thread: never waits. Beyond WORKER_BACKLOG the oldest droppable item goes, counted."""
+        with self._cond:
+            if self._closed:
+                return
+            self._items.append((fn, args, droppable))
+            if len(self._items) > WORKER_BACKLOG:
+                for i, (_fn, _args, may_drop) in enumerate(self._items):
+                    if may_drop:
+                        del self._items[i]
+                        self.dropped += 1
+                        self._on_overflow(self.dropped)
+                        break
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name=f"micros_rt mqtt {self.name}", daemon=True)
+                self._thread.start()
+            self._cond.notify()
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._items and not self._closed:
+                    self._cond.wait()
+                if self._closed:
+                    return
+                fn, args, _ = self._items.popleft()
+            try:
+                fn(*args)
+            except Exception:
+                _log.exception("micros_rt mqtt: handling a message of MQTT topic '%s' failed (continuing)", self.name)
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._items.clear()
+            self._cond.notify()
+        thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(2.0)
+
+
+class _Mqtt2Ros:
+    """One MQTT topic published on ROS."""
+
+    def __init__(self, bridge: "MqttBridge", p: Mqtt2RosParams) -> None:
+        self.bridge, self.p = bridge, p
+        self.lock = threading.Lock()
+        self.publisher: Optional[micros_rt.Publisher] = None
+        self.data_class: Optional[Type[genpy.Message]] = None
+        self.md5 = ""
+        self.announced = False               # a type announcement was accepted: the payload form is known
+        self.stamped: Optional[bool] = None  # its stamped field (None: 1.x, payloads carry a flag byte)
+        self.pending: Deque[bytes] = collections.deque()
+        self.latency_pub: Optional[micros_rt.Publisher] = None
+        self.delivered = 0
+        self.worker = _TopicWorker(p.mqtt_topic, lambda n: bridge.problems.report(
+            p.mqtt_topic, "backlog", f"MQTT topic '{p.mqtt_topic}': more than {WORKER_BACKLOG} messages waited for "
+                                     f"the ROS side; dropped the oldest ({n} in all)"))
+        if p.ros_type:
+            cls = roslib.message.get_message_class(p.ros_type)
+            if cls is None:
+                raise micros_rt.TypeMappingError(
+                    f"bridge/mqtt2ros: ros_type '{p.ros_type}' of MQTT topic '{p.mqtt_topic}' is not an installed "
+                    "ROS message type")
+            self._advertise(cls)
+
+    # -- ROS side
+
+    def _advertise(self, cls: Type[genpy.Message]) -> None:
+        if self.publisher is not None:
+            self.publisher.unregister()
+        self.publisher = self.bridge.nh.advertise(self.p.ros_topic, cls, self.p.queue_size, latch=self.p.latched)
+        self.data_class, self.md5 = cls, cls._md5sum
+        _log.info("ROS publisher message type on topic '%s' set to '%s'", self.p.ros_topic, cls._type)
+        _await_subscribers(self.publisher)
+
+
+    def _publish(self, msg: genpy.Message) -> None:
+        assert self.publisher is not None
+        self.publisher.publish(msg)
+        self.delivered += 1
+
+    def _latency(self, stamp: genpy.Time) -> None:
+        if self.latency_pub is None:
+            self.latency_pub = self.bridge.nh.advertise("~latencies/" + self.p.ros_topic.lstrip("/"), Float64, 1)
+        self.latency_pub.publish(Float64(data=time.time() - stamp.to_sec()))
+
+    # -- MQTT side: paho's network thread hands over (never waits), the worker handles in order
+
+    def feed_type(self, topic: str, payload: bytes, properties: Any = None) -> None:
+        self.worker.put(self.on_type, topic, payload, droppable=False)
+
+    def feed_data(self, topic: str, payload: bytes, properties: Any = None) -> None:
+        self.worker.put(self.on_data, topic, payload)
+
+    def on_type(self, topic: str, payload: bytes, properties: Any = None) -> None:
+        problems = self.bridge.problems
+        try:
+            announced = codec.decode_msg_type(payload)
+        except codec.CodecError as exc:
+            problems.report(topic, "bad_type", f"MQTT topic '{topic}': type announcement does not decode: {exc}")
+            return
+        with self.lock:
+            if self.p.ros_type and announced.name != self.p.ros_type:
+                problems.report(topic, "type_mismatch",
+                                f"MQTT topic '{self.p.mqtt_topic}' announces {announced.name}, but ros_type is "
+                                f"{self.p.ros_type}: its messages are dropped")
+                self.md5, self.announced = "", False
+                return
+            if announced.md5 != self.md5:
+                try:
+                    cls = _message_class(announced)
+                except Exception as exc:  # genmsg/genpy raise several kinds for a bad definition
+                    problems.report(topic, "unknown_type", f"MQTT topic '{self.p.mqtt_topic}': cannot build ROS "
+                                    f"type {announced.name} from its announced definition: {exc}")
+                    return
+                self._advertise(cls)
+            if not self.announced or self.stamped != announced.stamped:
+                _log.info("MQTT topic '%s': peer speaks mqtt_client %s%s", self.p.mqtt_topic, announced.wire.label,
+                          "" if announced.stamped is None else
+                          (", stamped" if announced.stamped else ", not stamped"))
+            self.announced, self.stamped = True, announced.stamped
+            pending, self.pending = list(self.pending), collections.deque()
+        for data in pending:
+            self.on_data(self.p.mqtt_topic, data)
+
+    def on_data(self, topic: str, payload: bytes, properties: Any = None) -> None:
+        p = self.p
+        if p.primitive or p.json:
+            self._on_text(topic, payload)
+            return
+        with self.lock:
+            cls, stamped = self.data_class, self.stamped
+            if cls is None or not self.announced:
+                if len(self.pending) >= PENDING_LIMIT:
+                    self.pending.popleft()
+                    self.bridge.problems.report(topic, "no_type",
+                                                f"MQTT topic '{topic}': no ROS type announced yet on "
+                                                f"'{codec.ROS_MSG_TYPE_PREFIX}{topic}'; holding the newest "
+                                                f"{PENDING_LIMIT} messages, dropping older ones")
+                self.pending.append(payload)
+                return
+        try:
+            stamp, body = codec.decode_ros_payload(payload, stamped=stamped)
+            msg = cls()
+            msg.deserialize(bytes(body))
+            _check_length(msg, body)
+        except Exception as exc:  # genpy raises struct.error, DeserializationError, UnicodeDecodeError...
+            self.bridge.problems.report(topic, "malformed",
+                                        f"MQTT topic '{topic}': a {len(payload)}-byte payload does not decode as "
+                                        f"mqtt_client {'1.x' if stamped is None else '2.x'}'s {cls._type}: "
+                                        f"{exc or type(exc).__name__}")
+            return
+        if stamp is not None:
+            self._latency(stamp)
+        self._publish(msg)
+
+    def _on_text(self, topic: str, payload: bytes) -> None:
+        p = self.p
+        try:
+            text = payload.decode("utf-8")
+        except UnicodeDecodeError:
+            self.bridge.problems.report(topic, "malformed", f"MQTT topic '{topic}': payload is not UTF-8 text "
+                                        f"({len(payload)} bytes)")
+            return
+        try:
+            with self.lock:
+                if p.json:
+                    assert self.data_class is not None
+                    msg = codec.json_to_msg(text, self.data_class)
+                elif self.data_class is None:
+                    msg = codec.probe_primitive(text)
+                    self._advertise(type(msg))
+                else:
+                    msg = codec.text_to_msg(text, self.data_class)
+        except codec.CodecError as exc:
+            self.bridge.problems.report(topic, "unfit_text", f"MQTT topic '{topic}' -> ROS topic '{p.ros_topic}': "
+                                        f"{exc}")
+            return
+        self._publish(msg)
+
+
+def _check_length(msg: genpy.Message, body: memoryview) -> None:
+    """genpy trusts length prefixes: a string or array claiming more bytes than the buffer holds is read
+    short without complaint. A payload is well-formed only when its message serializes back to it."""
+    buf = io.BytesIO()
+    msg.serialize(buf)
+    if buf.tell() != len(body) or buf.getbuffer() != body:
+        raise ValueError(f"its {len(body)}-byte body does not re-encode to the same bytes (a length prefix "
+                         f"does not match the data, or trailing bytes)")
+
+
+def _await_subscribers(pub: micros_rt.Publisher, *, timeout: float = SUBSCRIBER_WAIT) -> None:
+    """Wait (bounded) until the subscribers the master lists for a new publisher's topic are connected, so
+    that the first message, published right after advertising, reaches them (mqtt_client loses it)."""
+    try:
+        _, subscribers, _ = rospy.get_master().getSystemState()[2]
+    except Exception as exc:  # master away: publish anyway
+        _log.debug("micros_rt mqtt: cannot ask the master for subscribers: %s", exc)
+        return
+    expected = sum(len(nodes) for topic, nodes in subscribers if topic == pub.resolved_name)
+    deadline = time.monotonic() + timeout
+    while pub.get_num_connections() < expected and time.monotonic() < deadline:
+        time.sleep(0.01)
+
+
+def _message_class(t: codec.RosMsgType) -> Type[genpy.Message]:
+    """The installed class when its md5 matches the announcement, else one built from the definition."""
+    cls = roslib.message.get_message_class(t.name)
+    if cls is not None and cls._md5sum == t.md5:
+        return cls  # type: ignore[no-any-return]
+    built = genpy.dynamic.generate_dynamic(t.name, t.definition)[t.name]
+    if built._md5sum != t.md5:
+        raise ValueError(f"the definition's md5 is {built._md5sum}, the announcement says {t.md5}")
+    return built  # type: ignore[no-any-return]
+
+
+class MqttBridge:
+    """The bridge; ``micros_rt.init_node`` must have been called. ``close()`` (or ``with``) stops it."""
+
+    def __init__(self, params: MqttParams, *, on_fatal: Optional[Callable[[str], None]] = None) -> None:
+        self.params = params
+        self.nh = micros_rt.NodeHandle()
+        self.problems = _Problems()
+        self._closed = threading.Event()
+        self.connection = MqttConnection(params, on_fatal=on_fatal, on_connection_change=self._connection_changed)
+        self.ros2mqtt = [_Ros2Mqtt(self, p) for p in params.ros2mqtt]
+        self.mqtt2ros = [_Mqtt2Ros(self, p) for p in params.mqtt2ros]
+        for r in self.ros2mqtt:
+            kind = "primitive " if r.p.primitive else "JSON " if r.p.json else ""
+            _log.info("Bridging %sROS topic '%s' to MQTT topic '%s'", kind, r.p.ros_topic, r.p.mqtt_topic)
+        for m in self.mqtt2ros:
+            kind = "primitive " if m.p.primitive else "JSON " if m.p.json else ""
+            _log.info("Bridging MQTT topic '%s' to %sROS topic '%s'", m.p.mqtt_topic, kind, m.p.ros_topic)
+            self.connection.subscribe(m.p.mqtt_topic, m.p.qos, m.feed_data)
+            if not (m.p.primitive or m.p.json):
+                self.connection.subscribe(codec.ROS_MSG_TYPE_PREFIX + m.p.mqtt_topic, m.p.qos, m.feed_type)
+        _log.info("micros_rt mqtt: writing mqtt_client %s payloads and type announcements "
+                  "(bridge/mqtt_client_version: %d); reading 1.x and 2.x", params.wire.label, int(params.wire))
+        self._service_class = is_connected_service_class(params.wire)
+        self._service = rospy.Service("~is_connected", self._service_class, self._is_connected)
+        self._resolver = threading.Thread(target=self._resolve_loop, name="micros_rt mqtt types", daemon=True)
+
+    def start(self) -> None:
+        """Connect to the broker (in the background) and start subscribing ROS topics as they appear."""
+        self.connection.start()
+        self._resolver.start()
+
+    def _is_connected(self, request: Any) -> Any:
+        return self._service_class._response_class(connected=self.connection.is_connected)
+
+    def _connection_changed(self, connected: bool) -> None:
+        if connected:
+            for r in self.ros2mqtt:
+                r.announced_md5 = ""    # the retained announcement may be gone with a restarted broker
+
+    def _resolve_loop(self) -> None:
+        while not self._closed.wait(RESOLVE_INTERVAL):
+            waiting = [r for r in self.ros2mqtt if r.subscriber is None and r.raw_subscriber is None]
+            if not waiting:
+                return
+            try:
+                published = dict(rospy.get_published_topics())
+            except Exception as exc:  # master away: try again
+                _log.debug("micros_rt mqtt: cannot ask the master for topic types: %s", exc)
+                continue
+            for r in waiting:
+                name = rospy.resolve_name(r.p.ros_topic)
+                type_name = published.get(name)
+                if type_name is None:
+                    continue
+                cls = roslib.message.get_message_class(type_name)
+                if cls is None:
+                    r.attach_raw(type_name)
+                else:
+                    r.attach(cls)
+
+    def counters(self) -> Dict[str, Any]:
+        """Counts: messages sent and delivered, each kind of bad input, the connection's counters."""
+        out: Dict[str, Any] = {"sent": {r.p.ros_topic: r.sent for r in self.ros2mqtt},
+                               "delivered": {m.p.ros_topic: m.delivered for m in self.mqtt2ros},
+                               "bad_input": dict(self.problems.counts)}
+        out.update(vars(self.connection.counters()))
+        return out
+
+    def close(self) -> None:
+        """Stop the bridge (disconnects cleanly, so no last will); harmless twice."""
+        if self._closed.is_set():
+            return
+        self._closed.set()
+        self.connection.close()
+        self._service.shutdown()
+        for r in self.ros2mqtt:
+            for sub in (r.subscriber, r.raw_subscriber):
+                if sub is not None:
+                    sub.unregister()
+        for m in self.mqtt2ros:
+            m.worker.close()
+            for pub in (m.publisher, m.latency_pub):
+                if pub is not None:
+                    pub.unregister()
+        _log.info("micros_rt mqtt: counters: %s", self.counters())
+
+    def __enter__(self) -> "MqttBridge":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+

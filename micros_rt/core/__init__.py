@@ -1,0 +1,9 @@
+"""The core every transport shares, once: per-topic publications and subscriptions (:mod:`.publication`,
+:mod:`.subscription`), the lanes between ``publish()`` and the transports (:mod:`.lanes`), the one admission
+path and delivery thread (:mod:`.delivery`, :mod:`.writers`), statistics (:mod:`.stats`), the endpoint
+registry (:mod:`.registry`), process state (:mod:`.runtime`), the introspection API the tools read
+(:mod:`.introspection`), and the only module that reaches rospy's internals (:mod:`.rospy_compat`, which also
+holds TCPROS as a transport).
+
+Nothing here is public API: import from :mod:`micros_rt`.
+"""

@@ -1,0 +1,161 @@
+"""Per-topic lanes: between ``publish()`` and a transport writer that can say "no room now".
+
+A transport priority is a promise about a topic, so back-pressure on one topic must never hold another.
+A lane sits in front of each :class:`~micros_rt.transports.base.BackPressuredWriter` of a publication
+(DDS today; any transport that implements ``try_send`` gets one) and keeps ``publish()`` the way
+rospy's is:
+
+- ``queue_size=N`` (KEEP_LAST): ``publish()`` never waits. When the writer has no room (a reliable
+  subscriber behind a slow link has not acknowledged enough), or the sample is large enough that sending
+  it waits on the network (a camera frame: hundreds of datagrams into a socket buffer that a slow link
+  drains), the lane keeps the newest N samples and a thread of its own sends them in order; a sample
+  superseded before it left is not sent, and is counted in ``Publisher.statistics().dropped`` (rospy's
+  queued publisher drops the same way, per connection).
+- ``queue_size=None`` (lossless): ``publish()`` waits until the writer takes the sample, bounded, and
+  waits in Python (:func:`~micros_rt.transports.base.send_with_backoff`), so the process's other threads
+  and topics go on meanwhile.
+
+The fast path (no back-pressure, nothing queued) is one ``try_send`` on the caller's thread: no thread
+hop, no lock. Priority scheduling between lanes (HIGH data first when a link is the bottleneck) belongs
+here too; it comes with the constrained-link work.
+"""
+
+from __future__ import annotations
+
+import collections
+import threading
+import time
+from typing import Any, Deque, Optional
+
+from ..transports.base import BACKOFF_FIRST, BACKOFF_MAX, BackPressuredWriter
+from ..log import nonblocking_logger
+
+__all__ = ["Lane", "LANE_IDLE_EXIT", "LANE_CLOSE_FLUSH"]
+
+_log = nonblocking_logger("rosout.micros_rt")
+
+#: A lane's thread ends after this many seconds with nothing to send (it starts again when needed).
+LANE_IDLE_EXIT = 2.0
+#: At close, what a lane still holds gets this many seconds to leave; the rest is dropped and counted.
+LANE_CLOSE_FLUSH = 1.0
+
+
+class Lane:
+    """One publication's lane to one back-pressured writer (see the module's text)."""
+
+    def __init__(self, writer: BackPressuredWriter, *, topic: str, depth: Optional[int]) -> None:
+        self.writer = writer
+        self.protocol = writer.protocol
+        self.topic = topic
+        self.depth = depth                      # None: lossless, publish() waits instead of queueing
+        self.dropped = 0                        # superseded before they left (KEEP_LAST)
+        self.delayed = 0                        # KEEP_LAST samples handed to the lane's thread
+        self._queue: Deque[Any] = collections.deque()
+        self._active = False                    # samples wait here: publish() must queue behind them
+        self._inflight: Any = None              # the sample the lane's thread is trying to send
+        self._superseded = False                # ... and newer ones pushed it out of the newest `depth`
+        self._cond = threading.Condition()
+        self._thread: Optional[threading.Thread] = None
+        self._closed = False
+        self._close_deadline = float("inf")
+        self._burst = 0                         # dropped since the last report
+
+    def prepare(self, msg: Any) -> Any:
+        return self.writer.prepare(msg)
+
+    def send(self, prepared: Any) -> None:
+        """From ``publish()`` (under the publication's lock: calls come one at a time)."""
+        if self.depth is None:
+            # lossless: nothing is ever queued here, so order holds; the writer waits (bounded) in Python
+            self.writer.send(prepared)
+            return
+        if not self._active and not self.writer.may_wait(prepared) and self.writer.try_send(prepared):
+            return
+        # no room, or a large sample whose sending waits on the network: the lane's thread sends it
+        self.delayed += 1
+        with self._cond:
+            self._active = True
+            self._queue.append(prepared)
+            pending = len(self._queue) + (1 if self._inflight is not None and not self._superseded else 0)
+            while pending > self.depth:
+                if self._inflight is not None and not self._superseded:
+                    self._superseded = True     # the oldest is the one the thread is trying: give it up
+                else:
+                    self._queue.popleft()
+                pending -= 1
+                self.dropped += 1
+                self._burst += 1
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name=f"micros_rt lane {self.topic}", daemon=True)
+                self._thread.start()
+            else:
+                self._cond.notify()
+
+    def _next(self, idle_since: float) -> Any:
+        """The sample to try (under the lock); None to stop the thread."""
+        with self._cond:
+            while True:
+                if self._inflight is not None and not self._superseded:
+                    return self._inflight
+                self._inflight, self._superseded = None, False
+                if self._queue:
+                    self._inflight = self._queue.popleft()
+                    return self._inflight
+                self._active = False
+                if self._closed or time.monotonic() - idle_since > LANE_IDLE_EXIT:
+                    self._thread = None
+                    return None
+                self._cond.wait(LANE_IDLE_EXIT / 4)
+
+    def _run(self) -> None:
+        pause = BACKOFF_FIRST
+        idle_since = time.monotonic()
+        while True:
+            item = self._next(idle_since)
+            if item is None:
+                return
+            try:
+                sent = self.writer.try_send(item)
+            except Exception:
+                _log.exception("micros_rt: topic %s: sending a queued %s sample failed; dropped", self.topic,
+                               self.protocol)
+                sent = True
+            if sent:
+                with self._cond:
+                    if self._inflight is item:
+                        if self._superseded:        # it left after all: not a drop
+                            self.dropped -= 1
+                            self._burst -= 1
+                        self._inflight, self._superseded = None, False
+                    burst, self._burst = self._burst, 0
+                if burst > 0:
+                    _log.warning("micros_rt: topic %s: %d %s samples were superseded before the link had room "
+                                 "for them and were not sent (queue_size=%d keeps the newest, as ROS does; %d in "
+                                 "all)", self.topic, burst, self.protocol, self.depth or 0, self.dropped)
+                pause = BACKOFF_FIRST
+                idle_since = time.monotonic()
+                continue
+            if self._closed and time.monotonic() > self._close_deadline:
+                with self._cond:
+                    lost = len(self._queue) + (1 if self._inflight is not None and not self._superseded else 0)
+                    self._queue.clear()
+                    self._inflight, self._superseded, self._active = None, False, False
+                    self.dropped += lost
+                    self._thread = None
+                if lost:
+                    _log.warning("micros_rt: topic %s: %d %s samples were still waiting for room when the "
+                                 "publisher closed; dropped", self.topic, lost, self.protocol)
+                return
+            time.sleep(pause)
+            pause = min(pause * 2, BACKOFF_MAX)
+
+    def close(self) -> None:
+        """Give what the lane holds :data:`LANE_CLOSE_FLUSH` seconds to leave, then close the writer."""
+        with self._cond:
+            self._close_deadline = time.monotonic() + LANE_CLOSE_FLUSH
+            self._closed = True
+            thread = self._thread
+            self._cond.notify()
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(LANE_CLOSE_FLUSH + 1.0)
+        self.writer.close()

@@ -1,0 +1,319 @@
+"""A micros_rt publication: per topic and process, the rospy publisher (master registration, TCPROS for
+stock peers and TCPROS-preferring subscribers) and a back-end writer (DDS) for micros_rt subscribers."""
+
+from __future__ import annotations
+
+import collections
+import struct
+import threading
+import time
+from typing import TYPE_CHECKING, Any, Dict, Optional, Tuple, Type
+
+import genpy
+import rospy
+import rospy.topics
+
+from . import rospy_compat as compat
+from .lanes import Lane
+from .registry import EndpointRegistry
+from .rospy_compat import short
+from .stats import PublisherStatistics
+from ..transports.base import BackPressuredWriter, EndpointSpec, ProfileBackend, TransportWriter
+from ..transports.marking import mark_socket
+from ..exceptions import MicrosRtError
+from ..negotiation import (
+    MAX_PENDING_DDS_OFFERS,
+    UNMATCHED_READER_TIMEOUT,
+    DDS,
+    DDSAnswer,
+    DDSOffer,
+    NegotiatedTransport,
+    PublicationFacts,
+    RateLimitedLog,
+    Verdict,
+    decide,
+    dds_transport,
+    remember_verdict,
+)
+from ..qos import AdvertiseQoSOptions, is_lossless, priority_tos
+from ..log import nonblocking_logger
+
+if TYPE_CHECKING:
+    from ..transports.dds.backend import DDSBackend, DDSTopicWriter
+
+__all__ = ["Publisher"]
+
+_log = nonblocking_logger("rosout.micros_rt")
+_housekeeping_log = RateLimitedLog(_log, interval=60.0)
+
+
+class _Publication:
+    """Per topic and process: the rospy publisher and the DDS writer. Owned by the registry."""
+
+    def __init__(self, topic: str, data_class: Type[genpy.Message], queue_size: Optional[int], latch: bool,
+                 options: AdvertiseQoSOptions, *, dds: "Optional[DDSBackend]", tag: Dict[str, str],
+                 extra: Tuple[ProfileBackend, ...] = ()) -> None:
+        self.topic = topic
+        self.data_class = data_class
+        self.latch = latch
+        self.options = options
+        self.queue_size = queue_size
+        self.lock = threading.Lock()
+        self.connections: Dict[str, compat.DDSConnection] = {}  # subscriber caller id -> DDS link
+        # links dropped because discovery had not matched their reader in time, by reader GUID (bounded)
+        self._expired: "collections.OrderedDict[str, compat.DDSConnection]" = collections.OrderedDict()
+        # the last DDS verdict per subscriber caller id, for `micros-rt topic info` (bounded)
+        self.verdicts: "collections.OrderedDict[str, Verdict]" = collections.OrderedDict()
+        self.published = 0
+        self.blocked_seconds = 0.0
+        self.tcpros: Optional[compat.TcprosWriter] = None
+        self.dds: "Optional[DDSTopicWriter]" = None
+        self._dds_backend = dds
+        if dds is not None:
+            try:
+                self.dds = dds.open_writer(EndpointSpec(topic, data_class, queue_size, latch, tag), options)
+            except MicrosRtError as exc:
+                _log.warning("micros_rt: topic %s will use TCPROS only: %s", topic, exc)
+        # writers of the transports the YAML profile attaches to this topic (MQTT): every message is mirrored
+        spec = EndpointSpec(topic, data_class, queue_size, latch, tag)
+        self.mirrors: Tuple[TransportWriter, ...] = tuple(
+            w for w in (b.open_writer(spec, options) for b in extra) if w is not None)
+        # the DDS writer, then the mirrors, each behind a lane when it can say "no room now" (DDS): one topic's
+        # back-pressure never holds another topic's publish(), and a KEEP_LAST publish() never waits (as rospy's)
+        depth = None if is_lossless(queue_size) else queue_size
+        self.senders: Tuple[TransportWriter, ...] = tuple(
+            Lane(w, topic=topic, depth=depth) if isinstance(w, BackPressuredWriter) else w
+            for w in ((self.dds,) if self.dds is not None else ()) + self.mirrors)
+        self.lanes = tuple(s for s in self.senders if isinstance(s, Lane))
+        #: every writer of the topic, in sending order: TCPROS first (rospy serializes inside its send and
+        #: raises before writing), then the senders
+        self.writers: Tuple[TransportWriter, ...] = ()
+
+    def start(self) -> None:
+        self.tcpros = compat.TcprosWriter(self.topic, self.data_class, self.queue_size, self.latch,
+                                          pseudo_links=self.connections.__len__)
+        self.writers = (self.tcpros,) + self.senders
+
+    # -- negotiation (XML-RPC threads) -------------------------------------
+    def facts(self) -> PublicationFacts:
+        dds = self.dds
+        with self.lock:
+            pending = sum(1 for c in self.connections.values() if not c.seen)
+        return PublicationFacts(
+            topic=self.topic, dds_topic=dds.dds_topic if dds else "",
+            domain=self._dds_backend.domain_id if dds is not None and self._dds_backend else None,
+            type_name=dds.dds_type.type_name if dds else "", md5=self.data_class._md5sum,
+            options=self.options, latch=self.latch, pending=pending)
+
+    def negotiated_transports(self, subscriber: str) -> Dict[str, NegotiatedTransport]:
+        """What ``requestTopic`` may negotiate for this topic with ``subscriber``: DDS, judged here."""
+        return {DDS: dds_transport(lambda offer: self.judge(offer, subscriber))}
+
+    def judge(self, offer: DDSOffer, subscriber: str) -> Tuple[Verdict, Optional[DDSAnswer]]:
+        verdict = decide(offer, self.facts(), subscriber=short(subscriber))
+        with self.lock:
+            remember_verdict(self.verdicts, short(subscriber, 256), verdict)
+        dds = self.dds
+        if not verdict.accepted or dds is None:
+            return verdict, None
+        # rospy's publisher may still be registering (a subscriber can ask the moment the master knows
+        # us): its topic impl already exists, which is all the pseudo-connection needs
+        info = (f"DDS connection on topic {dds.dds_topic} to reader {offer.reader} (writer {dds.guid}, "
+                f"{'best effort' if self.options.using_best_effort_protocol else 'reliable'}, "
+                f"priority {self.options.transport_priority.name})")
+        conn = compat.DDSConnection(self.topic, subscriber, "o", info, peer_guid=offer.reader,
+                                    on_close=self._connection_closed)
+        with self.lock:
+            old = self.connections.get(subscriber)
+            self.connections[subscriber] = conn
+        if old is not None:
+            compat.remove_pseudo_connection(self.topic, old, publisher=True)
+            old.close()
+        if not compat.add_pseudo_connection(self.topic, conn, publisher=True):
+            conn.close()
+            return Verdict(False, "closing", f"topic {self.topic}: no rospy publisher to attach the DDS link of "
+                                             f"{short(subscriber)} to (unregistered); using TCPROS"), None
+        assert self._dds_backend is not None
+        return verdict, DDSAnswer(writer=dds.guid, participant=self._dds_backend.participant.guid,
+                                  latch=self.latch, qos=self.options, node=compat.caller_id())
+
+    def on_tcpros_connection(self, conn: Any, sock: Any) -> None:
+        """A TCPROS subscriber connected (rospy thread): mark its socket with our transport priority."""
+        prio = self.options.transport_priority
+        if sock is not None and mark_socket(sock, prio):
+            _log.debug("micros_rt: topic %s: TCPROS link to %s marked TOS 0x%02x (%s)", self.topic,
+                       getattr(conn, "endpoint_id", "?"), priority_tos(prio), prio.name)
+
+    def _connection_closed(self, conn: compat.DDSConnection) -> None:
+        with self.lock:
+            if self.connections.get(conn.endpoint_id) is conn:
+                del self.connections[conn.endpoint_id]
+
+    def housekeeping(self, now: float) -> None:
+        """Drop DDS links whose reader went away, or that discovery never matched in time
+        (an offer nobody follows up must not stay a connection forever)."""
+        dds = self.dds
+        with self.lock:
+            conns = list(self.connections.values())
+        if dds is None or (not conns and not self._expired):
+            return
+        matched = dds.matched_peers()
+        for conn in conns:
+            if conn.peer_guid in matched:
+                conn.seen = True
+                continue
+            if conn.seen:
+                _log.debug("micros_rt: topic %s: DDS subscriber %s is gone", self.topic, short(conn.endpoint_id))
+            elif now - conn.created > UNMATCHED_READER_TIMEOUT:
+                _housekeeping_log.warning(
+                    (self.topic, "unmatched"),
+                    f"topic {self.topic}: DDS subscriber {short(conn.endpoint_id)} was accepted but its reader "
+                    f"{conn.peer_guid} never appeared in DDS discovery within {UNMATCHED_READER_TIMEOUT:.0f} s; "
+                    f"dropped the connection (check both nodes' ROS_IP/CYCLONEDDS_URI and ROS_DOMAIN_ID)")
+                self._expired[conn.peer_guid] = conn
+                while len(self._expired) > MAX_PENDING_DDS_OFFERS:
+                    self._expired.popitem(last=False)
+            else:
+                continue
+            compat.remove_pseudo_connection(self.topic, conn, publisher=True)
+            conn.close()
+        # a real subscriber on a slow or lossy network can be discovered after the bound: take it back
+        for guid in [g for g in self._expired if g in matched]:
+            old = self._expired.pop(guid)
+            if old.endpoint_id in self.connections:
+                continue
+            late = compat.DDSConnection(self.topic, old.endpoint_id, "o", old.info, peer_guid=guid,
+                                        on_close=self._connection_closed)
+            late.seen = True
+            with self.lock:
+                self.connections[old.endpoint_id] = late
+            if compat.add_pseudo_connection(self.topic, late, publisher=True):
+                _log.warning("micros_rt: topic %s: DDS subscriber %s was discovered late; connected again",
+                             self.topic, short(old.endpoint_id))
+            else:
+                late.close()
+
+    def ready_connections(self) -> int:
+        """Subscribers a message published now reaches: TCPROS links, and DDS subscribers whose
+        reader the writer has matched (negotiation precedes DDS discovery by a few milliseconds;
+        counting those early would let a "wait for a subscriber, then publish" loop lose its first
+        messages)."""
+        tcpros = self.tcpros
+        if tcpros is None:
+            return 0
+        with self.lock:
+            conns = list(self.connections.values())
+        n_tcp = max(tcpros.links() - len(conns), 0)
+        if not conns or self.dds is None:
+            return n_tcp
+        matched = self.dds.matched_peers()
+        return n_tcp + sum(1 for c in conns if c.peer_guid in matched)
+
+    # -- data ----------------------------------------------------------------
+    def publish(self, msg: Any) -> None:
+        """Refuse a bad message before anything is sent on any transport, then send it on each."""
+        tcpros = self.tcpros
+        if tcpros is None or tcpros.closed:
+            raise rospy.ROSException(f"publish() to a closed topic {self.topic}")
+        with tcpros.lock():
+            try:
+                # every writer prepares (serializes, may raise) before any sends; TCPROS, first, raises
+                # inside its send before it writes anything
+                prepared = [(w, w.prepare(msg)) for w in self.writers]
+                for writer, data in prepared:
+                    if data is None:
+                        continue  # nobody to send to on that transport
+                    t0 = time.monotonic()
+                    try:
+                        writer.send(data)
+                    finally:
+                        waited = time.monotonic() - t0
+                        if waited > 0.001:
+                            self.blocked_seconds += waited
+                self.published += 1
+            except (genpy.SerializationError, struct.error, TypeError, ValueError, AttributeError, OverflowError,
+                    UnicodeError) as exc:
+                raise rospy.ROSSerializationException(
+                    f"topic {self.topic}: cannot serialize {type(msg).__name__}: {exc}") from exc
+
+    def statistics(self) -> PublisherStatistics:
+        return PublisherStatistics(published=self.published, dropped=sum(lane.dropped for lane in self.lanes),
+                                   blocked_seconds=self.blocked_seconds)
+
+    def close(self) -> None:
+        """Release the DDS links and writer and unregister from rospy (the registry calls this once)."""
+        with self.lock:
+            conns = list(self.connections.values())
+        for conn in conns:
+            conn.close()
+        self.dds, self.mirrors = None, ()
+        senders, self.senders, self.writers = self.senders, (), ()
+        for sender in reversed(senders):
+            sender.close()  # a lane lets what it holds leave first, then closes its writer
+        if self.tcpros is not None:
+            try:
+                self.tcpros.close()
+            except Exception as exc:  # rospy at shutdown; the rest is released already
+                _log.warning("micros_rt: topic %s: rospy could not unregister the publisher: %s", self.topic, exc)
+
+
+class Publisher:
+    """Returned by :meth:`NodeHandle.advertise`; rospy's Publisher API."""
+
+    def __init__(self, pub: _Publication, registry: EndpointRegistry[_Publication]) -> None:
+        self._pub: Optional[_Publication] = pub
+        self._registry = registry
+        self.resolved_name = pub.topic
+        self.name = pub.topic
+        self.data_class = pub.data_class
+        self.type = pub.data_class._type
+        self.md5sum = pub.data_class._md5sum
+
+    @property
+    def qos(self) -> AdvertiseQoSOptions:
+        """The QoS this publisher's topic uses (after merging the YAML profile)."""
+        if self._pub is None:
+            raise rospy.ROSException("publisher is unregistered")
+        return self._pub.options
+
+    def publish(self, *args: Any, **kwds: Any) -> None:
+        """Publish a message (or its fields), to DDS readers and TCPROS peers alike.
+
+        Raises ``rospy.ROSSerializationException`` for a bad field value (nothing is sent then), and
+        :class:`micros_rt.PublishTimeoutError` when a lossless topic (``queue_size=None``) stays blocked
+        on a subscriber that does not keep up.
+        """
+        pub = self._pub
+        if pub is None:
+            raise rospy.ROSException("publish() to an unregistered() handle")
+        if len(args) == 1 and not kwds and type(args[0]) is pub.data_class:
+            pub.publish(args[0])  # the common case, without rospy's argument parsing
+        else:
+            pub.publish(rospy.topics.args_kwds_to_message(pub.data_class, args, kwds))
+
+    def get_num_connections(self) -> int:
+        """Subscribers this topic reaches now, over TCPROS and DDS (DDS ones once discovery matched them)."""
+        return 0 if self._pub is None else self._pub.ready_connections()
+
+    def get_dds_connections(self) -> int:
+        return 0 if self._pub is None else len(self._pub.connections)
+
+    def statistics(self) -> PublisherStatistics:
+        """Counters of this topic's publication (shared by the Publishers of the topic in this node)."""
+        if self._pub is None:
+            raise rospy.ROSException("publisher is unregistered")
+        return self._pub.statistics()
+
+    def unregister(self) -> None:
+        """Stop publishing; the topic's writer goes when its last Publisher does. Harmless twice."""
+        pub, self._pub = self._pub, None
+        if pub is not None:
+            self._registry.release(pub)
+
+    def __enter__(self) -> "Publisher":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.unregister()
+
+    close = unregister

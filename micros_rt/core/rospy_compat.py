@@ -1,0 +1,607 @@
+"""The one module that touches rospy's private ``rospy.impl`` layer.
+
+micros_rt plugs into ROS 1's protocol negotiation (``requestTopic``) on both
+sides:
+
+* publisher side: ``ROSHandler.requestTopic`` is wrapped; for a micros_rt
+  publication the 'DDS' entries a subscriber offers are judged by micros_rt
+  (accepted, or declined with a logged reason so the next protocol, TCPROS, is
+  tried); for everything else they are removed and rospy decides as usual.
+* subscriber side: ``ROSHandler._connect_topic`` is wrapped; for a micros_rt
+  subscription the protocol list follows the subscription's TransportHints and
+  a DDS answer creates a DDS pseudo-connection instead of a socket.
+
+Pseudo-connections live in rospy's own connection lists, so ``getBusInfo``
+(``rosnode info``), ``get_num_connections`` and ``has_connection`` stay true.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import itertools
+import socket
+import urllib.parse
+import logging
+import threading
+import time
+import xmlrpc.client
+from typing import Any, Callable, Dict, Iterator, List, Optional, Protocol, Tuple
+
+import rospy
+import rospy.core
+import rospy.impl.init
+import rospy.impl.masterslave as masterslave
+import rospy.names
+import rospy.topics
+import rosgraph
+from ..negotiation import DDS, TCPROS, DDSAnswer, DDSOffer, MalformedNegotiationError, RateLimitedLog, Verdict
+from ..negotiation import NegotiatedTransport, choose_protocol
+from rospy.impl.registration import (
+    RegManager,
+    Registration,
+    get_registration_listeners,
+    get_service_manager,
+    get_topic_manager,
+)
+from ..log import nonblocking_logger
+
+__all__ = [
+    "DDSConnection",
+    "MasterWatch",
+    "PublicationHook",
+    "SubscriptionHook",
+    "install",
+    "caller_id",
+    "add_pseudo_connection",
+    "add_node_api_method",
+    "prompt_registration_poll",
+    "bus_info",
+    "remove_pseudo_connection",
+    "short",
+    "transport_socket",
+    "ROSPY_PUBLISHER",
+    "ROSPY_SUBSCRIBER",
+    "dds_connections",
+    "latched_messages",
+    "set_publisher_tcp_nodelay",
+    "topic_impl",
+    "TcprosReader",
+    "TcprosWriter",
+]
+
+_log = nonblocking_logger("rosout.micros_rt.negotiation")
+
+_ids = itertools.count(100000)
+
+
+class PublicationHook(Protocol):
+    """What the publisher side of the negotiation asks a micros_rt publication."""
+
+    def negotiated_transports(self, subscriber: str) -> Dict[str, NegotiatedTransport]:
+        """The transports this publication negotiates with ``subscriber``, by protocol name (DDS)."""
+
+    def on_tcpros_connection(self, conn: Any, sock: Any) -> None:
+        """A TCPROS subscriber connected (mark its socket)."""
+
+
+class SubscriptionHook(Protocol):
+    """What the subscriber side of the negotiation asks a micros_rt subscription."""
+
+    def offered_protocols(self) -> List[List[Any]]:
+        """Protocol entries to offer, in preference order, e.g. [['DDS', {...}], ['TCPROS']]."""
+
+    def connect_dds(self, pub_uri: str, answer: DDSAnswer) -> Tuple[int, str, int]:
+        """Create the DDS pseudo-connection after the publisher accepted DDS."""
+
+
+_find_publication: Callable[[str], Optional[PublicationHook]] = lambda topic: None
+_find_subscription: Callable[[str], Optional[SubscriptionHook]] = lambda topic: None
+_install_lock = threading.Lock()
+_installed = False
+_declines = RateLimitedLog(_log)
+
+
+def short(text: str, limit: int = 80) -> str:
+    """A remote-supplied string cut for a log line (a caller id can be a megabyte long)."""
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def caller_id() -> str:
+    return str(rospy.names.get_caller_id())
+
+
+class DDSConnection:
+    """A connection in rospy's bookkeeping whose data flows over DDS.
+
+    It has no socket (``fileno()`` is None) and writes nothing: the DDS writer
+    carries the data once for every DDS reader, however many of these exist.
+    """
+
+    transport_type = "DDS"
+    #: rospy's connection interface: ``Subscriber.add_callback`` replays each connection's ``latch`` (#1852).
+    #: A second rospy Subscriber of a topic made while DDS links are being added read it and raised
+    #: AttributeError (a 30-node graph lost a node to it). The latched DDS message is replayed by the
+    #: subscription itself (``_Subscription.replay_latched``), from its writer's state.
+    latch = None
+
+    def __init__(self, topic: str, endpoint_id: str, direction: str, info: str, peer_guid: str = "",
+                 on_close: Optional[Callable[["DDSConnection"], None]] = None) -> None:
+        self.id = next(_ids)
+        self.peer_guid = peer_guid  # the DDS reader (publisher side) or writer (subscriber side)
+        self.seen = False  # has DDS discovery matched the peer yet?
+        self.created = time.monotonic()
+        self.name = topic
+        self.endpoint_id = endpoint_id
+        self.direction = direction  # 'i' inbound (subscriber side) / 'o' outbound
+        self.info = info
+        self.done = False
+        self.cleanup_cb: Optional[Callable[[Any], None]] = None
+        self.stat_bytes = 0
+        self.stat_num_msg = 0
+        self.callerid_pub = endpoint_id
+        self._on_close = on_close
+
+    def fileno(self) -> None:
+        return None
+
+    def get_transport_info(self) -> str:
+        return self.info
+
+    def set_cleanup_callback(self, cb: Callable[[Any], None]) -> None:
+        self.cleanup_cb = cb
+
+    def write_data(self, data: bytes) -> bool:
+        return True
+
+    def close(self) -> None:
+        if self.done:
+            return
+        self.done = True
+        if self._on_close is not None:
+            self._on_close(self)
+        if self.cleanup_cb is not None:
+            try:
+                self.cleanup_cb(self)
+            except Exception:  # rospy's own cleanup; never break our close
+                _log.debug("cleanup callback failed", exc_info=True)
+
+
+def add_pseudo_connection(topic: str, conn: DDSConnection, *, publisher: bool) -> bool:
+    """Put ``conn`` into rospy's connection list of ``topic``.
+
+    On the publisher side the base ``_TopicImpl.add_connection`` is used on purpose:
+    ``_PublisherImpl.add_connection`` would wrap it in a queue thread and re-send the
+    latched message through rospy, while DDS durability already does that.
+    """
+    tm = get_topic_manager()
+    impl = tm.get_publisher_impl(topic) if publisher else tm.get_subscriber_impl(topic)
+    if impl is None:
+        return False
+    return bool(rospy.topics._TopicImpl.add_connection(impl, conn))
+
+
+def remove_pseudo_connection(topic: str, conn: DDSConnection, *, publisher: bool) -> None:
+    tm = get_topic_manager()
+    impl = tm.get_publisher_impl(topic) if publisher else tm.get_subscriber_impl(topic)
+    if impl is not None and conn in impl.connections:
+        impl.remove_connection(conn)
+
+
+#: rospy's own endpoint classes, taken before anything can replace them: ``micros-rt run`` puts
+#: micros_rt's drop-in classes in ``rospy.Publisher``/``rospy.Subscriber``, and micros_rt's TCPROS
+#: side must not construct those (it would call itself).
+ROSPY_PUBLISHER: Any = rospy.topics.Publisher
+ROSPY_SUBSCRIBER: Any = rospy.topics.Subscriber
+
+
+def topic_impl(topic: str, *, publisher: bool) -> Any:
+    """rospy's per-topic implementation object (what a rospy Publisher/Subscriber calls ``impl``), or None."""
+    tm = get_topic_manager()
+    return tm.get_publisher_impl(topic) if publisher else tm.get_subscriber_impl(topic)
+
+
+def set_publisher_tcp_nodelay(topic: str) -> None:
+    """rospy.Publisher(tcp_nodelay=True): TCP_NODELAY on this topic's TCPROS subscriber sockets."""
+    from rospy.impl.tcpros import get_tcpros_handler
+
+    get_tcpros_handler().set_tcp_nodelay(topic, True)
+
+
+def configure_publisher_impl(impl: Any, *, headers: Optional[Dict[str, str]] = None,
+                             subscriber_listener: Any = None) -> None:
+    """rospy.Publisher(headers=..., subscriber_listener=...) on rospy's per-topic publisher ``impl``."""
+    if impl is None:
+        return
+    if headers:
+        impl.add_headers(headers)
+    if subscriber_listener is not None:
+        impl.add_subscriber_listener(subscriber_listener)  # TCPROS subscribers (rospy calls it)
+
+
+def configure_subscriber_impl(impl: Any, *, buff_size: Optional[int] = None, tcp_nodelay: bool = False) -> None:
+    """rospy.Subscriber(buff_size=..., tcp_nodelay=...) on rospy's per-topic subscriber ``impl`` (its TCPROS
+    side reads both when it connects to a publisher)."""
+    if impl is None:
+        return
+    if buff_size is not None:
+        impl.set_buff_size(buff_size)
+    if tcp_nodelay:
+        impl.set_tcp_nodelay(True)
+
+
+def latched_messages(topic: str) -> List[Any]:
+    """The last message of each latching TCPROS publisher connected to subscribed ``topic`` (rospy keeps
+    it on the connection for callbacks added later)."""
+    impl = topic_impl(topic, publisher=False)
+    return [] if impl is None else [c.latch for c in list(impl.connections) if getattr(c, "latch", None) is not None]
+
+
+def dds_connections(topic: str, *, publisher: bool) -> List[DDSConnection]:
+    """The DDS pseudo-connections of ``topic`` in rospy's connection list."""
+    impl = topic_impl(topic, publisher=publisher)
+    return [] if impl is None else [c for c in list(impl.connections) if isinstance(c, DDSConnection)]
+
+
+def bus_info(topic: str, *, publisher: bool) -> List[Tuple[str, str, str]]:
+    """(endpoint id, transport, info) of each connection of ``topic`` in rospy's lists, as ``getBusInfo``
+    sees them: the subscriber's caller id (publisher side) or the publisher's URI (subscriber side)."""
+    tm = get_topic_manager()
+    impl = tm.get_publisher_impl(topic) if publisher else tm.get_subscriber_impl(topic)
+    if impl is None:
+        return []
+    return [(str(c.endpoint_id), str(getattr(c, "transport_type", TCPROS)), str(c.get_transport_info()))
+            for c in list(impl.connections)]
+
+
+def add_node_api_method(name: str, method: Callable[[str], List[Any]]) -> None:
+    """Answer the XML-RPC method ``name(caller_id)`` on this node's API, beside ``getBusInfo``: rospy's
+    server dispatches a call to the ``ROSHandler`` attribute of that name (idempotent)."""
+    setattr(masterslave.ROSHandler, name, lambda self, caller_id, *_: method(caller_id))
+
+
+class TimeoutTransport(xmlrpc.client.Transport):
+    # rospy sets a process-wide socket timeout for this call; a per-connection
+    # timeout keeps user sockets out of it.
+    def __init__(self, timeout: float) -> None:
+        super().__init__()
+        self._timeout = timeout
+
+    def make_connection(self, host: Any) -> Any:
+        conn = super().make_connection(host)
+        conn.timeout = self._timeout
+        return conn
+
+
+def _request_topic(pub_uri: str, topic: str, protocols: List[List[Any]]) -> Tuple[int, str, Any]:
+    interval = 0.5
+    deadline = time.monotonic() + 60.0
+    while not rospy.core.is_shutdown():
+        proxy = xmlrpc.client.ServerProxy(pub_uri, transport=TimeoutTransport(10.0), allow_none=False)
+        try:
+            answer: Any = proxy.requestTopic(caller_id(), topic, protocols)
+            code, msg, result = answer
+            return int(code), str(msg), result
+        except OSError as exc:
+            if exc.errno == errno.ECONNREFUSED or time.monotonic() > deadline:
+                return -1, f"publisher {pub_uri} unreachable: {exc}", None
+        except (xmlrpc.client.Fault, xmlrpc.client.ProtocolError, ValueError, TypeError) as exc:
+            return -1, f"publisher {pub_uri} gave a malformed requestTopic answer: {exc}", None
+        time.sleep(interval)
+        interval = min(interval * 2, 8.0)
+    return -1, "node is shutting down", None
+
+
+def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
+    def _connect_topic(self: Any, topic: str, pub_uri: str) -> Any:
+        hook = _find_subscription(topic)
+        if hook is None:
+            return original(self, topic, pub_uri)
+        sub = get_topic_manager().get_subscriber_impl(topic)
+        if not sub:
+            return -1, f"No subscriber for topic [{topic}]", 0
+        already = f"_connect_topic[{topic}]: subscriber already connected to publisher [{pub_uri}]"
+        existing = next((c for c in list(sub.connections) if c.endpoint_id == pub_uri), None)
+        if existing is not None and not isinstance(existing, DDSConnection):
+            return 1, already, 0
+        # An existing DDS link is asked again: the publisher may have unregistered and advertised the
+        # topic anew (same node, same URI, a new DDS writer) faster than its old writer was seen to go.
+        protocols = hook.offered_protocols()
+        if not protocols:
+            return 0, "ERROR: no protocol allowed by the TransportHints", 0
+        code, msg, result = _request_topic(pub_uri, topic, protocols)
+        if code <= 0:
+            offered = [p[0] for p in protocols]
+            if TCPROS not in offered:
+                _log.warning(
+                    "micros_rt: topic %s: publisher %s cannot use %s (%s); it is probably a stock ROS node. "
+                    "Nothing is received from it: add .tcp() to the TransportHints to accept TCPROS.",
+                    topic, pub_uri, "/".join(offered), short(msg, 200))
+            else:
+                _log.warning("micros_rt: topic %s: publisher %s refused the connection: %s", topic, pub_uri,
+                             short(msg, 200))
+            return code, msg, 0
+        if not isinstance(result, list) or not result or not isinstance(result[0], str):
+            _log.warning("micros_rt: publisher %s answered requestTopic for %s with %s; ignoring it",
+                         pub_uri, topic, short(repr(result)))
+            return 0, "ERROR: publisher returned invalid protocol choice", 0
+        if result[0] == DDS:
+            try:
+                answer = DDSAnswer.from_xmlrpc(result[1] if len(result) > 1 else None, source=f"publisher {pub_uri}")
+            except MalformedNegotiationError as exc:
+                _log.warning("micros_rt: topic %s: publisher %s accepted DDS with a malformed answer (%s); "
+                             "not connected to it", topic, pub_uri, exc)
+                return 0, "malformed DDS answer", 0
+            if existing is not None:
+                if existing.peer_guid == answer.writer:
+                    return 1, already, 0
+                remove_pseudo_connection(topic, existing, publisher=False)
+                existing.close()
+            return hook.connect_dds(pub_uri, answer)
+        if existing is not None:
+            return 1, already, 0  # keep the DDS link; a TCPROS answer now would be a second link
+        for h in self.protocol_handlers:
+            if h.supports(result[0]):
+                return h.create_transport(topic, pub_uri, result)
+        return 0, f"ERROR: publisher returned unsupported protocol choice: {short(repr(result))}", 0
+
+    return _connect_topic
+
+
+def _wrapped_request_topic(original: Callable[..., Any]) -> Callable[..., Any]:
+    def requestTopic(self: Any, caller_id: str, topic: str, protocols: Any) -> Any:
+        if not isinstance(protocols, list) or not isinstance(caller_id, str) or not isinstance(topic, str):
+            return original(self, caller_id, topic, protocols)
+        # resolve like rospy's _remap_table does for 'topic' before we look it up
+        resolved = rospy.names.resolve_name(topic, caller_id)
+        hook = _find_publication(resolved)
+        negotiated = {} if hook is None else hook.negotiated_transports(caller_id)
+        choice = choose_protocol(protocols, negotiated=negotiated, subscriber=short(caller_id),
+                                 supports=lambda name: any(h.supports(name) for h in self.protocol_handlers),
+                                 topic=short(resolved))
+        for verdict in choice.declined:
+            _declines.warning((short(caller_id, 256), verdict.kind), verdict.reason, group=verdict.kind.split(":")[0])
+        if choice.answer is not None:
+            return 1, f"ready on {choice.protocol}", choice.answer.to_xmlrpc()
+        if choice.entry is not None:
+            return original(self, caller_id, topic, [choice.entry])
+        return 0, "no supported protocol implementations", []
+
+    requestTopic.__doc__ = original.__doc__
+    return requestTopic
+
+
+def transport_socket(conn: Any) -> Any:
+    """The socket of a rospy TCPROS transport (also through rospy's QueuedConnection), or None."""
+    for _ in range(3):
+        sock = getattr(conn, "socket", None)
+        if sock is not None:
+            return sock
+        conn = getattr(conn, "_connection", None)
+        if conn is None:
+            return None
+    return None
+
+
+def _wrapped_publisher_add_connection(original: Callable[..., Any]) -> Callable[..., Any]:
+    # Publisher side: every accepted TCPROS subscriber link passes here (before rospy wraps it in a
+    # QueuedConnection); micros_rt publications mark the socket with their transport priority.
+    def add_connection(self: Any, c: Any) -> Any:
+        hook = _find_publication(getattr(self, "resolved_name", ""))
+        if hook is not None and getattr(c, "transport_type", "TCPROS") != DDS:
+            try:
+                hook.on_tcpros_connection(c, transport_socket(c))
+            except Exception:
+                _log.warning("micros_rt: topic %s: could not mark a TCPROS connection", self.resolved_name,
+                             exc_info=True)
+        return original(self, c)
+
+    add_connection.__doc__ = original.__doc__
+    return add_connection
+
+
+class MasterWatch:
+    """Notices a ROS master that went away or restarted, and re-registers this node with it.
+
+    rospy registers once; after a master restart the node is invisible (no new connections,
+    ``rosnode list`` misses it). Data already flowing keeps flowing meanwhile: DDS needs no
+    master at all, and TCPROS links stay up.
+
+    Cheap on the master: every ``period`` a TCP connect to its port (no XML-RPC work for it); the
+    master's pid (``getPid``) only every ``pid_period`` and when it answers again after being away.
+    On a graph of 30 nodes a getPid per node per second cost the master 3.5% of a core.
+    """
+
+    def __init__(self, uri: Optional[str] = None, period: float = 1.0, pid_period: float = 10.0) -> None:
+        self.uri = uri or str(rosgraph.get_master_uri())
+        self.period = period
+        self.pid_period = pid_period
+        self._next = 0.0
+        self._next_pid = 0.0
+        self._pid: Optional[int] = None
+        self._down_since: Optional[float] = None
+        parsed = urllib.parse.urlparse(self.uri)
+        self._address = (parsed.hostname or "localhost", parsed.port or 11311)
+
+    def _reachable(self) -> bool:
+        try:
+            with socket.create_connection(self._address, timeout=1.0):
+                return True
+        except OSError:
+            return False
+
+    def _master_pid(self) -> Optional[int]:
+        proxy = xmlrpc.client.ServerProxy(self.uri, transport=TimeoutTransport(2.0))
+        try:
+            answer: Any = proxy.getPid(caller_id())
+            code, _msg, pid = answer
+            return int(pid) if code == 1 else None
+        except (OSError, xmlrpc.client.Error, ValueError, TypeError):
+            return None
+
+    def check(self) -> None:
+        now = time.monotonic()
+        if now < self._next:
+            return
+        self._next = now + self.period
+        reachable = self._reachable()
+        if reachable and self._down_since is None and now < self._next_pid:
+            return  # up, as it was: the pid is checked every pid_period only
+        self._next_pid = now + self.pid_period
+        pid = self._master_pid() if reachable else None
+        if pid is None:
+            if self._down_since is None:
+                self._down_since = now
+                _log.warning("micros_rt: the ROS master at %s does not answer; connections already made keep "
+                             "delivering (DDS needs no master), new ones wait for it", self.uri)
+            return
+        restarted = self._pid is not None and pid != self._pid
+        back = self._down_since is not None
+        self._pid = pid
+        self._down_since = None
+        if restarted or back:
+            counts = reregister_all()
+            _log.warning("micros_rt: the ROS master at %s is back%s; re-registered %d publications, "
+                         "%d subscriptions and %d services", self.uri, " (restarted)" if restarted else "",
+                         *counts)
+
+
+def _reg_manager() -> Any:
+    for listener in get_registration_listeners().listeners:
+        if isinstance(listener, RegManager):
+            return listener
+    return None
+
+
+def reregister_all() -> Tuple[int, int, int]:
+    """Register every publication, subscription and service of this node again with the master."""
+    reg = _reg_manager()
+    if reg is None:
+        return 0, 0, 0
+    tm = get_topic_manager()
+    pubs = tm.get_publications()
+    subs = tm.get_subscriptions()
+    srvs = get_service_manager().get_services()
+    for name, type_ in pubs:
+        reg.reg_added(name, type_, Registration.PUB)
+    for name, type_ in subs:
+        reg.reg_added(name, type_, Registration.SUB)  # also connects to the publishers it returns
+    for name, uri in srvs:
+        reg.reg_added(name, uri, Registration.SRV)
+    return len(pubs), len(subs), len(srvs)
+
+
+class _PromptPoll:
+    """``time`` as ``rospy.impl.init`` sees it while a node starts, with a finer registration poll.
+
+    ``start_node`` checks whether the master registration is done, and if not sleeps 0.1 s. The
+    registration takes a few milliseconds on a local master, so whenever the first check came too
+    early a node's start lost ~95 ms (measured: ``init_node`` 10 ms or 110 ms, run to run). Here the
+    sleeps start at 2 ms and double up to rospy's 0.1 s, so a master that is down costs no more
+    wake-ups than before."""
+
+    def __init__(self) -> None:
+        self._step = 0.002
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(time, name)
+
+    def sleep(self, seconds: float) -> None:
+        if seconds < self._step:
+            time.sleep(seconds)
+            return
+        time.sleep(self._step)
+        self._step = min(self._step * 2, seconds)
+
+
+@contextlib.contextmanager
+def prompt_registration_poll() -> Iterator[None]:
+    """Within this block, ``rospy.init_node`` notices its master registration within milliseconds."""
+    module: Any = rospy.impl.init
+    original = module.time
+    module.time = _PromptPoll()
+    try:
+        yield
+    finally:
+        module.time = original
+
+
+def install(find_publication: Callable[[str], Optional[PublicationHook]],
+            find_subscription: Callable[[str], Optional[SubscriptionHook]]) -> None:
+    """Wrap rospy's negotiation once per process (idempotent); hooks are looked up by resolved topic
+    name through the two functions (the endpoint registry owns the endpoints)."""
+    global _installed, _find_publication, _find_subscription
+    with _install_lock:
+        _find_publication, _find_subscription = find_publication, find_subscription
+        if _installed:
+            return
+        handler_cls = masterslave.ROSHandler
+        handler_cls._connect_topic = _wrapped_connect_topic(handler_cls._connect_topic)
+        handler_cls.requestTopic = _wrapped_request_topic(handler_cls.requestTopic)
+        pub_cls = rospy.topics._PublisherImpl
+        pub_cls.add_connection = _wrapped_publisher_add_connection(pub_cls.add_connection)
+        _installed = True
+
+
+class TcprosWriter:
+    """TCPROS, rospy's own transport, for one publication: the rospy Publisher (master registration too)
+    behind the transport writer methods (:class:`micros_rt.transports.base.TransportWriter`).
+
+    rospy serializes inside ``publish`` and raises ``genpy.SerializationError`` before writing anything,
+    so :meth:`prepare` hands the message through and a publication sends TCPROS first. rospy's list of
+    connections also holds micros_rt's DDS pseudo-connections (``pseudo_links()`` counts them): with no
+    TCPROS link left and no latch, there is nothing to send."""
+
+    protocol = TCPROS
+
+    def __init__(self, topic: str, data_class: Any, queue_size: Optional[int], latch: bool, *,
+                 pseudo_links: Callable[[], int]) -> None:
+        self.latch = latch
+        self._pub = ROSPY_PUBLISHER(topic, data_class, queue_size=queue_size, latch=latch)
+        self._impl = self._pub.impl
+        self._pseudo_links = pseudo_links
+        self.guid = topic
+
+    @property
+    def closed(self) -> bool:
+        return self._impl is None or bool(self._impl.closed)
+
+    def links(self) -> int:
+        """Connections in rospy's list: TCPROS links and micros_rt's DDS pseudo-connections."""
+        return 0 if self._impl is None else len(self._impl.connections)
+
+    def lock(self) -> Any:
+        """rospy's publish lock (ordering of publish() calls across threads)."""
+        return self._impl.publock
+
+    def prepare(self, msg: Any) -> Any:
+        if self.latch or len(self._impl.connections) > self._pseudo_links():
+            return msg
+        return None
+
+    def send(self, msg: Any) -> None:
+        """Publish to the TCPROS links (rospy keeps the latched message even when there are none)."""
+        self._impl.publish(msg)
+
+    def close(self) -> None:
+        self._pub.unregister()
+
+
+class TcprosReader:
+    """TCPROS for one subscription: the rospy Subscriber (registration, negotiation, receive threads)."""
+
+    protocol = TCPROS
+
+    def __init__(self, topic: str, data_class: Any, callback: Callable[[Any], None],
+                 queue_size: Optional[int]) -> None:
+        self._sub = ROSPY_SUBSCRIBER(topic, data_class, callback, queue_size=queue_size)
+
+    def transports(self) -> dict[str, str]:
+        """Publisher URI -> 'DDS' or 'TCPROS' for every current connection."""
+        impl = self._sub.impl
+        if impl is None:
+            return {}
+        return {c.endpoint_id: getattr(c, "transport_type", TCPROS) for c in impl.connections}
+
+    def close(self) -> None:
+        self._sub.unregister()

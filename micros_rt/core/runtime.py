@@ -1,0 +1,109 @@
+"""Process-wide state of the micros_rt node (one per process, as in rospy): the endpoint registries,
+the DDS back end, the graph id and the YAML profile."""
+
+from __future__ import annotations
+
+import logging
+import os
+import threading
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Optional
+
+import rospy
+
+from .registry import EndpointRegistry
+from ..transports.dds.participant import get_participant
+from ..exceptions import NodeNotInitializedError
+from ..qos import QoSProfile
+from ..log import nonblocking_logger
+
+if TYPE_CHECKING:
+    from .publication import _Publication
+    from .subscription import _Subscription
+    from ..transports.dds.backend import DDSBackend
+
+_log = nonblocking_logger("rosout.micros_rt")  # rospy prints it and sends it to /rosout
+
+
+@dataclass
+class _NodeState:
+    initialized: bool = False
+    graph: str = ""
+    profile: Optional[QoSProfile] = None
+    publications: "EndpointRegistry[_Publication]" = field(default_factory=lambda: EndpointRegistry("publication"))
+    subscriptions: "EndpointRegistry[_Subscription]" = field(
+        default_factory=lambda: EndpointRegistry("subscription"))
+    lock: threading.RLock = field(default_factory=threading.RLock)
+    dds: "Optional[DDSBackend]" = None
+    dds_start: Optional[threading.Thread] = None
+
+
+_node = _NodeState()
+
+
+def _graph_id() -> str:
+    # The master's run_id names this ROS graph; the master URI makes it unique
+    # even when a run_id is reused. Readers drop micros_rt writers of other graphs.
+    try:
+        run_id = str(rospy.get_param("/run_id"))
+    except (KeyError, OSError, rospy.ROSException):
+        run_id = "norunid"
+    uri = os.environ.get("ROS_MASTER_URI", "")
+    return f"{run_id}@{uri}".replace(";", "_").replace("=", "_")[:200]
+
+
+def _require_node() -> None:
+    """The node is ready for a topic: initialised, and the DDS import that ``init_node`` started finished."""
+    if not _node.initialized:
+        raise NodeNotInitializedError("call micros_rt.init_node(name) before advertising or subscribing")
+    # cyclonedds's modules import each other in a cycle: a second thread importing them meanwhile meets one
+    # half-initialised ("cannot import name 'DcpsEndpoint' from partially initialized module
+    # 'cyclonedds.builtin_types'", once in 180 benchmark phases: a subscribe right after init_node)
+    wait_dds_started()
+
+
+def start_dds_early() -> None:
+    """Import the DDS back end on a background thread while rospy registers the node with the master.
+
+    Importing cyclonedds and micros_rt's DDS modules takes 80-200 ms of a node's start, and the node's
+    first ``advertise`` or ``subscribe`` waited for it; ``init_node`` spends a good part of that waiting
+    on the master's answers. The participant itself (~3 ms) is still created by the first topic, after
+    rospy's logging is set up, so a DDS that cannot start is reported as before. rospy's ``init_node``
+    imports only configparser and encodings.idna meanwhile, and the first topic waits for this thread
+    (:func:`_require_node`), so no two threads import cyclonedds at once."""
+    if os.environ.get("MICROS_RT_DISABLE_DDS", "") not in ("", "0"):
+        return
+
+    def start() -> None:
+        try:
+            import cyclonedds.domain  # noqa: F401
+            from ..transports.dds import backend  # noqa: F401
+        except Exception:  # the first topic imports them again and reports what is wrong, in words
+            pass
+
+    thread = threading.Thread(target=start, name="micros_rt DDS import", daemon=True)
+    with _node.lock:
+        _node.dds_start = thread
+    thread.start()
+
+
+def wait_dds_started(timeout: float = 10.0) -> None:
+    """Let the early import finish (before the participant is closed, at shutdown)."""
+    thread = _node.dds_start
+    if thread is not None and thread is not threading.current_thread():
+        thread.join(timeout)
+        if not thread.is_alive():
+            _node.dds_start = None
+
+
+def dds_backend() -> "Optional[DDSBackend]":
+    """The DDS back end of this process (created with the participant), or None without DDS."""
+    participant = get_participant()
+    if participant is None:
+        return None
+    with _node.lock:
+        if _node.dds is None or _node.dds.participant is not participant:
+            from ..transports.dds.backend import DDSBackend
+
+            _node.dds = DDSBackend(participant, str(rospy.get_caller_id()))
+        return _node.dds

@@ -1,0 +1,150 @@
+"""Exactly-once delivery: which DDS writers' samples a subscription delivers, holds or drops, and the
+state it keeps per writer (one object, dropped when the writer goes).
+
+A micros_rt reader hears every micros_rt writer of the topic on the DDS domain, but delivers only
+samples of writers whose publisher accepted DDS in the negotiation with *this* node; the others reach
+it over TCPROS, or not at all (another ROS graph on the same domain). Samples that arrive before the
+negotiation's answer are held, bounded, and delivered first when it arrives. Writers without a
+micros_rt tag (ROS 2 nodes) are delivered as they are.
+"""
+
+from __future__ import annotations
+
+import collections
+import threading
+from dataclasses import dataclass, field
+from typing import Any, Deque, Dict, List, Optional, Set, Tuple
+
+from .rospy_compat import DDSConnection
+from ..transports.base import RemoteWriter
+from ..qos import AdvertiseQoSOptions, ClockSkewCheck
+
+__all__ = ["Accepted", "WriterState", "WriterTable", "DELIVER", "HOLD", "DROP", "HOLD_SECONDS"]
+
+DELIVER, HOLD, DROP = 0, 1, 2
+#: How long samples of a not-yet-negotiated writer wait for the negotiation's answer.
+HOLD_SECONDS = 5.0
+
+
+@dataclass
+class Accepted:
+    """The negotiated publisher behind a writer."""
+
+    pub_uri: str
+    node: str
+    latch: bool
+    conn: DDSConnection
+
+
+@dataclass(eq=False)
+class WriterState:
+    """Everything a subscription knows of one DDS writer."""
+
+    guid: str
+    tag: Optional[Dict[str, str]]
+    accepted: Optional[Accepted] = None
+    qos: Optional[AdvertiseQoSOptions] = None  # the publisher's QoS (budget, lifespan), from the answer
+    held: Deque[Tuple[float, bytes, Any]] = field(default_factory=collections.deque)
+    last_ts: int = -1                          # dedupe between the volatile and the latched reader
+    header_seq: int = 0                        # Header.seq is not on the DDS wire: counted per writer
+    conn_header: Optional[Dict[str, str]] = None
+    latched: Any = None                        # a latching publisher's last message, for callbacks added later
+    skew: ClockSkewCheck = field(default_factory=ClockSkewCheck)
+    malformed: int = 0
+    handles: Set[Tuple[int, Any]] = field(default_factory=set)  # (reader id, back-end handle)
+
+    @property
+    def negotiated(self) -> bool:
+        # a writer negotiated before and now gone still has the samples it sent us delivered
+        return self.accepted is not None or self.qos is not None
+
+
+class WriterTable:
+    """Per-writer state of one subscription, and the exactly-once decision."""
+
+    def __init__(self, graph: str, hold_depth: int) -> None:
+        self.graph = graph
+        self.hold_depth = hold_depth
+        self._lock = threading.Lock()
+        self._states: Dict[str, WriterState] = {}
+        self._by_handle: Dict[Tuple[int, Any], WriterState] = {}
+        self.holding: Set[WriterState] = set()
+
+    def for_handle(self, reader: Any, handle: Any) -> Optional[WriterState]:
+        """The state of the writer behind a sample (created on its first sample)."""
+        key = (id(reader), handle)
+        state = self._by_handle.get(key)
+        if state is not None:
+            return state
+        remote: Optional[RemoteWriter] = reader.writer(handle)
+        if remote is None:
+            return None
+        with self._lock:
+            state = self._states.get(remote.guid)
+            if state is None:
+                state = self._states[remote.guid] = WriterState(remote.guid, remote.tag)
+            state.handles.add(key)
+            self._by_handle[key] = state
+        return state
+
+    def decide(self, state: WriterState) -> int:
+        if state.tag is None or state.negotiated:
+            return DELIVER
+        if state.tag.get("graph") != self.graph:
+            return DROP  # another ROS graph on the same DDS domain
+        return HOLD
+
+    def hold(self, state: WriterState, now: float, data: bytes, info: Any) -> None:
+        if len(state.held) >= self.hold_depth:
+            state.held.popleft()
+        state.held.append((now, data, info))
+        self.holding.add(state)
+
+    def accept(self, writer: str, accepted: Accepted, qos: Optional[AdvertiseQoSOptions]) -> WriterState:
+        with self._lock:
+            state = self._states.get(writer)
+            if state is None:
+                state = self._states[writer] = WriterState(writer, {"graph": self.graph})
+            state.accepted = accepted
+            if qos is not None:
+                state.qos = qos
+            state.conn_header = None
+            return state
+
+    def connection_closed(self, conn: DDSConnection) -> None:
+        with self._lock:
+            state = self._states.get(conn.peer_guid)
+            if state is not None and state.accepted is not None and state.accepted.conn is conn:
+                state.accepted = None
+
+    def releasable(self, now: float) -> List[WriterState]:
+        """Writers holding samples whose negotiation finished; expire holds older than HOLD_SECONDS."""
+        ready = []
+        for state in list(self.holding):
+            if state.negotiated:
+                ready.append(state)
+                self.holding.discard(state)
+                continue
+            while state.held and now - state.held[0][0] > HOLD_SECONDS:
+                state.held.popleft()
+            if not state.held:
+                self.holding.discard(state)
+        return ready
+
+    def accepted_states(self) -> List[WriterState]:
+        with self._lock:
+            return [s for s in self._states.values() if s.accepted is not None]
+
+    def prune(self, matched: Set[str]) -> int:
+        """Forget writers that are gone (not matched, not connected, nothing held); returns how many."""
+        with self._lock:
+            gone = [s for g, s in self._states.items() if g not in matched and s.accepted is None and not s.held]
+            for state in gone:
+                del self._states[state.guid]
+                for key in state.handles:
+                    self._by_handle.pop(key, None)
+                self.holding.discard(state)
+        return len(gone)
+
+    def __len__(self) -> int:
+        return len(self._states)

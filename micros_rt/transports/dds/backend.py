@@ -1,0 +1,236 @@
+"""DDS as a micros_rt back end (:class:`micros_rt.backends.Backend`): Cyclone writers and readers on the
+process participant, the ROS 2 graph announcement, and DDS errors translated at this boundary."""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Any, Callable, List, Optional, Sequence, Set, Tuple, TypeVar
+
+from cyclonedds.core import DDSException, Listener
+
+from ..base import TIME_FILTER, EndpointSpec, RemoteWriter, Sample, send_with_backoff
+from ...exceptions import MicrosRtError, PublishTimeoutError, TransportError
+from ...qos import (
+    PUBLISH_BLOCK_TIMEOUT,
+    RELIABLE_MAX_BLOCKING_TIME,
+    AdvertiseQoSOptions,
+    SubscribeQoSOptions,
+    is_lossless,
+    plain_reader_qos,
+    priority_socket_priority,
+    priority_tos,
+    reader_qos,
+    writer_qos,
+)
+from .endpoints import (RELEASED_WRITE_MIN, DDSReader, DDSWriter, make_user_data, network_bound, socket_congested,
+                        wait_for_acks)
+from .participant import DDSParticipant
+from .types import DDSType, dds_topic_name, dds_type_for
+from ...log import nonblocking_logger
+
+__all__ = ["DDSBackend", "DDSTopicWriter", "DDSTopicReader"]
+
+_log = nonblocking_logger("rosout.micros_rt.dds")
+
+_DDS_RETCODE_TIMEOUT = -10
+
+#: A writer with no room waits for acknowledgements in slices of at least this long (s): Cyclone wakes the
+#: wait at the acknowledgement, so a long slice costs nothing and spares the retries of a short one.
+WAIT_FOR_ROOM_MIN = 0.05
+
+
+class DDSTopicWriter:
+    """A publication's DDS writer: ``prepare`` encodes CDR, ``send`` writes it (blocking when lossless)."""
+
+    protocol = "DDS"
+
+    def __init__(self, backend: "DDSBackend", spec: EndpointSpec, options: AdvertiseQoSOptions) -> None:
+        self._backend = backend
+        self.topic = spec.topic
+        self.dds_type: DDSType = dds_type_for(spec.data_class)
+        self.dds_topic = dds_topic_name(spec.topic)
+        self.lossless = is_lossless(spec.queue_size) and not options.using_best_effort_protocol
+        qos = writer_qos(options, queue_size=spec.queue_size, latch=spec.latch, user_data=make_user_data(**spec.tag))
+        self._writer = DDSWriter(backend.participant, self.dds_topic, self.dds_type, qos,
+                                 latency_budget=options.latency_budget)
+        self._ref = self._writer._ref
+        self._write = self._writer.write_serialized
+        self.guid = self._writer.guid
+        self._encode = self.dds_type.encode  # raises genpy.SerializationError on a bad field value
+        self._latch = spec.latch
+        self._closed = False
+        backend.announce(add_writer=self.guid)
+        prio = options.transport_priority
+        backend.participant.mark_priority(int(prio), priority_tos(prio), priority_socket_priority(prio))
+
+    @property
+    def matched_count(self) -> int:
+        return self._writer.matched_count
+
+    def prepare(self, msg: Any) -> Optional[bytes]:
+        """CDR of ``msg``, or None while no reader is matched (a latched topic always encodes: Cyclone
+        keeps the last sample for late joiners)."""
+        if self._writer._matched or self._latch:
+            return self._encode(msg)
+        return None
+
+    def try_send(self, prepared: bytes) -> bool:
+        """Write at once, or return False when Cyclone has no room (more unacknowledged data than the
+        writer's window): the writer's max_blocking_time is 0, so Cyclone never waits holding the GIL."""
+        ret = self._write(prepared)
+        if ret >= 0:
+            return True
+        if ret == _DDS_RETCODE_TIMEOUT:
+            return False
+        raise TransportError(f"topic {self.topic}: DDS write failed (Cyclone return code {ret})")
+
+    def wait_for_room(self, timeout: float) -> None:
+        """Wait (GIL released) until the readers acknowledged what was sent, at most ``timeout`` s."""
+        wait_for_acks(self._ref, max(timeout, WAIT_FOR_ROOM_MIN))
+
+    def may_wait(self, prepared: bytes) -> bool:
+        """A large sample while the network is what limits this writer (its last large write waited for
+        socket room behind a slow link: :func:`~micros_rt.transports.dds.endpoints.network_bound`), or any sample while
+        the process's transmit socket is congested (another topic's large write just waited): a small
+        sample's ``sendmsg`` would wait behind those fragments. On loopback a 900 KB write takes ~0.5 ms
+        and stays on the caller's thread, with no hop to the lane's."""
+        return (len(prepared) >= RELEASED_WRITE_MIN and network_bound(self._ref)) or socket_congested()
+
+    def send(self, prepared: bytes) -> None:
+        """Write, waiting (in Python, other threads running) while a reliable subscriber is behind; raise
+        :class:`PublishTimeoutError` after the bound."""
+        bound = PUBLISH_BLOCK_TIMEOUT if self.lossless else RELIABLE_MAX_BLOCKING_TIME
+        if not send_with_backoff(self.try_send, prepared, bound, lambda: self._closed, self.wait_for_room):
+            raise PublishTimeoutError(
+                f"topic {self.topic}: publish() stayed blocked for {bound:.1f} s because a reliable DDS "
+                f"subscriber does not keep up{' (queue_size=None never drops)' if self.lossless else ''}. "
+                f"The subscribers: {', '.join(sorted(self.matched_peers())) or 'none matched'}")
+
+    def matched_peers(self) -> Set[str]:
+        return set(self._writer.matched_reader_guids())
+
+    def close(self) -> None:
+        self._closed = True
+        self._backend.announce(remove=self.guid)
+        self._writer.close()
+
+
+class DDSTopicReader:
+    """A subscription's DDS reader; its ``condition`` wakes the delivery thread's wait set."""
+
+    protocol = "DDS"
+    #: Cyclone applies TimeBasedFilter in the reader (and Lifespan in its cache)
+    enforces = frozenset({TIME_FILTER})
+
+    def __init__(self, backend: "DDSBackend", spec: EndpointSpec, options: Optional[SubscribeQoSOptions],
+                 wake: Callable[[], None], on_incompatible: Callable[[int], None]) -> None:
+        self.dds_type = dds_type_for(spec.data_class)
+        self.dds_topic = dds_topic_name(spec.topic)
+        user_data = make_user_data(**spec.tag)
+        depth = 1 if spec.latch else spec.queue_size
+        if options is None:
+            qos = plain_reader_qos(queue_size=depth, transient_local=spec.latch, user_data=user_data)
+        else:
+            qos = reader_qos(options, queue_size=depth, transient_local=spec.latch, user_data=user_data)
+        listener = Listener(  # type: ignore[no-untyped-call]
+            on_requested_incompatible_qos=lambda _r, status: on_incompatible(int(status.last_policy_id)),
+            on_subscription_matched=lambda *_: wake())
+        self._reader = DDSReader(backend.participant, self.dds_topic, self.dds_type, qos, listener)
+        self._backend = backend
+        self.condition = self._reader.condition
+        self.guid = self._reader.guid
+        backend.announce(add_reader=self.guid)
+        self.take: Callable[[int], Sequence[Sample]] = self._reader.take_raw
+        self.decode: Callable[[bytes], Any] = self.dds_type.decode
+
+    def writer(self, handle: Any) -> Optional[RemoteWriter]:
+        info = self._reader.writer_info(handle)
+        return None if info is None else RemoteWriter(info.guid, info.tag)
+
+    def matched_writers(self) -> Set[str]:
+        return set(self._reader.matched_writer_guids())
+
+    def close(self) -> None:
+        self._backend.announce(remove=self.guid)
+        self._reader.close()
+
+
+class DDSBackend:
+    """The process's DDS back end: one participant, writers and readers on it."""
+
+    protocol = "DDS"
+
+    def __init__(self, participant: DDSParticipant, node_name: str) -> None:
+        self.participant = participant
+        self.node_name = node_name
+        self._announcer: Any = None  # None: not started, True: starting, False: failed
+        self._pending: List[Tuple[str, str, str]] = []
+        self._lock = threading.Lock()
+
+    @property
+    def domain_id(self) -> int:
+        return self.participant.domain_id
+
+    def open_writer(self, spec: EndpointSpec, options: AdvertiseQoSOptions) -> DDSTopicWriter:
+        return _translated(lambda: DDSTopicWriter(self, spec, options), spec.topic, "writer")
+
+    def open_reader(self, spec: EndpointSpec, options: Optional[SubscribeQoSOptions], wake: Callable[[], None],
+                    on_incompatible: Callable[[int], None]) -> DDSTopicReader:
+        return _translated(lambda: DDSTopicReader(self, spec, options, wake, on_incompatible), spec.topic, "reader")
+
+    def describe(self) -> List[str]:
+        return [f"DDS domain {self.participant.domain_id}, participant {self.participant.guid}"]
+
+    def announce(self, *, add_reader: str = "", add_writer: str = "", remove: str = "") -> None:
+        """Keep ROS 2's graph (``ros_discovery_info``) told which endpoints this node has.
+
+        A courtesy to ROS 2 tools, kept off the caller's path: the announcer (its Topic costs ~25 ms of
+        Cyclone type-object building) starts on a background thread with the first endpoint, and updates
+        queue up until it runs. A failure is logged once as a warning and changes nothing else."""
+        with self._lock:
+            self._pending.append((add_reader, add_writer, remove))
+            if self._announcer is None:
+                self._announcer = True  # starting
+                threading.Thread(target=self._start_announcer, name="micros_rt ROS 2 graph", daemon=True).start()
+                return
+            if self._announcer is True or self._announcer is False:
+                return
+            announcer, pending, self._pending = self._announcer, self._pending, []
+        for r, w, gone in pending:
+            announcer.update(add_reader=r, add_writer=w, remove=gone)
+
+    def _start_announcer(self) -> None:
+        from .ros2_graph import Ros2GraphAnnouncer
+
+        announcer: Any = False
+        for attempt in range(3):
+            try:
+                announcer = Ros2GraphAnnouncer(self.participant, self.node_name)
+                break
+            except (MicrosRtError, DDSException) as exc:
+                # seen once in 84 processes of a 30-node graph start: Cyclone refused the Topic
+                # (BAD_PARAMETER) while the main thread created its own topics; a second try succeeds
+                if attempt == 2:
+                    _log.warning("micros_rt: ROS 2 tools will not name this node (ros_discovery_info: %s)", exc)
+                else:
+                    time.sleep(0.2)
+        with self._lock:
+            self._announcer = announcer
+            pending, self._pending = self._pending, []
+        if announcer:
+            for r, w, gone in pending:
+                announcer.update(add_reader=r, add_writer=w, remove=gone)
+
+
+T = TypeVar("T")
+
+
+def _translated(make: Callable[[], T], topic: str, what: str) -> T:
+    try:
+        return make()
+    except MicrosRtError:
+        raise
+    except DDSException as exc:
+        raise TransportError(f"topic {topic}: cannot create the DDS {what}: {exc}") from exc

@@ -1,0 +1,308 @@
+"""DataWriter and DataReader wrappers with a lean raw path.
+
+Samples go through the generated codec of :mod:`micros_rt.transports.dds.types` and the
+binding's raw ``ddspy_write``/``ddspy_take`` calls, skipping the per-sample
+IdlStruct objects of the high-level API.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import threading
+import time
+from typing import Any, Callable, Dict, List, Optional, Set, Tuple
+
+
+from cyclonedds._clayer import ddspy_take, ddspy_write
+from cyclonedds.core import DDSException, InstanceState, Listener, ReadCondition, SampleState, ViewState
+from cyclonedds.sub import DataReader
+
+from ...exceptions import DDSUnavailableError
+from .batching import adaptive_write, batch_window, batching_writer_class, budget_write, c_function, flusher
+from .participant import DDSParticipant, delete_entity
+from .types import DDSType
+from ...log import nonblocking_logger
+
+__all__ = ["DDSWriter", "DDSReader", "WriterInfo", "USER_DATA_PREFIX", "make_user_data", "parse_user_data"]
+
+_log = nonblocking_logger("rosout.micros_rt.dds")
+
+USER_DATA_PREFIX = b"micros_rt;"
+_ANY = SampleState.Any | ViewState.Any | InstanceState.Any
+
+
+#: Samples at least this large (bytes) are written with Python's GIL released (:func:`write_released`).
+RELEASED_WRITE_MIN = 16 * 1024
+
+
+class _SampleContainer(ctypes.Structure):
+    # cyclonedds-python's sample as its sertype reads it (clayer/pysertype.c, ddspy_sample_container_t):
+    # the serialized bytes, copied into a serdata in C (serdata_from_sample is a memcpy, no Python)
+    _fields_ = [("usample", ctypes.c_void_p), ("usample_size", ctypes.c_size_t)]
+
+
+_c_dds_write: Any = None
+
+#: A write through :func:`write_released` that took longer than this (s) waited for room in a socket that a
+#: slow link drains: the process's transmit socket is congested for :data:`CONGESTION_HOLD` seconds, and
+#: meanwhile every write releases the GIL and KEEP_LAST lanes send from their own threads.
+CONGESTED_WRITE = 0.005
+CONGESTION_HOLD = 0.1
+_congested_until = [0.0]
+_last_slow = [0.0]  # how long the last large write that waited took (0.0: it did not wait)
+_slow_writers: Set[int] = set()  # writers whose last large write waited on the network
+
+
+def socket_congested() -> bool:
+    """True while a recent large write waited on the network (see :data:`CONGESTED_WRITE`)."""
+    return time.monotonic() < _congested_until[0]
+
+
+def network_bound(ref: int) -> bool:
+    """True when writer ``ref``'s last large write waited on the network (a slow link drains its socket)."""
+    return ref in _slow_writers
+
+
+def write_released(ref: int, data: Any) -> int:
+    """``ddspy_write(ref, data)`` without holding Python's GIL: the binding's own call holds it for the whole
+    of ``dds_write``, which for a large sample includes sending every fragment, and a ``sendmsg`` that
+    waits for room in a socket buffer behind a slow link (measured: a 1 kHz topic of the same process
+    published 117 of 6,000 messages beside a 30 Hz camera on a 40 Mbit/s link). ctypes releases the GIL
+    during the call. ~1 us more per call than the binding's, so only for large samples."""
+    global _c_dds_write
+    fn = _c_dds_write
+    if fn is None:
+        fn = _c_dds_write = c_function("dds_write", [ctypes.c_int32, ctypes.c_void_p], ctypes.c_int32)
+    if isinstance(data, bytes):
+        address = ctypes.cast(ctypes.c_char_p(data), ctypes.c_void_p).value
+    else:  # the codec's bytearray (writable: ctypes views it without a copy)
+        address = ctypes.addressof((ctypes.c_char * len(data)).from_buffer(data))
+    container = _SampleContainer(address, len(data))
+    t0 = time.monotonic()
+    if _last_slow[0]:  # it will likely wait as long again: congested from now on, not from its end
+        _congested_until[0] = max(_congested_until[0], t0 + _last_slow[0] + CONGESTION_HOLD)
+    ret = int(fn(ref, ctypes.byref(container)))
+    done = time.monotonic()
+    if len(data) >= RELEASED_WRITE_MIN:
+        took = done - t0
+        if took > CONGESTED_WRITE:
+            _last_slow[0] = took
+            _slow_writers.add(ref)
+            _congested_until[0] = max(_congested_until[0], done + CONGESTION_HOLD)
+        else:
+            _last_slow[0] = 0.0
+            _slow_writers.discard(ref)
+    return ret
+
+
+_c_wait_for_acks: Any = None
+
+
+def wait_for_acks(ref: int, timeout: float) -> int:
+    """``dds_wait_for_acks(ref, timeout)`` with the GIL released: returns when every reader acknowledged
+    what writer ``ref`` sent (0), or after ``timeout`` seconds (Cyclone's timeout code, < 0). Cyclone
+    wakes it at the acknowledgement, so a writer with no room waits no longer than it must."""
+    global _c_wait_for_acks
+    fn = _c_wait_for_acks
+    if fn is None:
+        fn = _c_wait_for_acks = c_function("dds_wait_for_acks", [ctypes.c_int32, ctypes.c_int64], ctypes.c_int32)
+    return int(fn(ref, int(timeout * 1e9)))
+
+
+def sample_write(ref: int, data: Any, _small: Callable[[int, Any], int] = ddspy_write,
+                 _limit: int = RELEASED_WRITE_MIN, _until: List[float] = _congested_until,
+                 _now: Callable[[], float] = time.monotonic) -> int:
+    """Write one serialized sample: the binding's fast call for small ones, :func:`write_released` for
+    large ones and for every one while the socket is congested (they can wait on the network)."""
+    if len(data) < _limit and _now() >= _until[0]:
+        return _small(ref, data)
+    return write_released(ref, data)
+
+
+def make_user_data(**fields: str) -> bytes:
+    """USER_DATA tag of micros_rt endpoints: ``micros_rt;graph=...;node=...;``."""
+    return USER_DATA_PREFIX + b"".join(f"{k}={v};".encode() for k, v in fields.items())
+
+
+def parse_user_data(data: Optional[bytes]) -> Optional[Dict[str, str]]:
+    """The fields of a micros_rt tag, or None for an endpoint micros_rt did not create."""
+    if not data or not data.startswith(USER_DATA_PREFIX):
+        return None
+    out: Dict[str, str] = {}
+    for part in data[len(USER_DATA_PREFIX):].decode("utf-8", "replace").split(";"):
+        if "=" in part:
+            k, _, v = part.partition("=")
+            out[k] = v
+    return out
+
+
+def matched_handles(get: Callable[[], List[int]]) -> List[int]:
+    """The instance handles a writer's ``get_matched_subscriptions`` (a reader's ``get_matched_publications``)
+    returns, asked again when a match came in between: cyclonedds-python counts the matches, sizes an
+    array, then fills it, and a match made between the two calls made it index past the end (IndexError
+    out of ``get_num_connections()`` and housekeeping, seen with readers coming and going)."""
+    for _ in range(8):
+        try:
+            return list(get())
+        except IndexError:
+            continue
+    return list(get())  # matches changing faster than this for eight rounds: say so
+
+
+def matched_data(get: Callable[[int], Any], handle: int) -> Any:
+    """``get(handle)`` (a writer's ``get_matched_subscription_data``, a reader's
+    ``get_matched_publication_data``), or None when that match has ended meanwhile: the binding says so with
+    DDSException or IndexError."""
+    try:
+        return get(handle)
+    except (DDSException, IndexError):
+        return None
+
+
+class DDSWriter:
+    """A DataWriter for one topic of one process, fed with genpy messages."""
+
+    def __init__(self, participant: DDSParticipant, topic_name: str, dds_type: DDSType, qos: Any,
+                 on_matched: Optional[Callable[[int], None]] = None, *, latency_budget: float = 0.0) -> None:
+        self.topic_name = topic_name
+        self.batch_window = batch_window(latency_budget)
+        self.dds_type = dds_type
+        self._matched = 0
+        self._on_matched = on_matched
+        self._reader_guids: Dict[int, str] = {}  # matched reader's instance handle -> its GUID
+        self._guids_lock = threading.Lock()
+        self._participant = participant
+        topic = participant.topic(topic_name, dds_type.idl_class)
+        listener = Listener(on_publication_matched=self._matched_changed)  # type: ignore[no-untyped-call]
+        try:
+            self._writer = batching_writer_class()(participant.dp, topic, qos, listener)
+        except DDSException as exc:
+            participant.release_topic(topic_name)
+            raise DDSUnavailableError(f"cannot create a DDS writer for {topic_name}: {exc}") from exc
+        self._ref = self._writer._ref
+        self.guid = str(self._writer.guid)
+        self.closed = False
+        self.write_serialized = (budget_write(self._ref, sample_write, self.batch_window) if self.batch_window > 0
+                                 else adaptive_write(self._ref, sample_write))
+
+    def _matched_changed(self, _writer: Any, status: Any) -> None:
+        self._matched = status.current_count
+        if self._on_matched is not None:
+            self._on_matched(status.current_count)
+
+    @property
+    def matched_count(self) -> int:
+        """Readers currently matched (micros_rt and foreign, e.g. ROS 2)."""
+        return self._matched
+
+    def matched_reader_guids(self) -> List[str]:
+        """GUIDs of the matched readers. A match's instance handle stays its own while it lasts, so each
+        reader's data (its whole QoS, parsed: ~40 us) is read once, not at every housekeeping round."""
+        handles = matched_handles(self._writer.get_matched_subscriptions)
+        with self._guids_lock:  # housekeeping, get_num_connections() and a publish timeout may ask at once
+            known = self._reader_guids
+            for handle in handles:
+                if handle not in known:
+                    data = matched_data(self._writer.get_matched_subscription_data, handle)
+                    if data is not None:  # None: unmatched meanwhile
+                        known[handle] = str(data.key)
+            if len(known) > len(handles):
+                live = set(handles)
+                for handle in [h for h in known if h not in live]:
+                    del known[handle]
+            return [known[h] for h in handles if h in known]
+
+    #: ``write_serialized(data) -> int``: write one serialized sample (from the type's codec) and send
+    #: it now, with the rest of a burst, or within the batch window of its ``latency_budget``; Cyclone's return code (< 0:
+    #: failed, -10: timed out on back-pressure after the Reliability max_blocking_time).
+    write_serialized: Callable[[bytes], int]
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        flusher().forget(self._ref)  # what waits in the datagram leaves before the writer goes
+        _slow_writers.discard(self._ref)
+        delete_entity(self._writer)
+        self._participant.release_topic(self.topic_name)
+
+
+class WriterInfo:
+    """What a reader knows of one matched writer."""
+
+    __slots__ = ("guid", "tag", "participant_guid")
+
+    def __init__(self, guid: str, tag: Optional[Dict[str, str]], participant_guid: str) -> None:
+        self.guid = guid
+        self.tag = tag
+        self.participant_guid = participant_guid
+
+
+class DDSReader:
+    """A DataReader for one subscription, taken from by the subscription's delivery thread."""
+
+    def __init__(self, participant: DDSParticipant, topic_name: str, dds_type: DDSType, qos: Any,
+                 listener: Optional[Listener] = None) -> None:
+        self.topic_name = topic_name
+        self.dds_type = dds_type
+        self._participant = participant
+        topic = participant.topic(topic_name, dds_type.idl_class)
+        try:
+            self._reader = DataReader(participant.dp, topic, qos, listener)
+        except DDSException as exc:
+            participant.release_topic(topic_name)
+            raise DDSUnavailableError(f"cannot create a DDS reader for {topic_name}: {exc}") from exc
+        self._ref = self._reader._ref
+        self.condition = ReadCondition(self._reader, _ANY)
+        self.guid = str(self._reader.guid)
+        self._writers: Dict[int, WriterInfo] = {}
+        self._lock = threading.Lock()
+        self.closed = False
+
+    def take_raw(self, n: int = 256) -> List[Tuple[bytes, Any]]:
+        """Up to ``n`` (serialized sample, SampleInfo) pairs; invalid samples included."""
+        ret = ddspy_take(self._ref, _ANY, n)
+        if isinstance(ret, int):
+            raise DDSException(ret, f"taking from DDS topic {self.topic_name}")
+        return ret  # type: ignore[no-any-return]
+
+    def writer_info(self, handle: int) -> Optional[WriterInfo]:
+        """The writer behind a sample's publication_handle (cached)."""
+        info = self._writers.get(handle)
+        if info is not None:
+            return info
+        data = matched_data(self._reader.get_matched_publication_data, handle)
+        if data is None:
+            return None
+        from cyclonedds.qos import Policy
+
+        user_data = None
+        try:
+            user_data = data.qos[Policy.Userdata].data
+        except (KeyError, AttributeError):
+            user_data = None
+        info = WriterInfo(str(data.key), parse_user_data(user_data), str(data.participant_key))
+        with self._lock:
+            self._writers[handle] = info
+        return info
+
+    def matched_writer_guids(self) -> List[str]:
+        out = []
+        handles = matched_handles(self._reader.get_matched_publications)
+        for handle in handles:
+            info = self.writer_info(handle)
+            if info is not None:
+                out.append(info.guid)
+        if len(self._writers) > len(handles):  # forget writers that went (a publisher restarting)
+            with self._lock:
+                for gone in set(self._writers) - set(handles):
+                    del self._writers[gone]
+        return out
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        delete_entity(self.condition)
+        delete_entity(self._reader)
+        self._participant.release_topic(self.topic_name)

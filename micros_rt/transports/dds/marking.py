@@ -1,0 +1,85 @@
+"""Transport priority on the wire for DDS: IP TOS (DSCP) on Cyclone's UDP sockets.
+
+Cyclone DDS 11 carries TransportPriority in discovery only and has no setting for
+DSCP or IP_TOS. Its sockets live in our process, though, so micros_rt marks them
+itself: the UDP sockets that appeared while the participant was created are
+Cyclone's (its receive sockets on the DDSI ports and its transmit socket on an
+ephemeral port); ``IP_TOS`` (then ``SO_PRIORITY``) is set on them.
+
+What it costs: Cyclone sends all data of a participant through the same sockets,
+so the marking is per process, not per writer. A process marks its DDS traffic with
+the highest transport priority among its writers (discovery and ACKs included);
+a node that mixes HIGH and LOW topics should put them in different processes, or
+use TCPROS (which micros_rt marks per connection) for the topic whose class matters.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+from typing import Dict, Set, Tuple
+from ...log import nonblocking_logger
+from ..marking import mark_socket_tos
+
+__all__ = ["process_udp_sockets", "mark_udp_sockets"]
+
+_log = nonblocking_logger("rosout.micros_rt.dds")
+
+
+def _udp_inodes() -> Dict[int, int]:
+    """inode -> address family of this network namespace's UDP sockets."""
+    out: Dict[int, int] = {}
+    for path, family in (("/proc/self/net/udp", socket.AF_INET), ("/proc/self/net/udp6", socket.AF_INET6)):
+        try:
+            with open(path) as f:
+                next(f, None)
+                for line in f:
+                    parts = line.split()
+                    if len(parts) >= 10:
+                        out[int(parts[9])] = family
+        except OSError:
+            continue
+    return out
+
+
+def process_udp_sockets() -> Dict[int, Tuple[int, int]]:
+    """inode -> (fd, family) of this process's UDP sockets."""
+    inodes = _udp_inodes()
+    found: Dict[int, Tuple[int, int]] = {}
+    try:
+        fds = os.listdir("/proc/self/fd")
+    except OSError:
+        return found
+    for name in fds:
+        try:
+            target = os.readlink(f"/proc/self/fd/{name}")
+        except OSError:
+            continue
+        if target.startswith("socket:["):
+            inode = int(target[8:-1])
+            if inode in inodes:
+                found[inode] = (int(name), inodes[inode])
+    return found
+
+
+def mark_udp_sockets(inodes: Set[int], tos: int, so_priority: int) -> int:
+    """Set IP_TOS/IPV6_TCLASS and SO_PRIORITY on the UDP sockets with these inodes; returns how many."""
+    marked = 0
+    for inode, (fd, family) in process_udp_sockets().items():
+        if inode not in inodes:
+            continue
+        try:
+            # fromfd duplicates the descriptor: options apply to the shared socket, and
+            # closing the duplicate leaves Cyclone's descriptor open.
+            s = socket.fromfd(fd, family, socket.SOCK_DGRAM)
+        except OSError:
+            continue
+        try:
+            if mark_socket_tos(s, tos, so_priority, family=family):
+                marked += 1
+        except OSError as exc:
+            _log.warning("micros_rt: cannot mark a DDS socket with TOS 0x%02x: %s", tos, exc)
+        finally:
+            s.close()
+    return marked

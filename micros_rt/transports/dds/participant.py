@@ -1,0 +1,338 @@
+"""The process's one Cyclone DDS participant, its network configuration, topics.
+
+Cyclone's default configuration multicasts discovery on the machine's LAN
+interface. micros_rt instead follows ROS 1's own idea of the node's address
+(``ROS_IP``, then ``ROS_HOSTNAME``, then the host name): when that is a loopback
+address, Cyclone binds ``lo`` with multicast off and finds peers by unicast on
+127.0.0.1; otherwise it binds the interface holding that address. An explicit
+``CYCLONEDDS_URI`` always wins.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import logging
+import os
+import socket
+import threading
+from typing import Any, Dict, Mapping, Optional, Tuple
+
+from ...exceptions import DDSUnavailableError
+from ...log import nonblocking_logger
+from .batching import close_flusher
+from .typecache import forget_type_data, load_type_data, save_type_data
+
+__all__ = [
+    "LOOPBACK_CONFIG",
+    "DDSParticipant",
+    "DEFAULT_LEASE_DURATION",
+    "DEFAULT_NETWORK_LEASE_DURATION",
+    "cyclone_config",
+    "lease_duration",
+    "micros_rt_defaults",
+    "domain_id_from_env",
+    "get_participant",
+    "close_participant",
+    "delete_entity",
+]
+
+_log = nonblocking_logger("rosout.micros_rt.dds")
+
+#: Cyclone's reliable writers on a host's own loopback, where the network is never what is slow:
+#:
+#: - Writers start with a small window of unacknowledged data (``WhcHighInit``) and grow it toward 500 kB
+#:   (``WhcHigh``) as acknowledgements come back: a slow start that throttled every burst right after
+#:   discovery (a burst of 2,776 numpy_msg LaserScans of 8.6 KB one way at 51-54 k/s; 80-83 k/s starting at
+#:   500 kB; 64 B bursts of 60,000: 180-229 k/s against 239-252 k/s). Here writers start at 500 kB.
+#: - The window also shrinks by a fifth whenever a writer retransmits (``WhcAdaptive``), down to 1 kB, and
+#:   grows back only while nothing is retransmitted. A subscriber killed mid-stream is retransmitted to until
+#:   its lease ends, so subscribers that kept dying wore a lossless (``queue_size=None``) publisher's window
+#:   down to a few samples: with listeners killed every 0.5-1 s, the 15th-16th new subscriber heard nothing
+#:   and publish() blocked until PublishTimeoutError (3 runs of 18-20; none of 45 with the window fixed).
+#:   Here the window stays at 500 kB.
+#: - A reader that learns from a heartbeat that it misses data waits ``NackDelay`` (100 ms) before asking
+#:   for it, which spares a network with many readers a storm of requests. Discovery data goes that way
+#:   whenever it crosses the new participant's first announcement: a quarter of the subscribers started
+#:   next to a talker heard it ~80 ms later than the rest (3 of 12, 4 of 14). Here the wait is 5 ms (14 of 14
+#:   heard it within 20 ms of subscribing).
+#:
+#: Part of :data:`LOOPBACK_CONFIG` only: a user's ``CYCLONEDDS_URI`` (whose ``WhcHigh``/``WhcLow`` Cyclone
+#: checks the start against) and other interfaces keep Cyclone's defaults.
+LOOPBACK_INTERNAL = ("<Watermarks><WhcHighInit>500kB</WhcHighInit><WhcAdaptive>false</WhcAdaptive></Watermarks>"
+                     "<NackDelay>5ms</NackDelay>")
+
+LOOPBACK_CONFIG = (
+    '<CycloneDDS><Domain id="any"><General>'
+    '<Interfaces><NetworkInterface name="lo" multicast="false"/></Interfaces>'
+    "<AllowMulticast>false</AllowMulticast></General>"
+    "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
+    "<MaxAutoParticipantIndex>32</MaxAutoParticipantIndex>"
+    '<Peers><Peer address="127.0.0.1"/></Peers></Discovery>'
+    f"<Internal>{LOOPBACK_INTERNAL}</Internal>"
+    "</Domain></CycloneDDS>"
+)
+
+_INTERFACE_CONFIG = (
+    '<CycloneDDS><Domain id="any"><General>'
+    '<Interfaces><NetworkInterface address="{address}"/></Interfaces>'
+    "</General></Domain></CycloneDDS>"
+)
+
+
+def _ros_address(env: Mapping[str, str]) -> str:
+    """The address a ROS 1 node would advertise, resolved to an IP."""
+    host = env.get("ROS_IP") or env.get("ROS_HOSTNAME") or socket.gethostname()
+    try:
+        return socket.gethostbyname(host)
+    except OSError:
+        return host
+
+
+#: Seconds after which a peer that stopped without saying goodbye (killed, crashed) is considered
+#: gone and its DDS connections dropped, when the node's address (ROS_IP/ROS_HOSTNAME) is loopback:
+#: every peer is on this host, where silence means death. Cyclone's default is 10 s; TCPROS notices a
+#: dead peer at once.
+DEFAULT_LEASE_DURATION = 1.5
+#: The same on a real network, where silence may be a cable or a radio link that comes back: a link
+#: down for less than this keeps its DDS match, and a reliable stream then resumes without losing
+#: what the writer's history holds (a new match would not get it: micros_rt writers are volatile).
+DEFAULT_NETWORK_LEASE_DURATION = 15.0
+
+
+def _is_loopback(env: Mapping[str, str]) -> bool:
+    address = _ros_address(env)
+    try:
+        return ipaddress.ip_address(address).is_loopback
+    except ValueError:
+        return True  # not an IP: a name we could not resolve; micros_rt stays on loopback then
+
+
+def lease_duration(env: Mapping[str, str] = os.environ) -> float:
+    """The participant lease (seconds): ``MICROS_RT_LEASE_DURATION``, else :data:`DEFAULT_LEASE_DURATION`
+    for a loopback node and :data:`DEFAULT_NETWORK_LEASE_DURATION` for one on a network interface."""
+    raw = env.get("MICROS_RT_LEASE_DURATION", "").strip()
+    if not raw:
+        return DEFAULT_LEASE_DURATION if _is_loopback(env) else DEFAULT_NETWORK_LEASE_DURATION
+    try:
+        value = float(raw)
+    except ValueError:
+        raise DDSUnavailableError(
+            f"MICROS_RT_LEASE_DURATION={raw!r} is not a number of seconds (expected 0.5..3600)") from None
+    if not 0.5 <= value <= 3600.0:
+        raise DDSUnavailableError(f"MICROS_RT_LEASE_DURATION={value:g} is out of range (expected 0.5..3600 seconds)")
+    return value
+
+
+#: On loopback (64 KiB MTU) samples travel in 63 KB fragments instead of Cyclone's 1,344 B, which suits
+#: a 1,500 B Ethernet MTU: a 1920x1080 rgb8 Image (6.2 MB) round trip went from ~180 ms to ~20 ms.
+LOOPBACK_TRANSPORT = "<General><MaxMessageSize>65500B</MaxMessageSize><FragmentSize>63000B</FragmentSize></General>"
+
+
+#: A large sample arrives as a burst of fragments (a 1920x1080 Image: ~100 datagrams of 63 KB); with the
+#: kernel's default UDP receive buffer a burst of them overflowed it, and the lost fragments went through
+#: Cyclone's NACK/retransmit cycle: 64 Images/s one way. Up to 8 MB (what the kernel allows, see
+#: net.core.rmem_max; nothing fails when it allows less): 363-400 Images/s (stock rospy: 137-152).
+RECEIVE_BUFFER_CONFIG = '<SocketReceiveBufferSize max="8MB"/>'
+
+
+def micros_rt_defaults(env: Mapping[str, str] = os.environ) -> str:
+    """Settings micros_rt applies under any configuration (a user's ``CYCLONEDDS_URI`` overrides them):
+    the participant lease, a receive buffer large samples fit in, and on a loopback node large fragments."""
+    transport = LOOPBACK_TRANSPORT if _is_loopback(env) else ""
+    return (f'<CycloneDDS><Domain id="any">{transport}<Discovery>'
+            f"<LeaseDuration>{lease_duration(env):g}s</LeaseDuration>"
+            f"</Discovery><Internal>{RECEIVE_BUFFER_CONFIG}</Internal></Domain></CycloneDDS>")
+
+
+def cyclone_config(env: Mapping[str, str] = os.environ) -> str:
+    """The Cyclone configuration micros_rt uses: its defaults, then the network configuration.
+
+    With ``CYCLONEDDS_URI`` set, that is the network configuration (Cyclone reads comma-separated
+    sources in order, later ones override earlier ones: the user's file wins wherever it speaks).
+    Otherwise micros_rt follows ROS 1's address: loopback -> :data:`LOOPBACK_CONFIG`, else the
+    interface that holds the address.
+
+    >>> LOOPBACK_CONFIG in cyclone_config({"ROS_IP": "127.0.0.1"})
+    True
+    """
+    defaults = micros_rt_defaults(env)
+    user = env.get("CYCLONEDDS_URI", "").strip()
+    if user:
+        return f"{defaults},{user}"
+    if _is_loopback(env):
+        return f"{defaults},{LOOPBACK_CONFIG}"
+    return f"{defaults},{_INTERFACE_CONFIG.format(address=_ros_address(env))}"
+
+
+def domain_id_from_env(env: Mapping[str, str] = os.environ) -> int:
+    """``ROS_DOMAIN_ID`` as in ROS 2 (default 0); a bad value is an error that says so."""
+    raw = env.get("ROS_DOMAIN_ID", "").strip()
+    if not raw:
+        return 0
+    try:
+        value = int(raw)
+    except ValueError:
+        raise DDSUnavailableError(f"ROS_DOMAIN_ID={raw!r} is not an integer (expected 0..232)") from None
+    if not 0 <= value <= 232:
+        raise DDSUnavailableError(f"ROS_DOMAIN_ID={value} is out of range (expected 0..232)")
+    return value
+
+
+class DDSParticipant:
+    """One Cyclone domain participant and the topics created on it.
+
+    Created through :func:`get_participant`; ``close()`` releases every entity.
+    """
+
+    def __init__(self, domain_id: int, config: str) -> None:
+        from cyclonedds.core import DDSException
+        from cyclonedds.domain import Domain, DomainParticipant
+
+        self.domain_id = domain_id
+        from .marking import process_udp_sockets
+
+        before = set(process_udp_sockets())
+        try:
+            # A Domain with an explicit config keeps our settings out of the
+            # process environment (CYCLONEDDS_URI stays the user's).
+            self._domain = Domain(domain_id, config)
+            self.dp = DomainParticipant(domain_id)
+        except DDSException as exc:
+            raise DDSUnavailableError(
+                f"cannot start a Cyclone DDS participant on domain {domain_id}: {exc}") from exc
+        self.guid = str(self.dp.guid)
+        # the sockets Cyclone just opened: what transport priority marks (see marking.py)
+        self._sockets = set(process_udp_sockets()) - before
+        self._topics: Dict[str, Tuple[Any, int]] = {}  # name -> (Topic, references)
+        self._lock = threading.Lock()
+        self._priority: Optional[int] = None
+        self.closed = False
+
+    def mark_priority(self, level: int, tos: int, so_priority: int) -> None:
+        """Mark this process's DDS traffic for a writer of transport priority ``level``.
+
+        The highest level among the process's writers wins (see :mod:`micros_rt.transports.dds.marking`).
+        """
+        from .marking import mark_udp_sockets
+
+        with self._lock:
+            if self._priority is not None and level <= self._priority:
+                return
+            first = self._priority is None
+            self._priority = level
+        if first and tos == 0:
+            return  # unmarked is the default
+        n = mark_udp_sockets(self._sockets, tos, so_priority)
+        _log.debug("micros_rt: DDS traffic of this process marked TOS 0x%02x on %d sockets", tos, n)
+
+    def topic(self, name: str, idl_class: Any) -> Any:
+        """The Topic ``name`` with type ``idl_class``, shared by the process's readers and writers of it:
+        each call takes a reference that :meth:`release_topic` gives back (the last one deletes it)."""
+        with self._lock:
+            found = self._topics.get(name)
+            if found is not None:
+                topic, refs = found
+                if topic.data_type is not idl_class:
+                    raise DDSUnavailableError(
+                        f"DDS topic {name!r} is already used in this process with type "
+                        f"{topic.data_type.__idl_typename__}, not {idl_class.__idl_typename__}")
+                self._topics[name] = (topic, refs + 1)
+                return topic
+            topic = self._new_topic(name, idl_class)
+            self._topics[name] = (topic, 1)
+            return topic
+
+    def _new_topic(self, name: str, idl_class: Any) -> Any:
+        from cyclonedds.core import DDSException
+        from cyclonedds.topic import Topic
+
+        if load_type_data(idl_class):
+            try:
+                topic = Topic(self.dp, name, idl_class)
+            except DDSException as exc:  # bytes Cyclone refuses: build them as if never cached
+                _log.warning("micros_rt: cached DDS type data for %s refused (%s); rebuilding it",
+                             idl_class.__idl_typename__, exc)
+                forget_type_data(idl_class)
+                topic = Topic(self.dp, name, idl_class)
+        else:
+            topic = Topic(self.dp, name, idl_class)
+        save_type_data(idl_class)  # a no-op when its file exists
+        return topic
+
+    def release_topic(self, name: str) -> None:
+        """Give back a reference taken by :meth:`topic`; the Topic entity goes with the last one."""
+        with self._lock:
+            found = self._topics.get(name)
+            if found is None:
+                return
+            topic, refs = found
+            if refs > 1:
+                self._topics[name] = (topic, refs - 1)
+                return
+            del self._topics[name]
+        delete_entity(topic)
+
+    def topic_count(self) -> int:
+        """Topics alive in this participant (for leak checks)."""
+        with self._lock:
+            return len(self._topics)
+
+    def close(self) -> None:
+        """Delete the participant and everything created on it; harmless twice."""
+        if self.closed:
+            return
+        self.closed = True
+        delete_entity(self.dp)  # entities created on it go with it
+
+
+def delete_entity(entity: Any) -> None:
+    """Delete a cyclonedds entity now (not at garbage collection); harmless twice."""
+    try:
+        ref = entity._ref
+        if ref in entity._entities:
+            del entity._entities[ref]
+            entity._delete(ref)
+    except Exception as exc:  # closing must go on
+        _log.debug("deleting DDS entity: %s", exc)
+
+
+_lock = threading.Lock()
+_participant: Optional[DDSParticipant] = None
+_failed: Optional[str] = None
+
+
+def get_participant() -> Optional[DDSParticipant]:
+    """The process participant, created on first use; None when DDS cannot start.
+
+    The failure is logged once, in words, and micros_rt then uses TCPROS for
+    every connection of this process.
+    """
+    global _participant, _failed
+    with _lock:
+        if _participant is not None and not _participant.closed:
+            return _participant
+        if _failed is not None:
+            return None
+        if os.environ.get("MICROS_RT_DISABLE_DDS", "") not in ("", "0"):
+            _failed = "MICROS_RT_DISABLE_DDS is set"
+            _log.warning("micros_rt: DDS disabled (MICROS_RT_DISABLE_DDS is set); using TCPROS for every topic")
+            return None
+        try:
+            _participant = DDSParticipant(domain_id_from_env(), cyclone_config())
+        except Exception as exc:
+            _failed = str(exc)
+            _log.warning(
+                "micros_rt: DDS is unavailable in this process (%s); every topic falls back to TCPROS. "
+                "Check ROS_DOMAIN_ID, CYCLONEDDS_URI and the network interface named by ROS_IP.", exc)
+            return None
+        return _participant
+
+
+def close_participant() -> None:
+    """Close the process participant (at shutdown)."""
+    global _participant
+    with _lock:
+        close_flusher()  # what batching writers still hold goes out before their participant does
+        if _participant is not None:
+            _participant.close()
+            _participant = None
