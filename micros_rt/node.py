@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import math
 import os
 import threading
 import time
@@ -24,6 +25,8 @@ from .core import introspection as _introspection
 from .core import rospy_compat as compat
 from .core.publication import Publisher, _Publication
 from .core.runtime import _graph_id, _log, _node, _require_node, dds_backend, start_dds_early, wait_dds_started
+from .core.reader_subscription import OpenReader, ReaderSubscription
+from .core.registry import EndpointRegistry
 from .core.subscription import DeadlineMissed, Subscriber, _Subscription
 from .log import flush as flush_logs
 from .transports.base import ProfileBackend, close_profile_backends, profile_backends
@@ -266,15 +269,47 @@ class NodeHandle:
 
     def subscribe_with_qos(self, topic: str, data_class: Type[genpy.Message], callback: Callable[..., None],
                            queue_size: Optional[int], qos: SubscribeQoSOptions, *,
-                           callback_args: Any = None) -> Subscriber:
-        """Subscribe with :class:`SubscribeQoSOptions`; DDS is preferred, TCPROS is the fallback."""
+                           callback_args: Any = None, msg_valid_period: float = math.inf) -> Subscriber:
+        """Subscribe with :class:`SubscribeQoSOptions`; DDS is preferred, TCPROS is the fallback.
+        ``msg_valid_period``: this subscriber's own lifespan (seconds): a message older than that by its
+        source stamp (the DDS write time, or its Header stamp over TCPROS) is dropped and counted in
+        ``dropped_expired``, whatever the publisher offers (the shorter applies)."""
         if not isinstance(qos, SubscribeQoSOptions):
             raise QoSTypeError(f"qos={qos!r} is invalid: expected micros_rt.SubscribeQoSOptions")
-        return self._subscribe(topic, data_class, callback, queue_size, qos, TransportHints(), callback_args)
+        return self._subscribe(topic, data_class, callback, queue_size, qos, TransportHints(), callback_args,
+                               to_seconds(msg_valid_period, "msg_valid_period"))
+
+    def subscribe_reader(self, name: str, data_class: Type[genpy.Message], open_reader: OpenReader,
+                         callback: Callable[..., None], queue_size: Optional[int],
+                         qos: Optional[SubscribeQoSOptions] = None, *, msg_valid_period: float = math.inf,
+                         callback_args: Any = None) -> Subscriber:
+        """Deliver the messages of a transport reader a program opened itself (a bridge's link) to
+        ``callback`` through the same admission path as any subscription: ``qos``'s time filter and
+        deadline, ``msg_valid_period`` (dropped when older by their source stamp), ``queue_size`` (the
+        newest kept), counted in ``statistics()``. ``open_reader(depth, wake)`` opens the reader (a
+        :class:`micros_rt.transports.base.PushReader`). ``name`` names it in logs and ``DeadlineMissed``;
+        nothing is registered with the master. ``unregister()`` closes it."""
+        _require_node()
+        _check_data_class(data_class)
+        if not callable(callback):
+            raise TypeError(f"callback must be callable, got {callback!r}")
+        if qos is not None and not isinstance(qos, SubscribeQoSOptions):
+            raise QoSTypeError(f"qos={qos!r} is invalid: expected micros_rt.SubscribeQoSOptions or None")
+        lifespan = to_seconds(msg_valid_period, "msg_valid_period")
+        registry: EndpointRegistry[_Subscription] = EndpointRegistry("reader subscription")
+
+        def create() -> _Subscription:
+            new = ReaderSubscription(name, data_class, open_reader, queue_size, qos, graph=_node.graph,
+                                     lifespan=lifespan)
+            new.callbacks = ((callback, callback_args),)
+            return new
+
+        sub = registry.acquire(name, create, lambda _existing: None)
+        return Subscriber(sub, registry, callback, callback_args)
 
     def _subscribe(self, topic: str, data_class: Type[genpy.Message], callback: Callable[..., None],
                    queue_size: Optional[int], options: Optional[SubscribeQoSOptions],
-                   hints: TransportHints, callback_args: Any) -> Subscriber:
+                   hints: TransportHints, callback_args: Any, lifespan: float = math.inf) -> Subscriber:
         _require_node()
         _check_data_class(data_class)
         if not callable(callback):
@@ -296,6 +331,7 @@ class NodeHandle:
         def create() -> _Subscription:
             new = _Subscription(resolved, data_class, queue_size, effective, hints, dds=dds_backend(), tag=_tag(),
                                 graph=_node.graph, extra=_profile_backends())
+            new.lifespan = lifespan
             new.callbacks = ((callback, callback_args),)  # before start(): a latched message may come at once
             created.append(new)
             return new

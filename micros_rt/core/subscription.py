@@ -51,6 +51,10 @@ _RETAKE_SECONDS = 0.005  # with a bounded queue, take new samples at least this 
 class _Subscription:
     """Per topic and process: rospy subscriber, DDS reader(s) and the delivery thread."""
 
+    #: the subscriber's own msg_valid_period (seconds): a message older than this by its source stamp is
+    #: dropped (``dropped_expired``) whatever its publisher offers; the shorter of the two applies
+    lifespan: float = math.inf
+
     def __init__(self, topic: str, data_class: Type[genpy.Message], queue_size: Optional[int],
                  options: Optional[SubscribeQoSOptions], hints: TransportHints, *,
                  dds: Optional[DDSBackend], tag: Dict[str, str], graph: str,
@@ -296,7 +300,8 @@ class _Subscription:
         if tf.period > 0.0 and TIME_FILTER not in reader.enforces and not tf.admit(time.time()):
             self.dropped_filtered += 1
             return False
-        if qos is not None and source_ns and is_expired(source_ns, time.time_ns(), qos.msg_valid_period):
+        valid = self.lifespan if qos is None else min(self.lifespan, qos.msg_valid_period)
+        if source_ns and is_expired(source_ns, time.time_ns(), valid):
             self.dropped_expired += 1
             return False
         return True

@@ -1,9 +1,19 @@
 """The bridge node: ROS topics and services on one side, the microcontroller link on the other.
 
-The ROS side uses micros_rt's public API, so micros_rt nodes hear the board's streams over DDS and stock
-nodes over TCPROS, as negotiated; services use rospy's own ``Service``/``ServiceProxy`` (``rosservice``
-works). One delivery thread publishes what the board sends and watches its deadlines; callbacks of
-subscribed topics run on micros_rt's delivery threads, never on the link's socket threads.
+A thin program on micros_rt's public API and the link's transport writer and reader:
+
+- ROS -> board: a micros_rt subscription per ``to_microcontroller`` topic (``subscribe_with_qos``: the core
+  applies its time filter and msg_valid_period and counts them); its callback prepares and sends one datagram
+  through the link's :class:`~micros_rt.transports.mcu.link.UdpWriter`.
+- board -> ROS: the link's :class:`~micros_rt.transports.mcu.link.UdpReader` feeds a subscription of its own
+  (``subscribe_reader``: the core's time filter, deadline and queue rule, on its delivery thread) whose
+  callback publishes on a micros_rt publication (``advertise_with_qos``: DDS to micros_rt nodes, TCPROS to
+  stock ones, the entry's priority, latency budget and lifespan).
+- services use rospy's own ``Service``/``ServiceProxy`` (``rosservice`` works).
+
+The counters on ``~stats`` are the publications' and subscriptions' ``statistics()`` plus the link's wire
+counters (datagrams sent, oversized, refused; bad input; service calls). No thread of the bridge's runs QoS:
+one timer thread publishes the counters.
 
 >>> micros_rt.init_node("mcu_bridge")                                  # doctest: +SKIP
 >>> with McuBridge(load_config("mcu.yaml"), deadline_cb=print):        # doctest: +SKIP
@@ -12,25 +22,26 @@ subscribed topics run on micros_rt's delivery threads, never on the link's socke
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
+import math
 import threading
 import time
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Optional
 
+import genpy
 import rospy
 from std_msgs.msg import String
 
 import micros_rt
 from micros_rt.log import nonblocking_logger
-from micros_rt.qos.enforcement import DeadlineMissed, DeadlineMonitor, TimeFilter
-from micros_rt.qos.options import SubscribeQoSOptions
 
 from ...transports.mcu import wire
 from ...transports.mcu.config import McuConfig, ServiceEntry, TopicEntry
-from ...transports.mcu.errors import McuServiceError, WireError
-from ...transports.mcu.link import LinkStats, McuLink, UdpReader, UdpWriter
+from ...transports.mcu.errors import DatagramTooLargeError, McuServiceError, WireError
+from ...transports.mcu.link import McuLink, UdpWriter
 
 __all__ = ["McuBridge", "StatsCallback"]
 
@@ -40,28 +51,26 @@ _log = nonblocking_logger("rosout.micros_rt.mcu")
 StatsCallback = Callable[[Dict[str, Any]], None]
 
 _PUBLISH_QUEUE = 100   # ROS-side publisher of a board stream: keeps the newest 100, never blocks the bridge
+_FROM_QUEUE = 1000     # board stream -> its publication: the newest 1,000 waiting (dropped_queue_full beyond)
 _SUBSCRIBE_QUEUE = 10  # ROS-side subscriber of a topic for the board
-_POLL = 0.05           # seconds between deadline checks
 _DEADLINE_REMINDER = 10.0  # seconds between log lines while a stream stays silent
 _MAX_OUTSTANDING = 8   # board -> ROS calls whose ROS service has not answered yet
 
 
 @dataclass
-class _FromStream:
+class _Stream:
+    """One configured topic: its ROS-side subscription, and for a board stream its publication."""
+
     entry: TopicEntry
-    reader: UdpReader
-    publisher: micros_rt.Publisher
-    time_filter: TimeFilter
-    deadline: DeadlineMonitor
-    in_silence: bool = False
-    last_reminder: float = 0.0
+    subscriber: micros_rt.Subscriber
+    publisher: Optional[micros_rt.Publisher] = None
 
 
 class McuBridge:
     """Runs one microcontroller link inside the current node (call :func:`micros_rt.init_node` first).
 
-    - ``deadline_cb``: called (on the bridge's delivery thread) with a :class:`DeadlineMissed` when a
-      ``from_microcontroller`` stream with a ``deadline`` goes silent, once per deadline of silence.
+    - ``deadline_cb``: called with a :class:`micros_rt.DeadlineMissed` when a ``from_microcontroller`` stream
+      with a ``deadline`` goes silent, once per deadline of silence (micros_rt's deadline monitor).
     - ``stats_cb``: called with the counters every ``stats_period`` seconds (also published, as JSON in a
       ``std_msgs/String``, on ``~stats``).
 
@@ -69,46 +78,49 @@ class McuBridge:
     ``with`` block) stops everything; it is harmless twice.
     """
 
-    def __init__(self, config: McuConfig, *, deadline_cb: Optional[Callable[[DeadlineMissed], None]] = None,
+    def __init__(self, config: McuConfig, *, deadline_cb: Optional[Callable[[Any], None]] = None,
                  stats_cb: Optional[StatsCallback] = None) -> None:
         self.config = config
-        self.stats = LinkStats()
         self._deadline_cb = deadline_cb
         self._stats_cb = stats_cb
         self._closed = threading.Event()
-        self._wake = threading.Event()
-        self._subscribers: List[micros_rt.Subscriber] = []
+        self._from: List[_Stream] = []
+        self._to: List[_Stream] = []
         self._services: List[rospy.Service] = []
         self._outstanding = 0
         self._outstanding_lock = threading.Lock()
-        self.link = McuLink(config, stats=self.stats)
+        self._last_reminder: Dict[str, float] = {}
+        self.link = McuLink(config)
+        self.stats = self.link.stats
         try:
             self._open()
         except BaseException:
             self.close()
             raise
-        self._thread = threading.Thread(target=self._deliver_loop, name="mcu-bridge delivery", daemon=True)
+        self._thread = threading.Thread(target=self._stats_loop, name="mcu-bridge stats", daemon=True)
         self._thread.start()
 
     def _open(self) -> None:
         nh = micros_rt.NodeHandle()
-        now = time.monotonic()
-        self._streams = []
         for entry in self.config.from_microcontroller:
             publisher = nh.advertise_with_qos(entry.topic, entry.data_class, _PUBLISH_QUEUE, entry.advertise)
-            reader = self.link.open_reader(entry, self._wake.set)
-            self._streams.append(_FromStream(entry, reader, publisher,
-                                             TimeFilter(entry.subscribe.time_filter_duration),
-                                             DeadlineMonitor(entry.subscribe.deadline, start=now)))
-        # Any publisher on the ROS side is welcome (best effort or reliable, stamped or not): the link is
-        # the narrow part, and it applies the entry's QoS itself (UdpWriter.offer).
-        ros_side = SubscribeQoSOptions(using_best_effort_protocol=True, ordered_by_sending_timestamp=False)
-        self._writers: List[UdpWriter] = []
+            qos = entry.subscribe if math.isinf(entry.subscribe.deadline) else \
+                dataclasses.replace(entry.subscribe, deadline_cb=functools.partial(self._deadline_missed, entry))
+            subscriber = nh.subscribe_reader(entry.topic, entry.data_class,
+                                             functools.partial(self.link.open_reader, entry),
+                                             functools.partial(self._publish, entry, publisher), _FROM_QUEUE, qos)
+            self._from.append(_Stream(entry, subscriber, publisher))
+        # Any publisher on the ROS side is welcome (best effort or reliable, stamped or not): the link is the
+        # narrow part. The core applies the entry's time filter and msg_valid_period before the callback sends.
         for entry in self.config.to_microcontroller:
             writer = self.link.open_writer(entry)
-            self._writers.append(writer)
-            self._subscribers.append(nh.subscribe_with_qos(entry.topic, entry.data_class, _offer_callback(writer),
-                                                           _SUBSCRIBE_QUEUE, ros_side))
+            ros_side = micros_rt.SubscribeQoSOptions(using_best_effort_protocol=True,
+                                                     ordered_by_sending_timestamp=False,
+                                                     time_filter_duration=entry.subscribe.time_filter_duration)
+            subscriber = nh.subscribe_with_qos(entry.topic, entry.data_class, functools.partial(self._send, writer),
+                                               _SUBSCRIBE_QUEUE, ros_side,
+                                               msg_valid_period=entry.advertise.msg_valid_period)
+            self._to.append(_Stream(entry, subscriber))
         for service in self.config.services_on_microcontroller:
             self.stats.declare("services_on_microcontroller", service.name, ("calls", "ok", "failed", "timeout"))
             self._services.append(rospy.Service(service.service, service.service_class,
@@ -129,18 +141,17 @@ class McuBridge:
 
     # -- life cycle
     def close(self) -> None:
-        """Stop the delivery thread, the services and the link; harmless twice."""
+        """Stop the subscriptions, the services, the counters' timer and the link; harmless twice."""
         if self._closed.is_set():
             return
         self._closed.set()
-        self._wake.set()
         thread = getattr(self, "_thread", None)
         if thread is not None:
             thread.join(timeout=2.0)
         for service in self._services:
             service.shutdown("mcu-bridge closed")
-        for sub in self._subscribers:
-            sub.unregister()
+        for stream in self._from + self._to:
+            stream.subscriber.unregister()
         self.link.close()
 
     def __enter__(self) -> "McuBridge":
@@ -149,72 +160,53 @@ class McuBridge:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    # -- board -> ROS
-    def _deliver_loop(self) -> None:
-        next_stats = time.monotonic() + self.config.stats_period
-        while not self._closed.is_set():
-            self._wake.wait(_POLL)
-            self._wake.clear()
-            try:
-                for stream in self._streams:
-                    self._deliver(stream)
-                    self._check_deadline(stream)
-                if time.monotonic() >= next_stats:
-                    next_stats = time.monotonic() + self.config.stats_period
-                    self._publish_stats()
-            except Exception as exc:  # a bug (or a stats_cb) must not end the delivery: counted, logged
-                self.link.internal_error(exc, "in the bridge's delivery thread")
+    # -- ROS -> board (a micros_rt delivery thread, after the core's admission path)
+    def _send(self, writer: UdpWriter, msg: Any) -> None:
+        topic = writer.entry.topic
+        try:
+            writer.send(writer.prepare(msg))
+        except DatagramTooLargeError as exc:
+            self.link.warn(("oversized", topic), f"microcontroller link: {exc}", group="oversized")
+        except genpy.SerializationError as exc:
+            self.link.warn(("bad_message", topic), f"microcontroller link: {topic}: cannot encode the message: "
+                           f"{exc}", group="bad_message")
+        except micros_rt.TransportError as exc:
+            self.link.warn(("send_failed", topic), f"microcontroller link: {topic}: {exc}", group="send_failed")
 
-    def _deliver(self, stream: _FromStream) -> None:
-        for payload, info in stream.reader.take(256):
-            try:
-                msg = stream.reader.decode(payload)
-            except WireError as exc:
-                self.link.bad_input(info["source"], exc, "a datagram")
-                continue
-            now = time.monotonic()
-            resumed = stream.deadline.delivered(now)
-            if resumed is not None:
-                stream.in_silence = False
-                _log.warning("micros_rt: mcu-bridge: %s: data from the microcontroller resumed after %.1f s of "
-                             "silence (deadline %g s)", stream.entry.topic, resumed, stream.deadline.deadline)
-            if not stream.time_filter.admit(now):
-                self.stats.add("from_microcontroller", "filtered", entry=stream.entry.name)
-                continue
-            try:
-                stream.publisher.publish(msg)
-            except rospy.ROSSerializationException as exc:
-                self.link.bad_input(info["source"], WireError("bad_field", f"{stream.entry.topic}: {exc}"),
-                                    "a datagram")
-                continue
-            except (rospy.ROSException, micros_rt.MicrosRtError) as exc:
-                if not rospy.is_shutdown():  # at shutdown the topic closes under us: nothing to say
-                    self.link.warn(("publish", stream.entry.topic), f"mcu-bridge: cannot publish on "
-                                   f"{stream.entry.topic}: {exc}", group="publish")
-                continue
-            self.stats.add("from_microcontroller", "published", entry=stream.entry.name)
+    # -- board -> ROS (a micros_rt delivery thread, after the core's admission path)
+    def _publish(self, entry: TopicEntry, publisher: micros_rt.Publisher, msg: Any) -> None:
+        try:
+            publisher.publish(msg)
+        except rospy.ROSSerializationException as exc:
+            self.link.bad_input(self.config.microcontroller.address, WireError("bad_field", f"{entry.topic}: {exc}"),
+                                "a datagram")
+        except (rospy.ROSException, micros_rt.MicrosRtError) as exc:
+            if not rospy.is_shutdown():  # at shutdown the topic closes under us: nothing to say
+                self.link.warn(("publish", entry.topic), f"mcu-bridge: cannot publish on {entry.topic}: {exc}",
+                               group="publish")
 
-    def _check_deadline(self, stream: _FromStream) -> None:
+    def _deadline_missed(self, entry: TopicEntry, missed: Any) -> None:
+        """micros_rt's deadline monitor found the stream silent: say it in the link's words (the first miss of
+        a silence, then at most every _DEADLINE_REMINDER seconds), then tell ``deadline_cb`` (every miss)."""
         now = time.monotonic()
-        silent = stream.deadline.poll(now)
-        if silent is None:
-            return
-        entry, board = stream.entry, self.config.microcontroller
-        self.stats.add("from_microcontroller", "deadline_missed", entry=entry.name)
-        # The first miss of a silence in words, then a reminder at most every _DEADLINE_REMINDER seconds:
-        # a board that stays off must not fill the log (deadline_cb still hears every miss).
-        if not stream.in_silence or now - stream.last_reminder >= _DEADLINE_REMINDER:
-            stream.in_silence, stream.last_reminder = True, now
+        first = missed.silent_for < 2 * missed.deadline
+        if first or now - self._last_reminder.get(entry.name, 0.0) >= _DEADLINE_REMINDER:
+            self._last_reminder[entry.name] = now
+            board = self.config.microcontroller
             _log.warning("micros_rt: mcu-bridge: %s: no %r datagram from the microcontroller %s for %.1f s, longer "
                          "than the deadline of %g s (%d misses so far); is the board running and sending to %s:%d?",
-                         entry.topic, entry.name, board.address, silent, entry.subscribe.deadline,
-                         stream.deadline.missed_total, self.config.bind.address, self.config.bind.topic_port)
+                         entry.topic, entry.name, board.address, missed.silent_for, missed.deadline,
+                         missed.total_count, self.config.bind.address, self.config.bind.topic_port)
         if self._deadline_cb is not None:
+            self._deadline_cb(missed)  # micros_rt logs (and survives) a callback that raises
+
+    # -- counters
+    def _stats_loop(self) -> None:
+        while not self._closed.wait(self.config.stats_period):
             try:
-                self._deadline_cb(DeadlineMissed(entry.topic, entry.subscribe.deadline, silent,
-                                                 stream.deadline.missed_total))
-            except Exception:  # a user callback must not stop the bridge
-                _log.exception("micros_rt: mcu-bridge: deadline_cb of %s raised", entry.topic)
+                self._publish_stats()
+            except Exception as exc:  # a bug (or a stats_cb) must not end the counters: counted, logged
+                self.link.internal_error(exc, "in the bridge's counters thread")
 
     def _publish_stats(self) -> None:
         snapshot = self.snapshot()
@@ -228,8 +220,27 @@ class McuBridge:
             self._stats_cb(snapshot)
 
     def snapshot(self) -> Dict[str, Any]:
-        """Every counter now (what ``~stats`` carries), with ``bad_input.total``."""
+        """Every counter now (what ``~stats`` carries): each stream's from its micros_rt publication and
+        subscription, the link's wire counters, and ``bad_input.total``."""
         snapshot = self.stats.snapshot()
+        wire_to = snapshot.pop("to_microcontroller", {})
+        from_board: Dict[str, Any] = {}
+        for stream in self._from:
+            sub = stream.subscriber.statistics()
+            assert stream.publisher is not None
+            from_board[stream.entry.name] = {
+                "received": sub.received, "published": stream.publisher.statistics().published,
+                "filtered": sub.dropped_filtered, "dropped_queue_full": sub.dropped_queue_full,
+                "deadline_missed": sub.deadline_missed}
+        to_board: Dict[str, Any] = {}
+        for stream in self._to:
+            sub = stream.subscriber.statistics()
+            to_board[stream.entry.name] = {**wire_to.get(stream.entry.name, {}),
+                                           "expired": sub.dropped_expired, "filtered": sub.dropped_filtered}
+        if from_board:
+            snapshot["from_microcontroller"] = from_board
+        if to_board:
+            snapshot["to_microcontroller"] = to_board
         bad = snapshot.setdefault("bad_input", {})
         bad.pop("total", None)
         bad["total"] = sum(v for v in bad.values() if isinstance(v, int))
@@ -287,8 +298,3 @@ class McuBridge:
             raise McuServiceError(f"{entry.service}: {outcome['error']}")
         return wire.codec_for(entry.service_class._response_class).to_wire(outcome["response"])
 
-
-def _offer_callback(writer: UdpWriter) -> Callable[[Any], None]:
-    def callback(msg: Any) -> None:
-        writer.offer(msg)
-    return callback

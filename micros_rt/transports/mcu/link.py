@@ -1,21 +1,22 @@
-"""The microcontroller link itself: one UDP socket for topics, TCP for service calls, counters.
+"""The microcontroller link itself: one UDP socket for topics, TCP for service calls, wire counters.
 
 * :class:`McuLink` owns the UDP socket (bound to ``bind``), its receive thread and the bridge's service
   server (calls *from* the board), and makes service calls *to* the board (one TCP connection each).
-* :class:`UdpWriter` (a :class:`micros_rt.backends.WriterBackend`) sends one stream to the board:
+* :class:`UdpWriter` (a :class:`~micros_rt.transports.base.TransportWriter`) sends one stream to the board:
   ``prepare`` encodes and refuses what does not fit the mtu, ``send`` sends one datagram with the
-  stream's IP TOS. :meth:`UdpWriter.offer` applies the stream's QoS first (msg_valid_period,
-  time_filter_duration).
-* :class:`UdpReader` (a :class:`micros_rt.backends.ReaderBackend`) holds one stream's datagrams from the
-  board; ``decode`` turns one into a ROS message.
+  stream's IP TOS.
+* :class:`UdpReader` (a :class:`~micros_rt.transports.base.PushReader`) decodes one stream's datagrams on
+  the receive thread and queues the messages for the subscription that takes them.
 
-Bad input never stops anything: each problem is counted (:class:`LinkStats`, section ``bad_input``) and
-reported in words once per peer and kind (then counted; a summary line at most every 30 s).
+The link applies no QoS (time filter, lifespan, deadline): micros_rt's core does, in the subscriptions the
+bridge makes (:mod:`micros_rt.bridges.mcu`). It counts what only it can see (:class:`LinkStats`): datagrams
+sent, oversized or refused by the kernel, service calls, and bad input, which never stops anything: each
+problem is counted (section ``bad_input``) and reported in words once per peer and kind (then counted; a
+summary line at most every 30 s).
 """
 
 from __future__ import annotations
 
-import collections
 import errno
 import json
 import select
@@ -23,15 +24,14 @@ import socket
 import struct
 import threading
 import time
-from typing import Any, Callable, Deque, Dict, List, Optional, Sequence, Set, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import genpy
 
 from micros_rt.log import nonblocking_logger
-from micros_rt.transports.base import RemoteWriter, Sample
 from micros_rt.exceptions import TransportError
 from micros_rt.ratelimit import RateLimitedLog
-from micros_rt.qos.enforcement import TimeFilter, is_expired
+from micros_rt.transports.base import PushReader
 from micros_rt.transports.marking import mark_socket
 from micros_rt.qos.options import TransportPriority, priority_tos
 
@@ -50,7 +50,7 @@ MAX_FRAME = 65536
 FRAME_TIMEOUT = 5.0
 #: Calls from the board handled at once; more connections are closed at once and counted ``busy``.
 MAX_CONCURRENT_CALLS = 4
-#: Datagrams held per stream between the receive thread and the bridge (the oldest is dropped first).
+#: Messages a reader holds by default between the receive thread and its taker (the oldest is dropped first).
 READER_QUEUE = 1000
 
 #: (name of the service entry, its params) -> the response's fields, or raise McuServiceError/WireError.
@@ -58,7 +58,7 @@ ServiceHandler = Callable[[ServiceEntry, List[Any]], Dict[str, Any]]  # (entry, 
 
 
 class LinkStats:
-    """Thread-safe counters, by section and entry: what ``~stats`` shows.
+    """The link's wire counters (thread-safe), by section and entry: datagrams, bad input, service calls.
 
     >>> s = LinkStats(); s.add("bad_input", "not_msgpack"); s.snapshot()["bad_input"]
     {'not_msgpack': 1}
@@ -102,7 +102,10 @@ def _tos_cmsg(tos: int, v6: bool) -> List[Tuple[int, int, bytes]]:
 
 
 class UdpWriter:
-    """One stream to the board (a ``WriterBackend``): encode, check the mtu, send one datagram.
+    """One stream to the board, a :class:`~micros_rt.transports.base.TransportWriter`: ``prepare`` encodes and
+    refuses what does not fit the mtu, ``send`` sends one datagram with the stream's IP TOS. QoS (time filter,
+    lifespan) is the core's: the bridge's subscription applies it before its callback sends. Counts its wire
+    outcomes (``sent``, ``oversized``, ``send_failed``) in the link's counters.
 
     >>> writer.prepare(big_message)                       # doctest: +SKIP
     DatagramTooLargeError: /cmd: the message encodes to 2,013 bytes, more than ... mtu of 1,472 ...
@@ -118,100 +121,58 @@ class UdpWriter:
         self.guid = f"udp://{board.address}:{board.topic_port}/{entry.name}"
         self.tos = priority_tos(entry.advertise.transport_priority)
         self._cmsg = _tos_cmsg(self.tos, board.family_v6)
-        self._filter = TimeFilter(entry.subscribe.time_filter_duration)
-        self._lock = threading.Lock()
-        link.stats.declare("to_microcontroller", entry.name,
-                           ("sent", "expired", "filtered", "oversized", "send_failed"))
+        self.closed = False
+        link.stats.declare("to_microcontroller", entry.name, ("sent", "oversized", "send_failed"))
 
     def prepare(self, msg: Any) -> bytes:
-        """The datagram for ``msg``; ``DatagramTooLargeError`` when it exceeds the mtu,
-        ``genpy.SerializationError`` on a bad field value."""
-        data = wire.encode_datagram(self.entry.name, self.codec.to_wire(msg), form=self._link.config.wire_form)
+        """The datagram for ``msg``; :class:`DatagramTooLargeError` when it exceeds the mtu (counted
+        ``oversized``), ``genpy.SerializationError`` on a bad field value (counted ``send_failed``)."""
+        try:
+            data = wire.encode_datagram(self.entry.name, self.codec.to_wire(msg), form=self._link.config.wire_form)
+        except genpy.SerializationError:
+            self._link.stats.add("to_microcontroller", "send_failed", entry=self.entry.name)
+            raise
         if len(data) > self._link.config.mtu:
+            self._link.stats.add("to_microcontroller", "oversized", entry=self.entry.name)
             raise DatagramTooLargeError(self.entry.topic, len(data), self._link.config.mtu)
         return data
 
     def send(self, prepared: bytes) -> None:
-        """Send one datagram to the board without blocking; ``TransportError`` when the kernel refuses."""
-        self._link.send_datagram(prepared, self._cmsg)
-
-    def offer(self, msg: Any, *, now_ns: Optional[int] = None) -> str:
-        """Apply the stream's QoS, then prepare and send ``msg``; returns the outcome, also counted:
-        ``sent``, ``expired`` (older than msg_valid_period by its Header stamp), ``filtered``
-        (time_filter_duration), ``oversized`` or ``send_failed`` (both also logged)."""
-        now_ns = time.time_ns() if now_ns is None else now_ns
-        outcome = self._offer(msg, now_ns)
-        self._link.stats.add("to_microcontroller", outcome, entry=self.entry.name)
-        return outcome
-
-    def _offer(self, msg: Any, now_ns: int) -> str:
-        header = getattr(msg, "header", None) if getattr(msg, "_has_header", False) else None
-        stamp = getattr(header, "stamp", None)
-        if stamp is not None and (stamp.secs or stamp.nsecs) and \
-                is_expired(stamp.secs * 1_000_000_000 + stamp.nsecs, now_ns, self.entry.advertise.msg_valid_period):
-            return "expired"
-        with self._lock:
-            if not self._filter.admit(time.monotonic()):
-                return "filtered"
+        """Send one datagram to the board without blocking (counted ``sent``); :class:`TransportError`
+        (counted ``send_failed``) when the kernel refuses or the writer or link is closed."""
+        if self.closed:
+            raise TransportError(f"microcontroller link: the writer of {self.entry.topic} is closed; "
+                                 f"open another with McuLink.open_writer")
         try:
-            data = self.prepare(msg)
-        except DatagramTooLargeError as exc:
-            self._link.warn(("oversized", self.entry.topic), f"microcontroller link: {exc}", group="oversized")
-            return "oversized"
-        except genpy.SerializationError as exc:
-            self._link.warn(("bad_message", self.entry.topic), f"microcontroller link: {self.entry.topic}: "
-                            f"cannot encode the message: {exc}", group="bad_message")
-            return "send_failed"
-        try:
-            self.send(data)
-        except TransportError as exc:
-            self._link.warn(("send_failed", self.entry.topic), f"microcontroller link: {self.entry.topic}: {exc}",
-                            group="send_failed")
-            return "send_failed"
-        return "sent"
-
-    def matched_peers(self) -> Set[str]:
-        return {self.guid}
+            self._link.send_datagram(prepared, self._cmsg)
+        except TransportError:
+            self._link.stats.add("to_microcontroller", "send_failed", entry=self.entry.name)
+            raise
+        self._link.stats.add("to_microcontroller", "sent", entry=self.entry.name)
 
     def close(self) -> None:
-        """Nothing of its own to release: the socket is the link's."""
+        """Refuse further sends (the socket is the link's); harmless twice."""
+        self.closed = True
 
 
-class UdpReader:
-    """One stream from the board (a ``ReaderBackend``): datagrams waiting for the bridge, oldest first."""
+class UdpReader(PushReader):
+    """One stream from the board, a pushed :class:`~micros_rt.transports.base.TransportReader`: the receive
+    thread decodes each datagram (a malformed one is counted in ``bad_input`` and dropped) and queues the
+    message; ``take`` hands them over oldest first. Enforces no QoS itself (the subscription does)."""
 
-    protocol = PROTOCOL
-
-    def __init__(self, link: "McuLink", entry: TopicEntry, wake: Callable[[], None]) -> None:
-        self.entry = entry
-        self.codec = wire.codec_for(entry.data_class)
+    def __init__(self, link: "McuLink", entry: TopicEntry, depth: Optional[int], wake: Callable[[], None]) -> None:
         board = link.config.microcontroller
         self.guid = f"udp://{board.address}:{board.topic_port}/{entry.name}"
-        self._wake = wake
-        self._stats = link.stats
-        self._queue: Deque[Sample] = collections.deque()
-        self._lock = threading.Lock()
+        super().__init__(PROTOCOL, depth, wake, blocking=False, links=self._heard)
+        self.entry = entry
+        self.codec = wire.codec_for(entry.data_class)
+        self._link = link
         self._last_source: Optional[str] = None
-        link.stats.declare("from_microcontroller", entry.name,
-                           ("received", "published", "filtered", "dropped_queue_full", "deadline_missed"))
 
-    def put(self, datagram: bytes, source: str) -> None:
-        """From the receive thread: queue one datagram (dropping the oldest when full) and wake."""
-        with self._lock:
-            if len(self._queue) >= READER_QUEUE:
-                self._queue.popleft()
-                self._stats.add("from_microcontroller", "dropped_queue_full", entry=self.entry.name)
-            self._queue.append((datagram, {"source": source, "arrival_ns": time.time_ns()}))
-            self._last_source = source
-        self._stats.add("from_microcontroller", "received", entry=self.entry.name)
-        self._wake()
+    def _heard(self) -> Dict[str, str]:
+        return {self.guid: PROTOCOL} if self._last_source is not None else {}
 
-    def take(self, n: int) -> Sequence[Sample]:
-        with self._lock:
-            k = min(n, len(self._queue))
-            return [self._queue.popleft() for _ in range(k)]
-
-    def decode(self, payload: bytes) -> Any:
+    def decode_datagram(self, payload: bytes) -> Any:
         """The ROS message of one datagram; :class:`WireError` (a ``ValueError``) when malformed."""
         name, body = wire.split_datagram(payload)
         try:
@@ -219,15 +180,16 @@ class UdpReader:
         except WireError as exc:
             raise WireError(exc.kind, f"stream {name!r} ({self.entry.type}): {exc}") from exc
 
-    def writer(self, handle: Any) -> Optional[RemoteWriter]:
-        return RemoteWriter(guid=self.guid, tag=None)
-
-    def matched_writers(self) -> Set[str]:
-        return {self.guid} if self._last_source is not None else set()
-
-    def close(self) -> None:
-        with self._lock:
-            self._queue.clear()
+    def put_datagram(self, datagram: bytes, source: str) -> None:
+        """From the receive thread: decode one datagram and queue its message (never waits: the oldest is
+        dropped when the queue is full, counted in :attr:`dropped`)."""
+        try:
+            msg = self.decode_datagram(datagram)
+        except WireError as exc:
+            self._link.bad_input(source, exc, "a datagram")
+            return
+        self._last_source = source
+        self.put(msg, 0, source)
 
 
 class McuLink:
@@ -316,8 +278,11 @@ class McuLink:
     def open_writer(self, entry: TopicEntry) -> UdpWriter:
         return UdpWriter(self, entry)
 
-    def open_reader(self, entry: TopicEntry, wake: Callable[[], None]) -> UdpReader:
-        reader = UdpReader(self, entry, wake)
+    def open_reader(self, entry: TopicEntry, depth: Optional[int] = READER_QUEUE,
+                    wake: Callable[[], None] = lambda: None) -> UdpReader:
+        """The reader of ``entry``'s datagrams: its queue keeps the newest ``depth`` messages (None:
+        unbounded); ``wake`` is called after each (the subscription's delivery thread waits on it)."""
+        reader = UdpReader(self, entry, depth, wake)
         self._readers[entry.name] = reader
         return reader
 
@@ -368,7 +333,7 @@ class McuLink:
         if reader is None:
             self.bad_input(peer, _unknown("unknown_stream", "from_microcontroller", name, self._readers), "a datagram")
             return
-        reader.put(data, peer)
+        reader.put_datagram(data, peer)
 
     # -- services: calls from the board
     def serve_calls(self, handler: ServiceHandler) -> None:
