@@ -1,7 +1,7 @@
 """Hosts in network namespaces of the test's own making, for robustness tests across a real network.
 
 ``Hosts(n)`` makes n namespaces joined by veth pairs to a bridge in a namespace of their own (nothing is
-attached to the machine's own interfaces), addresses 10.78.T.1..n/24, a rosmaster on host 0, optional
+attached to the machine's own interfaces), addresses 10.78.T.1..n/24, every link at ``mtu`` (1500 unless told), a rosmaster on host 0, optional
 nftables packet loss on every host's input (so both directions lose), and ``cut()``/``restore()`` of one
 host's link. Everything is removed by ``down()``, also after a failure.
 """
@@ -16,10 +16,11 @@ import harness
 
 
 class Hosts:
-    def __init__(self, n: int, *, loss_percent: int = 0) -> None:
+    def __init__(self, n: int, *, loss_percent: int = 0, mtu: int = 1500) -> None:
         pid = os.getpid()
         self.n = n
         self.loss_percent = loss_percent
+        self.mtu = mtu
         self.net = f"10.78.{pid % 200 + 20}"
         self.names = [f"mrtH{i}_{pid}" for i in range(n)]
         self.bridge_ns = f"mrtBR_{pid}"
@@ -45,7 +46,8 @@ class Hosts:
         for i, ns in enumerate(self.names):
             host_end, bridge_end = self.link_name(i), f"b{i}_{pid}"
             self.sh("ip", "netns", "add", ns)
-            self.sh("ip", "link", "add", host_end, "type", "veth", "peer", "name", bridge_end)
+            self.sh("ip", "link", "add", host_end, "mtu", str(self.mtu), "type", "veth", "peer", "name", bridge_end,
+                    "mtu", str(self.mtu))
             self.sh("ip", "link", "set", host_end, "netns", ns)
             self.sh("ip", "link", "set", bridge_end, "netns", self.bridge_ns)
             self.sh("ip", "-n", self.bridge_ns, "link", "set", bridge_end, "master", "br0")
