@@ -28,6 +28,7 @@ import time
 import xmlrpc.client
 from typing import Any, Callable, Dict, Iterator, List, Optional, Protocol, Tuple
 
+import genpy
 import rospy
 import rospy.core
 import rospy.impl.init
@@ -44,6 +45,7 @@ from rospy.impl.registration import (
     get_service_manager,
     get_topic_manager,
 )
+from ..exceptions import TransportError
 from ..log import nonblocking_logger
 
 __all__ = [
@@ -581,7 +583,20 @@ class TcprosWriter:
 
     def send(self, msg: Any) -> None:
         """Publish to the TCPROS links (rospy keeps the latched message even when there are none)."""
-        self._impl.publish(msg)
+        try:
+            self._impl.publish(msg)
+        except genpy.SerializationError:
+            # rospy leaves the half-written message in its per-topic buffer, and its next publish() sends those
+            # bytes ahead of its own: the subscriber reads garbage and drops the link (found by tests/contract)
+            buff = self._impl.buff
+            buff.seek(0)
+            buff.truncate(0)
+            raise
+        except rospy.ROSException as exc:  # rospy's "publish() to a closed topic" (silent at shutdown)
+            if not self.closed:
+                raise
+            raise TransportError(f"topic {self.guid}: its TCPROS writer is closed (the publication was "
+                                 f"unregistered); nothing was sent") from exc
 
     def close(self) -> None:
         self._pub.unregister()

@@ -84,6 +84,9 @@ class DDSTopicWriter:
             return True
         if ret == _DDS_RETCODE_TIMEOUT:
             return False
+        if self._closed:
+            raise TransportError(f"topic {self.topic}: this DDS writer is closed (its publication was unregistered); "
+                                 f"nothing was sent")
         raise TransportError(f"topic {self.topic}: DDS write failed (Cyclone return code {ret})")
 
     def wait_for_room(self, timeout: float) -> None:

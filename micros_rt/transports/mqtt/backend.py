@@ -40,7 +40,7 @@ import genpy
 
 from ...log import nonblocking_logger
 from ..base import EndpointSpec
-from ...exceptions import ProfileError
+from ...exceptions import ProfileError, TransportError
 from ...ratelimit import RateLimitedLog
 from ...qos.topic_rules import TopicPattern, best_match
 from ...qos import AdvertiseQoSOptions, SubscribeQoSOptions, TransportPriority, priority_socket_priority, priority_tos
@@ -216,6 +216,7 @@ class MqttTopicWriter:
         self.expiry = int(math.ceil(period)) if math.isfinite(period) and period > 0 else None
         self._announced = -1
         self.sent = 0
+        self.closed = False
         _log.info("micros_rt: topic %s is mirrored to MQTT topic '%s' (%s, QoS %d%s)", spec.topic, self.mqtt_topic,
                   rule.codec, self.qos, ", retained" if self.retain else "")
 
@@ -241,6 +242,9 @@ class MqttTopicWriter:
 
     def send(self, prepared: Tuple[bytes, Any]) -> None:
         """Publish what :meth:`prepare` made (buffered on disk while disconnected, if configured)."""
+        if self.closed:
+            raise TransportError(f"topic {self.spec.topic}: its MQTT writer is closed (the publication was "
+                                 f"unregistered); nothing was sent to '{self.mqtt_topic}'")
         payload, msg_class = prepared
         conn = self.backend.connection
         if msg_class is not None and self._announced != self.backend.generation:
@@ -257,7 +261,8 @@ class MqttTopicWriter:
                               f"message cannot go to MQTT topic '{self.mqtt_topic}': {exc}")
 
     def close(self) -> None:
-        """Nothing per writer: the connection is the process's."""
+        """Refuse further sends; the connection is the process's, it stays."""
+        self.closed = True
 
 
 class MqttTopicReader:
