@@ -46,6 +46,7 @@ from rospy.impl.registration import (
     get_topic_manager,
 )
 from ..exceptions import TransportError
+from ..transports.base import send_with_backoff
 from ..log import nonblocking_logger
 
 __all__ = [
@@ -276,21 +277,29 @@ class TimeoutTransport(xmlrpc.client.Transport):
 
 
 def _request_topic(pub_uri: str, topic: str, protocols: List[List[Any]]) -> Tuple[int, str, Any]:
-    interval = 0.5
-    deadline = time.monotonic() + 60.0
-    while not rospy.core.is_shutdown():
+    """requestTopic to ``pub_uri``, retried (0.5 s, doubling, at most 8 s; for 60 s) while it times out."""
+    outcome: List[Tuple[int, str, Any]] = []
+    failure: List[OSError] = []
+
+    def attempt(_: Any) -> bool:
         proxy = xmlrpc.client.ServerProxy(pub_uri, transport=TimeoutTransport(10.0), allow_none=False)
         try:
             answer: Any = proxy.requestTopic(caller_id(), topic, protocols)
             code, msg, result = answer
-            return int(code), str(msg), result
+            outcome.append((int(code), str(msg), result))
         except OSError as exc:
-            if exc.errno == errno.ECONNREFUSED or time.monotonic() > deadline:
-                return -1, f"publisher {pub_uri} unreachable: {exc}", None
+            if exc.errno != errno.ECONNREFUSED:
+                failure[:] = [exc]
+                return False  # try again
+            outcome.append((-1, f"publisher {pub_uri} unreachable: {exc}", None))
         except (xmlrpc.client.Fault, xmlrpc.client.ProtocolError, ValueError, TypeError) as exc:
-            return -1, f"publisher {pub_uri} gave a malformed requestTopic answer: {exc}", None
-        time.sleep(interval)
-        interval = min(interval * 2, 8.0)
+            outcome.append((-1, f"publisher {pub_uri} gave a malformed requestTopic answer: {exc}", None))
+        return True
+
+    if send_with_backoff(attempt, None, 60.0, rospy.core.is_shutdown, first=0.5, most=8.0):
+        return outcome[0]
+    if failure and not rospy.core.is_shutdown():
+        return -1, f"publisher {pub_uri} unreachable: {failure[0]}", None
     return -1, "node is shutting down", None
 
 

@@ -110,16 +110,18 @@ BACKOFF_MAX = 0.002
 
 def send_with_backoff(try_send: Callable[[Any], bool], prepared: Any, timeout: float,
                       closed: Callable[[], bool] = lambda: False,
-                      wait: Optional[Callable[[float], None]] = None) -> bool:
+                      wait: Optional[Callable[[float], None]] = None, *,
+                      first: float = BACKOFF_FIRST, most: float = BACKOFF_MAX) -> bool:
     """Try ``try_send(prepared)`` until it succeeds or ``timeout`` seconds passed (False then), waiting
     between tries with ``wait(seconds)`` (the transport's own wait for room, which returns as soon as there
-    is some; a sleep when it has none). The waiting never holds the GIL: Cyclone's own blocking write does,
-    and stalls the whole process (measured: a thread counting got 0.3 % of its rate while a write waited
-    1.5 s for a stopped reader's acknowledgements)."""
+    is some; a sleep when it has none), ``first`` seconds, doubling, at most ``most``. The waiting never holds
+    the GIL: Cyclone's own blocking write does, and stalls the whole process (measured: a thread counting got
+    0.3 % of its rate while a write waited 1.5 s for a stopped reader's acknowledgements). The one retry loop:
+    anything retried with backoff (a peer's XML-RPC call, too) goes through it."""
     if try_send(prepared):
         return True
     deadline = time.monotonic() + timeout
-    pause = BACKOFF_FIRST
+    pause = first
     pausing = time.sleep if wait is None else wait
     while not closed():
         pausing(pause)
@@ -127,7 +129,7 @@ def send_with_backoff(try_send: Callable[[Any], bool], prepared: Any, timeout: f
             return True
         if time.monotonic() >= deadline:
             return False
-        pause = min(pause * 2, BACKOFF_MAX)
+        pause = min(pause * 2, most)
     return False
 
 
