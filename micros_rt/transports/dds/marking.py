@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 import os
 import socket
+import stat
 from typing import Dict, Set, Tuple
 from ...log import nonblocking_logger
 from ..marking import mark_socket_tos
@@ -27,39 +28,32 @@ __all__ = ["process_udp_sockets", "mark_udp_sockets"]
 _log = nonblocking_logger("rosout.micros_rt.dds")
 
 
-def _udp_inodes() -> Dict[int, int]:
-    """inode -> address family of this network namespace's UDP sockets."""
-    out: Dict[int, int] = {}
-    for path, family in (("/proc/self/net/udp", socket.AF_INET), ("/proc/self/net/udp6", socket.AF_INET6)):
-        try:
-            with open(path) as f:
-                next(f, None)
-                for line in f:
-                    parts = line.split()
-                    if len(parts) >= 10:
-                        out[int(parts[9])] = family
-        except OSError:
-            continue
-    return out
-
-
 def process_udp_sockets() -> Dict[int, Tuple[int, int]]:
-    """inode -> (fd, family) of this process's UDP sockets."""
-    inodes = _udp_inodes()
+    """inode -> (fd, family) of this process's UDP sockets (IPv4 and IPv6).
+
+    Each open descriptor that is a socket (``fstat``) is asked its family and type by the kernel (a socket
+    made on a duplicate of it: the standard library reads ``SO_DOMAIN``/``SO_TYPE``); its inode is the
+    ``socket:[inode]`` Linux shows. No text of /proc/net/udp is parsed."""
     found: Dict[int, Tuple[int, int]] = {}
     try:
         fds = os.listdir("/proc/self/fd")
     except OSError:
         return found
     for name in fds:
+        fd = int(name)
         try:
-            target = os.readlink(f"/proc/self/fd/{name}")
+            st = os.fstat(fd)
+        except OSError:  # the listing's own descriptor, or one closed meanwhile
+            continue
+        if not stat.S_ISSOCK(st.st_mode):
+            continue
+        try:
+            probe = socket.socket(fileno=os.dup(fd))
         except OSError:
             continue
-        if target.startswith("socket:["):
-            inode = int(target[8:-1])
-            if inode in inodes:
-                found[inode] = (int(name), inodes[inode])
+        with probe:
+            if probe.type == socket.SOCK_DGRAM and probe.family in (socket.AF_INET, socket.AF_INET6):
+                found[st.st_ino] = (fd, int(probe.family))
     return found
 
 
