@@ -289,10 +289,7 @@ class NodeHandle:
         newest kept), counted in ``statistics()``. ``open_reader(depth, wake)`` opens the reader (a
         :class:`micros_rt.transports.base.PushReader`). ``name`` names it in logs and ``DeadlineMissed``;
         nothing is registered with the master. ``unregister()`` closes it."""
-        _require_node()
-        _check_data_class(data_class)
-        if not callable(callback):
-            raise TypeError(f"callback must be callable, got {callback!r}")
+        _check_subscriber(data_class, callback)
         if qos is not None and not isinstance(qos, SubscribeQoSOptions):
             raise QoSTypeError(f"qos={qos!r} is invalid: expected micros_rt.SubscribeQoSOptions or None")
         lifespan = to_seconds(msg_valid_period, "msg_valid_period")
@@ -310,10 +307,7 @@ class NodeHandle:
     def _subscribe(self, topic: str, data_class: Type[genpy.Message], callback: Callable[..., None],
                    queue_size: Optional[int], options: Optional[SubscribeQoSOptions],
                    hints: TransportHints, callback_args: Any, lifespan: float = math.inf) -> Subscriber:
-        _require_node()
-        _check_data_class(data_class)
-        if not callable(callback):
-            raise TypeError(f"callback must be callable, got {callback!r}")
+        _check_subscriber(data_class, callback)
         resolved = self.resolve_name(topic)
         profile = _node.profile.subscribe_options(resolved) if _node.profile else None
         effective = merge_subscribe(options, profile) if (options or profile) else None
@@ -352,6 +346,13 @@ def _profile_backends() -> Tuple[ProfileBackend, ...]:
 def _tag() -> Dict[str, str]:
     """What micros_rt endpoints tell peers about themselves (DDS USER_DATA): the graph and the node."""
     return {"graph": _node.graph, "node": compat.caller_id()}
+
+
+def _check_subscriber(data_class: Any, callback: Any) -> None:
+    _require_node()
+    _check_data_class(data_class)
+    if not callable(callback):
+        raise TypeError(f"callback must be callable, got {callback!r}")
 
 
 def _check_data_class(data_class: Any) -> None:
