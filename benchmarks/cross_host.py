@@ -223,13 +223,14 @@ class Bench:
                 "p50_ms": [r["p50_ms"] for r in res], "p99_ms": [r["p99_ms"] for r in res],
                 "all_p50_ms": pct(lat, 0.5), "all_p99_ms": pct(lat, 0.99),
                 "publisher_cpu_ms_per_msg": sent["cpu_s"] * 1e3 / max(1, sent["sent"]),
+                "publish_call_p50_ms": sent.get("publish_p50_ms"),
                 "publisher_link_copies": (tx1 - tx0) / (IMAGE * max(1, sent["sent"])),
                 "cdf_ms": [pct(lat, i / 100) for i in range(100)]}
 
 
 def run_mtu(mtu: int, impls: List[str], figures: List[str], P: Dict[str, Any], rnd: int,
             results: Dict[str, Any], errors: List[str]) -> None:
-    hosts = Hosts(5 if "fanout4" in figures else 2, mtu=mtu).up()
+    hosts = Hosts(5 if "fanout4" in figures else 2, mtu=mtu, plain_bridge=P["plain_bridge"]).up()
     try:
         b = Bench(hosts, P)
         order = impls[rnd % len(impls):] + impls[:rnd % len(impls)]
@@ -290,6 +291,7 @@ def summarise(results: Dict[str, Any]) -> Dict[str, Any]:
                 flat[f"{kind}_lost"] = sum(r["sent"] * len(r["delivered"]) - sum(r["delivered"]) for r in runs)
                 flat[f"{kind}_copies"] = statistics.median(r["publisher_link_copies"] for r in runs)
                 flat[f"{kind}_pub_cpu_ms_per_msg"] = statistics.median(r["publisher_cpu_ms_per_msg"] for r in runs)
+                flat[f"{kind}_publish_call_ms"] = statistics.median(r["publish_call_p50_ms"] or 0.0 for r in runs)
             summary.setdefault(mtu, {})[impl] = flat
     for mtu, stacks in summary.items():
         base = stacks.get(BASE, {})
@@ -299,7 +301,7 @@ def summarise(results: Dict[str, Any]) -> Dict[str, Any]:
             ratios = {}
             for k, v in flat.items():
                 b = base.get(k)
-                if v is not None and b and not k.endswith(("_lost", "_copies", "_cpu_ms_per_msg")):
+                if v is not None and b and not k.endswith(("_lost", "_copies", "_cpu_ms_per_msg", "_call_ms")):
                     ratios[k] = v / b
             flat["vs_rospy"] = ratios
     return summary
@@ -328,7 +330,7 @@ def table(summary: Dict[str, Any]) -> List[str]:
             cells = []
             for impl, flat in stacks.items():
                 v = flat.get(k)
-                nd = 2 if k.endswith(("_copies", "_ms", "_ms_per_msg")) else 0
+                nd = 2 if k.endswith(("_copies", "_ms", "_ms_per_msg", "_call_ms")) else 0
                 cell = fmt(v, nd)
                 lost_key = k.rsplit("_", 2)[0] + "_lost" if k.endswith(("_p50_us", "_p99_us", "_p50_ms", "_p99_ms"))\
                     else k.rsplit("_", 3)[0] + "_lost"
@@ -380,6 +382,8 @@ def main() -> int:
     ap.add_argument("--rounds", type=int, default=1)
     ap.add_argument("--seconds", type=float, default=None, help="seconds per stream (default 5; quick 3)")
     ap.add_argument("--out", default=str(RESULTS))
+    ap.add_argument("--plain-bridge", action="store_true", help="the bridge as a switch: bridged frames skip the "
+                    "firewall (net.bridge.bridge-nf-call-iptables=0 in the bridge's namespace)")
     ap.add_argument("--no-save", action="store_true", help="print only (steering runs)")
     ap.add_argument("--cyclone-xml", default="", help="experiments: CYCLONEDDS_URI for micros_rt's processes "
                     "({ip} stands for the host's address; it replaces micros_rt's network configuration)")
@@ -390,7 +394,8 @@ def main() -> int:
     figures = (args.figures or ("stream,fanout4" if args.quick else ",".join(FIGURES))).split(",")
     impls = args.only.split(",")
     P = {"rtt_n": 300, "rtt_big_n": 60, "rtt_s": 4.0, "thr_s": 2.0, "rate": 30.0,
-         "stream_s": args.seconds or (3.0 if args.quick else 5.0), "cyclone_xml": args.cyclone_xml}
+         "stream_s": args.seconds or (3.0 if args.quick else 5.0), "cyclone_xml": args.cyclone_xml,
+         "plain_bridge": args.plain_bridge}
     os.environ.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 200 + 20))
     tx_before = eth0_tx()
     t0 = time.monotonic()

@@ -50,13 +50,16 @@ def role_stream(a, tr, msgs):
     start = time.monotonic()
     end, last, n = start + a.seconds, start, 0
     c0 = time.process_time()
+    took = []
     while not STOP.is_set():
         now = time.monotonic()
         if now >= end:
             break
         m = msgs.make(n)
         stamp_now(m, tr)
+        t = time.perf_counter()
         p.publish(m)
+        took.append((time.perf_counter() - t) * 1e3)
         n += 1
         last += period
         now = time.monotonic()
@@ -64,7 +67,8 @@ def role_stream(a, tr, msgs):
             last = now
         elif last > now:
             time.sleep(last - now)
-    emit("sent", sent=n, seconds=time.monotonic() - start, cpu_s=time.process_time() - c0)
+    emit("sent", sent=n, seconds=time.monotonic() - start, cpu_s=time.process_time() - c0,
+         publish_p50_ms=percentile(took, 0.5))
     deadline = time.monotonic() + a.timeout
     while not STOP.is_set() and time.monotonic() < deadline and "DONE" not in CMDS:
         time.sleep(0.05)

@@ -16,8 +16,9 @@ import harness
 
 
 class Hosts:
-    def __init__(self, n: int, *, loss_percent: int = 0, mtu: int = 1500) -> None:
+    def __init__(self, n: int, *, loss_percent: int = 0, mtu: int = 1500, plain_bridge: bool = False) -> None:
         pid = os.getpid()
+        self.plain_bridge = plain_bridge
         self.n = n
         self.loss_percent = loss_percent
         self.mtu = mtu
@@ -42,6 +43,8 @@ class Hosts:
         pid = os.getpid()
         self.sh("ip", "netns", "add", self.bridge_ns)
         self.sh("ip", "-n", self.bridge_ns, "link", "add", "br0", "type", "bridge")
+        if self.plain_bridge:  # a switch: bridged frames skip the firewall (no iptables, no reassembly there)
+            self.sh("ip", "netns", "exec", self.bridge_ns, "sysctl", "-qw", "net.bridge.bridge-nf-call-iptables=0")
         self.sh("ip", "-n", self.bridge_ns, "link", "set", "br0", "up")
         for i, ns in enumerate(self.names):
             host_end, bridge_end = self.link_name(i), f"b{i}_{pid}"

@@ -72,7 +72,31 @@ def test_cyclone_accepts_the_layered_configuration() -> None:
 
 def test_loopback_nodes_use_large_fragments_and_network_nodes_do_not() -> None:
     assert "<FragmentSize>63000B</FragmentSize>" in micros_rt_defaults({"ROS_IP": "127.0.0.1"})
-    assert "FragmentSize" not in micros_rt_defaults({"ROS_IP": "10.1.2.3"})  # 1,500 B MTUs: Cyclone's default
+    net = micros_rt_defaults({"ROS_IP": "10.1.2.3"})  # no local interface holds it: MTU unknown
+    assert "FragmentSize" not in net  # 1,500 B MTUs: Cyclone's default, one packet per fragment
+    assert "<MaxMessageSize>65500B</MaxMessageSize>" in net  # but 64 KB datagrams: fewer send calls
+
+
+def test_network_fragments_are_one_packet_of_the_interfaces_mtu() -> None:
+    from micros_rt.transports.dds.participant import interface_mtu, network_transport
+
+    assert network_transport(1500) == network_transport(None) == \
+        "<General><MaxMessageSize>65500B</MaxMessageSize></General>"
+    jumbo = network_transport(9000)  # a retransmission resends a fragment: one jumbo frame each
+    assert "<FragmentSize>8844B</FragmentSize>" in jumbo and "<MaxRexmitMessageSize>8956B</MaxRexmitMessageSize>" in jumbo
+    assert interface_mtu("127.0.0.1") == int(Path("/sys/class/net/lo/mtu").read_text())
+    assert interface_mtu("10.255.254.253") is None
+
+
+def test_cyclone_accepts_the_network_sizes() -> None:
+    from cyclonedds.domain import Domain, DomainParticipant
+    from micros_rt.transports.dds.participant import network_transport
+
+    sizes = f'<CycloneDDS><Domain id="any">{network_transport(9000)}</Domain></CycloneDDS>'
+    domain = Domain(227, f"{sizes},{LOOPBACK_CONFIG}")
+    participant = DomainParticipant(227)
+    assert str(participant.guid)
+    del participant, domain
 
 
 def test_loopback_writers_keep_a_fixed_window_and_readers_ask_at_once_others_keep_cyclones() -> None:
