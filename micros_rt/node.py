@@ -316,9 +316,9 @@ class NodeHandle:
             if sub.data_class is not data_class:
                 raise rospy.ROSException(
                     f"topic {resolved} is already subscribed in this node with type {sub.data_class._type}")
-            if sub.options != effective or sub.hints != hints:
-                _log.warning("micros_rt: topic %s is already subscribed in this node with %s, %r; "
-                             "the new Subscriber shares them", resolved, sub.options, sub.hints)
+            if sub.options != effective or sub.hints != hints or sub.lifespan != lifespan:
+                _log.warning("micros_rt: topic %s is already subscribed in this node with %s, %r, msg_valid_period "
+                             "%g; the new Subscriber shares them", resolved, sub.options, sub.hints, sub.lifespan)
 
         created: List[_Subscription] = []
 
