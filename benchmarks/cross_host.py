@@ -36,7 +36,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Tuple
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
@@ -124,10 +124,12 @@ class Peer:
             self.p.wait(5)
 
 
-def link_tx_bytes(hosts: Hosts, i: int) -> int:
+def link_tx(hosts: Hosts, i: int) -> Tuple[int, int]:
+    """(bytes, packets) host ``i``'s link has sent (a veth counts a TCP segmentation-offload skb as one)."""
     out = subprocess.run(["ip", "-n", hosts.names[i], "-s", "-j", "link", "show", "dev", hosts.link_name(i)],
                          capture_output=True, text=True, check=True, timeout=10).stdout
-    return int(json.loads(out)[0]["stats64"]["tx"]["bytes"])
+    tx = json.loads(out)[0]["stats64"]["tx"]
+    return int(tx["bytes"]), int(tx["packets"])
 
 
 def pct(values: List[float], q: float) -> Optional[float]:
@@ -207,12 +209,12 @@ class Bench:
                 s.wait("ready", 40)
             src = self.peer(impl, 0, "stream", [*common, "--subs", subs], stream=True)
             src.wait("ready", 60)
-            tx0 = link_tx_bytes(self.hosts, 0)
+            tx0 = link_tx(self.hosts, 0)
             sent = src.wait("sent", P["stream_s"] + 30)
             for s in sinks:
                 s.send(f"SENT {sent['sent']}")
             res = [s.wait("result", 30) for s in sinks]
-            tx1 = link_tx_bytes(self.hosts, 0)
+            tx1 = link_tx(self.hosts, 0)
         finally:
             for p in (src, *sinks):
                 if p is not None:
@@ -224,7 +226,8 @@ class Bench:
                 "all_p50_ms": pct(lat, 0.5), "all_p99_ms": pct(lat, 0.99),
                 "publisher_cpu_ms_per_msg": sent["cpu_s"] * 1e3 / max(1, sent["sent"]),
                 "publish_call_p50_ms": sent.get("publish_p50_ms"),
-                "publisher_link_copies": (tx1 - tx0) / (IMAGE * max(1, sent["sent"])),
+                "publisher_link_copies": (tx1[0] - tx0[0]) / (IMAGE * max(1, sent["sent"])),
+                "publisher_link_packets_per_msg": (tx1[1] - tx0[1]) / max(1, sent["sent"]),
                 "cdf_ms": [pct(lat, i / 100) for i in range(100)]}
 
 
@@ -290,6 +293,8 @@ def summarise(results: Dict[str, Any]) -> Dict[str, Any]:
                 flat[f"{kind}_p99_ms"] = statistics.median(max(r["p99_ms"]) for r in runs)
                 flat[f"{kind}_lost"] = sum(r["sent"] * len(r["delivered"]) - sum(r["delivered"]) for r in runs)
                 flat[f"{kind}_copies"] = statistics.median(r["publisher_link_copies"] for r in runs)
+                flat[f"{kind}_link_packets_per_msg"] = statistics.median(
+                    r.get("publisher_link_packets_per_msg", 0.0) for r in runs)
                 flat[f"{kind}_pub_cpu_ms_per_msg"] = statistics.median(r["publisher_cpu_ms_per_msg"] for r in runs)
                 flat[f"{kind}_publish_call_ms"] = statistics.median(r["publish_call_p50_ms"] or 0.0 for r in runs)
             summary.setdefault(mtu, {})[impl] = flat
@@ -301,7 +306,7 @@ def summarise(results: Dict[str, Any]) -> Dict[str, Any]:
             ratios = {}
             for k, v in flat.items():
                 b = base.get(k)
-                if v is not None and b and not k.endswith(("_lost", "_copies", "_cpu_ms_per_msg", "_call_ms")):
+                if v is not None and b and not k.endswith(("_lost", "_copies", "_cpu_ms_per_msg", "_call_ms", "_packets_per_msg")):
                     ratios[k] = v / b
             flat["vs_rospy"] = ratios
     return summary
