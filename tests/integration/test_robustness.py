@@ -320,9 +320,11 @@ def test_hundred_publisher_restarts_keep_the_subscriber_small(ros_master: harnes
             time.sleep(0.6)
             after10 = listener.events("status")[-1]
     publisher.wait_for("done", 30)
-    # the last writer is gone: housekeeping forgets its state (within a few rounds, also on a busy machine)
+    # the last writer is gone: housekeeping forgets its state within a few rounds; a publisher killed after
+    # its negotiation but before the subscriber discovered its DDS writer (a loaded machine: CI saw it once)
+    # is given the 30 s a never-discovered writer gets before it is dropped with a warning
     final = harness.wait_until(lambda: next((e for e in listener.events("status")[-1:] if e["writers"] <= 1), None),
-                               10, interval=0.2, message="per-writer state back to at most one writer")
+                               45, interval=0.2, message="per-writer state back to at most one writer")
     got = [e["data"] for e in listener.events("recv")]
     print(f"\n105 publisher restarts: {len(got)} messages; subscriber after 10: rss {after10 and after10['rss_kb']} "
           f"kB, writers {after10 and after10['writers']}; at the end: rss {final['rss_kb']} kB, writers "
