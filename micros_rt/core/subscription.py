@@ -19,6 +19,7 @@ import genpy
 import rospy
 
 from . import rospy_compat as compat
+from . import threadprio
 from .delivery import Inbox
 from .registry import EndpointRegistry
 from .stats import LatencyStats, SubscriberStatistics
@@ -32,6 +33,7 @@ from ..qos import (
     DeadlineMonitor,
     SubscribeQoSOptions,
     TimeFilter,
+    TransportPriority,
     describe_incompatible_policy,
     is_expired,
     is_lossless,
@@ -82,6 +84,11 @@ class _Subscription:
         self.writers = WriterTable(graph, self.depth or UNBOUNDED_QUEUE_DEPTH)
         self.incompatible_reported: Set[int] = set()
         self._housekeeping_due = False
+        # the highest transport priority of the DDS publishers received from; the delivery thread takes it
+        # on (core/threadprio.py: its nice value, the interpreter's switch interval for HIGH)
+        self.priority: Optional[TransportPriority] = None
+        self._thread_priority: Optional[TransportPriority] = None
+        self._high_entered = False
         self._dds = dds if hints.allows_dds else None
         self.inbox = Inbox(self._dds.participant if self._dds is not None else None)
         self.readers: Tuple[DDSTopicReader, ...] = ()
@@ -177,6 +184,9 @@ class _Subscription:
         conn = compat.DDSConnection(self.topic, pub_uri, "i", f"DDS connection on topic {dds_topic} from writer "
                                     f"{answer.writer}", peer_guid=answer.writer, on_close=self.writers.connection_closed)
         self.writers.accept(answer.writer, Accepted(pub_uri, answer.node, answer.latch, conn), answer.qos)
+        if answer.qos is not None and (self.priority is None or answer.qos.transport_priority > self.priority):
+            # taken on by the delivery thread, woken below
+            self.priority = TransportPriority(answer.qos.transport_priority)
         if not compat.add_pseudo_connection(self.topic, conn, publisher=False):
             conn.close()
             return 0, "subscriber closed", 0
@@ -192,6 +202,8 @@ class _Subscription:
             self.inbox.wait(timeout)
             if self.closed:
                 break
+            if self.priority != self._thread_priority:
+                self._take_priority()
             try:
                 self._drain()
                 now = time.monotonic()
@@ -206,6 +218,17 @@ class _Subscription:
             except Exception:
                 if not self.closed:
                     _log.exception("micros_rt: topic %s: delivery error (continuing)", self.topic)
+
+    def _take_priority(self) -> None:
+        """On the delivery thread: run at this topic's priority (see core/threadprio.py)."""
+        priority = self._thread_priority = self.priority
+        if priority is None or not threadprio.enabled():
+            return
+        nice = threadprio.set_thread_nice(threadprio.nice_for(priority))
+        if priority >= TransportPriority.HIGH and not self._high_entered:
+            self._high_entered = True
+            threadprio.RECEIVE_PRIORITY.enter_high()
+        _log.debug("micros_rt: topic %s: delivery thread at priority %s (nice %d)", self.topic, priority.name, nice)
 
     def _drain(self) -> None:
         """Take what the readers have, deliver it and TCPROS messages, until both are empty."""
@@ -470,6 +493,9 @@ class _Subscription:
         self.inbox.wake()
         if self.thread.is_alive() and threading.current_thread() is not self.thread:
             self.thread.join(timeout=5.0)
+        if self._high_entered:
+            self._high_entered = False
+            threadprio.RECEIVE_PRIORITY.leave_high()
         for state in self.writers.accepted_states():
             if state.accepted is not None:
                 state.accepted.conn.close()

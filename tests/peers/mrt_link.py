@@ -68,6 +68,8 @@ def main() -> int:
     ap.add_argument("--image-priority", default="LOW")
     ap.add_argument("--image-best-effort", action="store_true")
     ap.add_argument("--stock", action="store_true", help="plain rospy (no micros_rt)")
+    ap.add_argument("--image-work-ms", type=float, default=0.0,
+                    help="sub: each image callback computes in Python this long (holds the GIL: a CPU-bound node)")
     ap.add_argument("--wait-subscribers", type=float, default=60.0)
     args = ap.parse_args()
 
@@ -150,6 +152,10 @@ def main() -> int:
 
     def on_image(msg: Any) -> None:
         now = time.time()
+        if args.image_work_ms:
+            until, x = time.perf_counter() + args.image_work_ms / 1e3, 0
+            while time.perf_counter() < until:
+                x += 1
         with lock:
             got["image"] += 1
             got["image_latency"].append(now - msg.header.stamp.to_sec())
@@ -175,7 +181,13 @@ def main() -> int:
         lat = [x * 1e3 for x in got["latency"]]
         ordered = sorted(lat)
         cdf = [ordered[min(len(ordered) - 1, int(i * len(ordered) / 200))] for i in range(200)] if ordered else []
+        # each delivery thread's nice value and the switch interval (micros_rt's receiver priority)
+        import os
+
+        nice = {t.name.rsplit(" ", 1)[-1]: os.getpriority(os.PRIO_PROCESS, t.native_id or 0)
+                for t in threading.enumerate() if t.name.startswith("micros_rt delivery ")}
         emit("summary", control=got["control"], image=got["image"], transports=sorted(got["transports"]),
+             nice=nice, switch_interval=sys.getswitchinterval(),
              p50_ms=percentile(lat, 0.5), p99_ms=percentile(lat, 0.99), max_ms=max(lat) if lat else None,
              image_p50_ms=percentile([x * 1e3 for x in got["image_latency"]], 0.5), control_cdf_ms=cdf)
     return 0
