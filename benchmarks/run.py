@@ -93,7 +93,7 @@ LOWER_BETTER = lambda f: not (f.endswith("per_s"))  # noqa: E731
 
 PROFILES = {
     "full": dict(rounds=3, lat_n=2000, lat_warm=200, latk_n=1000, thr64_n=60000, thr1m_n=600, thr_s=2.0, lat_s=2.5,
-                 fan_n=30000, real_lat_n=200, real_s=1.0, scale_ns=(2, 10, 30), scale_steady=3.0, idle_s=2.0,
+                 fan_n=30000, real_lat_n=200, real_s=1.0, scale_ns=(2, 10, 30, 60), scale_steady=3.0, idle_s=2.0,
                  rclpy_lat_n=1000),
     "quick": dict(rounds=1, lat_n=500, lat_warm=50, latk_n=200, thr64_n=10000, thr1m_n=100, thr_s=1.5, lat_s=1.5,
                   fan_n=5000, real_lat_n=50, real_s=1.0, scale_ns=(10,), scale_steady=2.0, idle_s=1.0,
@@ -430,7 +430,7 @@ class Bench:
                                                      "--kind", "bytes", "--size", 64, "--timeout", 180], f"n{n}"))
             last = 0.0
             for p in procs:
-                last = max(last, p.wait_ev("connected", max(5.0, 60 - (time.time() - t0)))["t"])
+                last = max(last, p.wait_ev("connected", max(5.0, 30 + 2 * n - (time.time() - t0)))["t"])
             connect_s = last - t0
             pids = [p.p.pid for p in procs] + ([self.master.pid] if t.startswith(("micros", "rospy")) else [])
             time.sleep(1.0)
@@ -641,7 +641,7 @@ def table(figs, spread, transports, md=False):
 
 def _fig_order(f):
     order = ["lat64_", "lat64k_", "thr64_", "thr1m_", "fanout4_", "disc", "idle", "image_vga", "image_hd",
-             "cloud", "scan", "scale2_", "scale10_", "scale30_"]
+             "cloud", "scan", "scale2_", "scale10_", "scale30_", "scale60_"]
     for i, p in enumerate(order):
         if f.startswith(p):
             return (i, f)
@@ -787,6 +787,7 @@ def main():
     ap.add_argument("--only", default=",".join(TRANSPORTS), help="comma-separated transports")
     ap.add_argument("--figures", default=",".join(FIGURE_GROUPS), help="comma-separated: " + ",".join(FIGURE_GROUPS))
     ap.add_argument("--rounds", type=int, help="override the number of rounds")
+    ap.add_argument("--scale-ns", help="override the scale figure's graph sizes, e.g. 2,10,30,60")
     ap.add_argument("--out", default=str(RESULTS), help="results directory")
     ap.add_argument("--keep-logs", action="store_true")
     args = ap.parse_args()
@@ -801,6 +802,8 @@ def main():
     P = dict(PROFILES["quick" if args.quick else "full"])
     if args.rounds:
         P["rounds"] = args.rounds
+    if args.scale_ns:
+        P["scale_ns"] = tuple(int(x) for x in args.scale_ns.split(","))
     command = "benchmarks/run.py " + " ".join(sys.argv[1:]) if sys.argv[1:] else "benchmarks/run.py"
     outdir = Path(args.out)
     outdir.mkdir(parents=True, exist_ok=True)

@@ -133,3 +133,13 @@ def test_large_samples_get_a_receive_buffer_to_land_in() -> None:
     for env in ({"ROS_IP": "127.0.0.1"}, {"ROS_IP": "10.1.2.3"}):
         assert RECEIVE_BUFFER_CONFIG in micros_rt_defaults(env)
     assert 'max="8MB"' in RECEIVE_BUFFER_CONFIG and "min=" not in RECEIVE_BUFFER_CONFIG  # never fails to start
+
+
+def test_loopback_discovery_reaches_a_sixty_node_robot_inside_the_domains_ports() -> None:
+    from micros_rt.transports.dds.participant import LOOPBACK_MAX_PARTICIPANT_INDEX
+
+    # a participant that finds no free index cannot start: 32 let the 34th node of a host fail
+    assert f"<MaxAutoParticipantIndex>{LOOPBACK_MAX_PARTICIPANT_INDEX}</MaxAutoParticipantIndex>" in LOOPBACK_CONFIG
+    assert LOOPBACK_MAX_PARTICIPANT_INDEX + 1 >= 60
+    # Cyclone's ports: 7400 + 250 x domain + 10 (+1 user data) + 2 x index: the highest stays in its domain
+    assert 10 + 2 * LOOPBACK_MAX_PARTICIPANT_INDEX + 1 < 250
