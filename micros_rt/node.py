@@ -264,8 +264,7 @@ class NodeHandle:
         """Like ``rospy.Subscriber``, with :class:`TransportHints` choosing DDS/TCPROS order."""
         if transport_hints is not None and not isinstance(transport_hints, TransportHints):
             raise TypeError(f"transport_hints must be micros_rt.TransportHints, got {transport_hints!r}")
-        return self._subscribe(topic, data_class, callback, queue_size, None,
-                               transport_hints or TransportHints(), callback_args)
+        return self._subscribe(topic, data_class, callback, queue_size, None, transport_hints, callback_args)
 
     def subscribe_with_qos(self, topic: str, data_class: Type[genpy.Message], callback: Callable[..., None],
                            queue_size: Optional[int], qos: SubscribeQoSOptions, *,
@@ -276,7 +275,7 @@ class NodeHandle:
         ``dropped_expired``, whatever the publisher offers (the shorter applies)."""
         if not isinstance(qos, SubscribeQoSOptions):
             raise QoSTypeError(f"qos={qos!r} is invalid: expected micros_rt.SubscribeQoSOptions")
-        return self._subscribe(topic, data_class, callback, queue_size, qos, TransportHints(), callback_args,
+        return self._subscribe(topic, data_class, callback, queue_size, qos, None, callback_args,
                                to_seconds(msg_valid_period, "msg_valid_period"))
 
     def subscribe_reader(self, name: str, data_class: Type[genpy.Message], open_reader: OpenReader,
@@ -306,11 +305,18 @@ class NodeHandle:
 
     def _subscribe(self, topic: str, data_class: Type[genpy.Message], callback: Callable[..., None],
                    queue_size: Optional[int], options: Optional[SubscribeQoSOptions],
-                   hints: TransportHints, callback_args: Any, lifespan: float = math.inf) -> Subscriber:
+                   code_hints: Optional[TransportHints], callback_args: Any,
+                   lifespan: float = math.inf) -> Subscriber:
         _check_subscriber(data_class, callback)
         resolved = self.resolve_name(topic)
         profile = _node.profile.subscribe_options(resolved) if _node.profile else None
         effective = merge_subscribe(options, profile) if (options or profile) else None
+        # TransportHints given in code win; else the profile's transport_hints; else DDS, then TCPROS
+        hints = code_hints or TransportHints()
+        if code_hints is None and _node.profile is not None:
+            order = _node.profile.subscribe_transports(resolved)
+            if order is not None:
+                hints = TransportHints.from_names(order)
 
         def reuse(sub: _Subscription) -> None:
             if sub.data_class is not data_class:

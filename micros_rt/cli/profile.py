@@ -52,7 +52,9 @@ def check_main(argv: List[str]) -> int:
             continue
         print(f"\n{section}:")
         for key, options in rules.items():
-            print(f"  {key}: {describe(options.to_dict())}")
+            order = profile.subscribe_transports(key) if section == "subscribers" else None
+            transports = f"; transports offered in order: {', '.join(order)}" if order else ""
+            print(f"  {key}: {describe(options.to_dict())}{transports}")
             if section in live:
                 matched = rule_matches(profile, section, key, live[section])
                 for topic, (nodes, shadow) in matched.items():

@@ -36,6 +36,17 @@ class TransportHints:
             return self
         return TransportHints(self._order + (protocol,))
 
+    @classmethod
+    def from_names(cls, names: "Tuple[str, ...] | list[str]") -> "TransportHints":
+        """Hints offering ``names`` (``"DDS"``, ``"TCPROS"``) in that order (a YAML profile's
+        ``transport_hints``); ValueError names an unknown one."""
+        hints = cls()
+        for name in names:
+            if name not in (DDS, TCPROS):
+                raise ValueError(f"unknown transport {name!r}: expected {DDS!r} or {TCPROS!r}")
+            hints = hints._with(name)
+        return hints
+
     def dds(self) -> "TransportHints":
         """Add DDS to the preference (Cyclone DDS, with the subscription's QoS)."""
         return self._with(DDS)

@@ -7,6 +7,14 @@ Format::
       "/camera/*": {using_best_effort_protocol: true, msg_valid_period: 0.1}
     subscribers:
       /chatter: {time_filter_duration: 1.0, deadline: 0.5}
+      "/camera/*": {transport_hints: [TCPROS]}
+
+``transport_hints`` (subscribers only) lists the transports the subscriber offers, in order, as
+``TransportHints`` in code (which wins when it gives any). Across a constrained link a large LOW topic over
+TCPROS leaves the link's queue to TCP's congestion window where DDS keeps it full, and a HIGH topic on DDS
+stops waiting behind it (README, constrained link). ``[TCPROS]`` alone: with ``[TCPROS, DDS]`` the
+subscriber's DDS reader exists for the fallback, Cyclone matches it with a micros_rt publisher's writer
+whatever was negotiated, and the camera crossed the link twice (13 images delivered instead of 34).
 
 Keys are resolved topic names, :mod:`fnmatch` glob patterns (``*``, ``?``, ``[...]``; note that
 ``*`` also matches ``/``) or ``^...$`` regular expressions (:mod:`micros_rt.qos.topic_rules`, the
@@ -33,6 +41,7 @@ from typing import Any, Mapping, TypeVar, Union
 import yaml
 
 from micros_rt.exceptions import MicrosRtError, ProfileError, UnsupportedQoSError
+from micros_rt.negotiation.protocol import DDS, TCPROS
 from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions
 from micros_rt.qos.topic_rules import TopicPattern, best_match
 
@@ -73,6 +82,8 @@ class QoSProfile:
         self.source = source
         self._publishers: dict[str, AdvertiseQoSOptions] = dict(publishers or {})
         self._subscribers: dict[str, SubscribeQoSOptions] = dict(subscribers or {})
+        # subscribers' transport_hints: key -> protocol names in the order offered
+        self._transports: dict[str, tuple[str, ...]] = {}
         # the raw ``mqtt`` section (broker and per-topic MQTT rules), validated by micros_rt.transports.mqtt.backend
         self.mqtt: Any = None
 
@@ -112,6 +123,7 @@ class QoSProfile:
             raise ProfileError(f"{source}: not valid YAML: {exc}") from exc
         publishers: dict[str, AdvertiseQoSOptions] = {}
         subscribers: dict[str, SubscribeQoSOptions] = {}
+        transports: dict[str, tuple[str, ...]] = {}
         if root is None:  # empty file: an empty profile
             return cls(publishers, subscribers, source=source)
         _expect_mapping(root, source, "the top level", "a mapping with 'publishers'/'subscribers'")
@@ -144,10 +156,14 @@ class QoSProfile:
                         AdvertiseQoSOptions, options_node, source, path
                     )
                 else:
+                    hints = _take_transport_hints(options_node, source, path)
+                    if hints is not None:
+                        transports[topic] = hints
                     subscribers[topic] = _parse_options(
                         SubscribeQoSOptions, options_node, source, path
                     )
         profile = cls(publishers, subscribers, source=source)
+        profile._transports = transports
         profile.mqtt = mqtt
         return profile
 
@@ -160,7 +176,16 @@ class QoSProfile:
         return _lookup(self._subscribers, topic)
 
 
-def _lookup(section: Mapping[str, _Options], topic: str) -> _Options | None:
+    def subscribe_transports(self, topic: str) -> tuple[str, ...] | None:
+        """The transports (``"DDS"``, ``"TCPROS"``) in the order the profile has a subscriber of the resolved
+        ``topic`` offer them, or None (the code's TransportHints or the default order)."""
+        return _lookup(self._transports, topic)
+
+
+_Value = TypeVar("_Value")
+
+
+def _lookup(section: Mapping[str, _Value], topic: str) -> _Value | None:
     exact = section.get(topic)
     if exact is not None:
         return exact
@@ -225,6 +250,32 @@ def _construct(node: yaml.Node) -> Any:
         return loader.construct_object(node, deep=True)
     finally:
         loader.dispose()
+
+
+def _take_transport_hints(node: yaml.Node, source: str, path: str) -> tuple[str, ...] | None:
+    """Remove a ``transport_hints`` entry from a subscriber's options mapping and return its protocols."""
+    if not isinstance(node, yaml.MappingNode):
+        return None  # _parse_options says what is wrong with it
+    for i, (key_node, value_node) in enumerate(node.value):
+        if isinstance(key_node, yaml.ScalarNode) and key_node.value == "transport_hints":
+            break
+    else:
+        return None
+    del node.value[i]
+    where, key = _where(source, value_node), f"{path}.transport_hints"
+    allowed = f"a list of {DDS!r} and {TCPROS!r} in the order preferred, e.g. [{TCPROS}, {DDS}]"
+    if not isinstance(value_node, yaml.SequenceNode) or not value_node.value:
+        raise ProfileError(f"{where}: {key}: expected {allowed}, got {_kind(value_node)}")
+    names: list[str] = []
+    for item in value_node.value:
+        name = str(item.value).upper() if isinstance(item, yaml.ScalarNode) else ""
+        if name not in (DDS, TCPROS):
+            shown = item.value if isinstance(item, yaml.ScalarNode) else _kind(item)
+            raise ProfileError(f"{_where(source, item)}: {key}: {shown!r} is not a transport; expected {allowed}")
+        if name in names:
+            raise ProfileError(f"{_where(source, item)}: {key}: {name} is given twice")
+        names.append(name)
+    return tuple(names)
 
 
 def _parse_options(

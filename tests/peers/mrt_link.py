@@ -14,6 +14,7 @@ sub: both topics; control latency (receive time - stamp) percentiles, counts, tr
 from __future__ import annotations
 
 import argparse
+import os
 import json
 import sys
 import threading
@@ -140,7 +141,8 @@ def main() -> int:
         emit("done")
         return 0
 
-    got: Dict[str, Any] = {"control": 0, "image": 0, "latency": [], "image_latency": [], "transports": set()}
+    got: Dict[str, Any] = {"control": 0, "image": 0, "latency": [], "image_latency": [], "transports": set(),
+                           "image_transports": set()}
     lock = threading.Lock()
 
     def on_control(msg: Any) -> None:
@@ -158,6 +160,7 @@ def main() -> int:
                 x += 1
         with lock:
             got["image"] += 1
+            got["image_transports"].add((getattr(msg, "_connection_header", None) or {}).get("transport", "TCPROS"))
             got["image_latency"].append(now - msg.header.stamp.to_sec())
 
     if args.stock:
@@ -182,12 +185,10 @@ def main() -> int:
         ordered = sorted(lat)
         cdf = [ordered[min(len(ordered) - 1, int(i * len(ordered) / 200))] for i in range(200)] if ordered else []
         # each delivery thread's nice value and the switch interval (micros_rt's receiver priority)
-        import os
-
         nice = {t.name.rsplit(" ", 1)[-1]: os.getpriority(os.PRIO_PROCESS, t.native_id or 0)
                 for t in threading.enumerate() if t.name.startswith("micros_rt delivery ")}
         emit("summary", control=got["control"], image=got["image"], transports=sorted(got["transports"]),
-             nice=nice, switch_interval=sys.getswitchinterval(),
+             nice=nice, switch_interval=sys.getswitchinterval(), image_transports=sorted(got["image_transports"]),
              p50_ms=percentile(lat, 0.5), p99_ms=percentile(lat, 0.99), max_ms=max(lat) if lat else None,
              image_p50_ms=percentile([x * 1e3 for x in got["image_latency"]], 0.5), control_cdf_ms=cdf)
     return 0

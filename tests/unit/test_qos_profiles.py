@@ -344,3 +344,45 @@ def test_merge_with_a_loaded_profile() -> None:
     profile = parse(EXAMPLE)
     merged = merge_advertise(AdvertiseQoSOptions(latency_budget=0.001), profile.advertise_options("/chatter"))
     assert merged == AdvertiseQoSOptions(P.HIGH, 0.001)
+
+
+# -- transport_hints (subscribers) -------------------------------------------------------------------------
+
+def test_subscriber_transport_hints_are_read_in_order_and_looked_up_like_options() -> None:
+    from micros_rt.negotiation import TransportHints
+
+    p = QoSProfile.from_string(
+        "subscribers:\n"
+        "  /camera/*: {transport_hints: [tcpros]}\n"
+        "  /scan: {transport_hints: [TCPROS, DDS], deadline: 1.0}\n"
+        "  /odom: {deadline: 0.5}\n", source="robot.yaml")
+    assert p.subscribe_transports("/camera/image") == ("TCPROS",)
+    assert p.subscribe_transports("/scan") == ("TCPROS", "DDS")
+    scan = p.subscribe_options("/scan")
+    assert scan is not None and scan.deadline == 1.0  # the other options of the entry still apply
+    assert p.subscribe_transports("/odom") is None and p.subscribe_transports("/other") is None
+    hints = TransportHints.from_names(p.subscribe_transports("/scan") or ())
+    assert hints == TransportHints().tcp().dds() and hints.protocols == ("TCPROS", "DDS")
+    assert not TransportHints.from_names(("TCPROS",)).allows_dds
+
+
+@pytest.mark.parametrize("value, says", [
+    ("UDPROS", "got the value 'UDPROS'"),
+    ("[UDPROS]", "'UDPROS' is not a transport"),
+    ("[DDS, dds]", "DDS is given twice"),
+    ("[]", "expected a list of 'DDS' and 'TCPROS'"),
+    ("{a: 1}", "got a mapping"),
+])
+def test_bad_transport_hints_are_refused_with_file_line_and_key(value: str, says: str) -> None:
+    with pytest.raises(ProfileError) as err:
+        QoSProfile.from_string(f"subscribers:\n  /x: {{deadline: 1.0}}\n  /a:\n    transport_hints: {value}\n",
+                               source="robot.yaml")
+    assert str(err.value).startswith("robot.yaml:4: subscribers['/a'].transport_hints: ") and says in str(err.value)
+
+
+def test_transport_hints_are_a_subscriber_option_only() -> None:
+    with pytest.raises(ProfileError, match=r"publishers\['/a'\]\.transport_hints: unknown option"):
+        QoSProfile.from_string("publishers: {/a: {transport_hints: [DDS]}}")
+    with pytest.raises(ValueError, match="unknown transport 'UDP'"):
+        from micros_rt.negotiation import TransportHints
+        TransportHints.from_names(["UDP"])
