@@ -26,7 +26,7 @@ from __future__ import annotations
 import os
 import sys
 import threading
-from typing import Optional
+from typing import Mapping, Optional
 
 from ..log import nonblocking_logger
 from ..qos import TransportPriority
@@ -41,7 +41,7 @@ HIGH_NICE = -5
 LOW_NICE = 5
 
 
-def enabled(env: "os._Environ[str] | dict[str, str]" = os.environ) -> bool:
+def enabled(env: Mapping[str, str] = os.environ) -> bool:
     return env.get("MICROS_RT_RECEIVE_PRIORITY", "1").strip().lower() not in ("0", "false", "no", "off")
 
 

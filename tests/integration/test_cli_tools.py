@@ -77,9 +77,24 @@ def graph(ros_master: harness.RosMaster) -> Iterator[Dict[str, str]]:
             harness.wait_until(all_linked, 60, interval=0.5, message=f"the four links of {TOPIC} {EXPECTED}")
         except AssertionError as exc:
             raise AssertionError(f"{exc}; last seen {seen[0]}") from None
+        _GRAPH_PEERS[:] = list(spawner)
         yield dict(ros_master.env)
     finally:
+        _GRAPH_PEERS.clear()
         spawner.close()
+
+
+_GRAPH_PEERS: List[harness.Peer] = []
+
+
+@pytest.fixture(autouse=True)
+def _graph_still_up() -> Iterator[None]:
+    """Each test starts with the module's four nodes alive; a dead one fails with its exit code and stderr."""
+    for peer in _GRAPH_PEERS:
+        if not peer.alive():
+            raise AssertionError(f"{peer!r} of the module's graph exited (returncode {peer.returncode}); "
+                                 f"last events {peer.events()[-3:]}\nstderr tail:\n{peer.stderr_tail()}")
+    yield
 
 
 def test_topic_info_names_dds_and_tcpros_links_and_the_declined_reason(graph: Dict[str, str]) -> None:

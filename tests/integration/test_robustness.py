@@ -29,12 +29,14 @@ def probe(*args: str) -> List[str]:
     return [harness.MICROS_RT_PYTHON, PROBE, *args]
 
 
-def rss_kb(pid: int) -> int:
-    with open(f"/proc/{pid}/status") as f:
+def rss_kb(peer: harness.Peer) -> int:
+    """The peer's resident set; a peer that has exited (a zombie has no VmRSS) fails with its stderr."""
+    with open(f"/proc/{peer.pid}/status") as f:
         for line in f:
             if line.startswith("VmRSS:"):
                 return int(line.split()[1])
-    raise AssertionError(f"no VmRSS for {pid}")
+    raise AssertionError(f"{peer!r} has no VmRSS (exited, returncode {peer.returncode}); last events "
+                         f"{peer.events()[-3:]}\nstderr tail:\n{peer.stderr_tail()}")
 
 
 def dds_links(uri: str, topic: str) -> int:
@@ -69,7 +71,7 @@ def test_fake_dds_offers_leave_no_phantom_connections(ros_master: harness.RosMas
     talker.wait_for("ready", 30)
     uri = harness.lookup_node(ros_master, "/phantom_talker")
     time.sleep(1.0)
-    rss0 = rss_kb(talker.pid)
+    rss0 = rss_kb(talker)
     accepted = 0
     most_at_once = 0
     t_flood = time.monotonic()
@@ -98,7 +100,7 @@ def test_fake_dds_offers_leave_no_phantom_connections(ros_master: harness.RosMas
                                                       caller_id=f"/huge_{rnd}_{i}", timeout=10)
             slowest = max(slowest, time.monotonic() - t0)
             assert code == 1 and proto[0] == "TCPROS", f"an offer with a 1 MB reader string got {proto[0]!r}: {_msg}"
-        rss_rounds.append(rss_kb(talker.pid))
+        rss_rounds.append(rss_kb(talker))
     no_phantoms(uri, "/phantom")
     rss1, rss2 = rss_rounds[1], rss_rounds[2]
     print(f"\n300 fake offers in {flood_s:.2f} s: {accepted} accepted ({most_at_once} DDS links at once), "
@@ -160,7 +162,7 @@ def test_ten_thousand_random_request_topic_calls(ros_master: harness.RosMaster, 
     talker.wait_for("ready", 30)
     uri = harness.lookup_node(ros_master, "/abused_talker")
     time.sleep(1.0)
-    rss_start = rss_kb(talker.pid)
+    rss_start = rss_kb(talker)
     counts = {"answered": 0, "errors": 0}
     lock = threading.Lock()
 
@@ -190,13 +192,13 @@ def test_ten_thousand_random_request_topic_calls(ros_master: harness.RosMaster, 
     # high-water mark of the first burst (a stock rospy talker grows 15-20 MB on the same 10,000 calls);
     # what must not happen is growth that goes on with the calls: the second 10,000 are measured.
     volley(range(100, 104), 2500)
-    rss0 = rss_kb(talker.pid)
+    rss0 = rss_kb(talker)
     counts.update(answered=0, errors=0)
     elapsed = volley(range(4), 2500)
     assert sum(counts.values()) == 10_000, counts
     assert talker.alive(), talker.stderr_tail()
     no_phantoms(uri, "/abused")
-    rss1 = rss_kb(talker.pid)
+    rss1 = rss_kb(talker)
     negotiation_warnings = [w for w in logs(talker) if "DDS" in w or "protocol" in w or "offer" in w]
     print(f"\n10,000 random requestTopic calls in {elapsed:.1f} s ({10_000 / elapsed:.0f}/s): {counts}; talker RSS "
           f"{rss_start} kB at start, {rss0} kB after a first 10,000 (warm-up), {rss1} kB after the next 10,000; "
