@@ -32,6 +32,7 @@ SUBCOMMANDS: dict[str, Tuple[str, str]] = {
     "profile": ("micros_rt.cli.profile", "check a YAML QoS profile (and what it matches on a live graph)"),
     "mqtt-bridge": ("micros_rt.bridges.mqtt.__main__", "bridge ROS topics and an MQTT broker (mqtt_client's params)"),
     "mcu-bridge": ("micros_rt.bridges.mcu.__main__", "bridge ROS and a microcontroller (MessagePack over UDP/TCP)"),
+    "relay": ("micros_rt.bridges.relay.__main__", "carry named topics between ROS graphs (robots) over DDS, with QoS"),
 }
 
 

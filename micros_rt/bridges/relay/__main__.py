@@ -1,0 +1,95 @@
+"""``micros-rt relay --config relay.yaml`` (also ``python -m micros_rt.bridges.relay``, or a node in a launch
+file): carries the configuration's topics between this ROS graph and others over DDS (see
+:mod:`micros_rt.bridges.relay.config` for the file, :mod:`micros_rt.bridges.relay.relay` for how).
+
+The node is named ``relay_<graph>`` unless ``--name`` or a ``__name:=`` remapping says otherwise. A bad
+configuration is one line on stderr naming file, line and key, and exit code 1. ``--json`` prints
+``{"event": "ready"}`` and then the counters (``{"event": "stats", ...}``) every ``--stats-period`` seconds;
+``--check`` only validates the file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import threading
+from typing import Any, List, Optional
+
+from ...cli import CommandError
+
+__all__ = ["main"]
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="micros-rt relay",
+                                 description="Carry named topics between ROS graphs (robots with their own "
+                                             "masters) over DDS, with QoS per topic.")
+    ap.add_argument("--config", required=True, help="relay configuration (YAML)")
+    ap.add_argument("--name", default=None, help="ROS node name (default: relay_<graph>)")
+    ap.add_argument("--json", action="store_true", help="print readiness and counters as JSON lines on stdout")
+    ap.add_argument("--stats-period", type=float, default=5.0, help="seconds between counters with --json")
+    ap.add_argument("--poll-period", type=float, default=1.0,
+                    help="seconds between looks for new topics to export and exporters to import from")
+    ap.add_argument("--check", action="store_true", help="validate the configuration and exit")
+    return ap
+
+
+def _emit(event: str, **fields: Any) -> None:
+    sys.stdout.write(json.dumps({"event": event, **fields}, default=str) + "\n")
+    sys.stdout.flush()
+
+
+def main(argv: List[str]) -> int:
+    """Run the relay until Ctrl-C; see the module docstring."""
+    ros_args = [a for a in argv if ":=" in a]
+    args = _parser().parse_args([a for a in argv if ":=" not in a])
+
+    from .config import RelayConfigError, load_config
+
+    try:
+        config = load_config(args.config)
+    except RelayConfigError as exc:
+        raise CommandError(str(exc)) from None
+    if args.check:
+        print(f"{args.config}: OK: graph {config.graph}, {len(config.exports)} export rules, "
+              f"{len(config.imports)} imports")
+        return 0
+
+    import micros_rt
+
+    from .relay import Relay
+
+    micros_rt.init_node(args.name or f"relay_{config.graph}", argv=[sys.argv[0], *ros_args])
+    try:
+        relay = Relay(config, poll_period=args.poll_period)
+    except micros_rt.MicrosRtError as exc:
+        micros_rt.shutdown("relay: cannot start")
+        raise CommandError(str(exc)) from None
+    stop = threading.Event()
+    with relay:
+        if args.json:
+            _emit("ready", node=relay.node, graph=config.graph)
+        try:
+            while not stop.is_set() and micros_rt.ok():
+                stop.wait(args.stats_period if args.json else 0.5)
+                if args.json:
+                    _emit("stats", **relay.snapshot())
+        except KeyboardInterrupt:
+            pass
+        if args.json:
+            _emit("stats", **relay.snapshot())
+    micros_rt.shutdown("relay stopped")
+    return 0
+
+
+def _run(argv: Optional[List[str]] = None) -> int:
+    try:
+        return main(list(sys.argv[1:] if argv is None else argv))
+    except CommandError as exc:
+        print(f"micros-rt relay: {exc}", file=sys.stderr)
+        return exc.code
+
+
+if __name__ == "__main__":
+    sys.exit(_run())

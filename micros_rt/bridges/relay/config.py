@@ -1,0 +1,233 @@
+"""The relay's configuration file (YAML), parsed with line numbers: every error is one line naming the file,
+the line and the key.
+
+::
+
+    graph: robot_a                    # this graph's name outside it: exports are /robot_a/<topic>
+    export:                           # topics of this graph, whoever publishes them
+      /chatter: {transport_priority: HIGH}
+      /camera/image: {using_best_effort_protocol: true, max_rate: 5}
+      /map: {latch: true}             # late joiners on other robots get the last message
+      /sensors/*: {}                  # globs and ^regex$ as in QoS profiles
+    import:                           # topics other graphs export, published in this graph
+      /robot_b/chatter: {}            # under the same name
+      /robot_b/odom: {as: /others/odom, deadline: 0.5}
+
+An export's options are :class:`~micros_rt.AdvertiseQoSOptions` keys (the DDS writer's QoS on the link) plus
+``max_rate`` (Hz, applied before the link: newer messages within 1/max_rate of the last one sent are not
+sent, counted), ``queue_size`` (the writer's history; null: lossless) and ``latch``. An import's options are
+:class:`~micros_rt.SubscribeQoSOptions` keys (deadline, time filter, ...) plus ``as``, ``queue_size`` and
+``latch``. Option values are checked as in a QoS profile (:mod:`micros_rt.qos.profiles`).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional, Tuple
+
+import yaml
+
+from ...exceptions import MicrosRtError
+from ...qos import AdvertiseQoSOptions, SubscribeQoSOptions
+from ...qos.profiles import _construct, _expect_mapping, _is_null, _pairs, _parse_options, _where
+from ...qos.topic_rules import TopicPattern
+
+__all__ = ["ExportRule", "ImportRule", "RelayConfig", "RelayConfigError", "load_config", "parse_config"]
+
+_GRAPH_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+_TOPIC_NAME = re.compile(r"^(/[A-Za-z][A-Za-z0-9_]*)+$")
+DEFAULT_QUEUE_SIZE = 10
+
+
+class RelayConfigError(MicrosRtError, ValueError):
+    """A relay configuration that cannot be used; the message names file, line and key."""
+
+
+@dataclass(frozen=True)
+class ExportRule:
+    key: str                              # topic name, glob or ^regex$
+    options: AdvertiseQoSOptions
+    max_rate: float = math.inf            # Hz
+    queue_size: Optional[int] = DEFAULT_QUEUE_SIZE
+    latch: bool = False
+    pattern: TopicPattern = field(default_factory=lambda: TopicPattern.parse("/"), compare=False)
+
+
+@dataclass(frozen=True)
+class ImportRule:
+    outside: str                          # /<graph>/<topic>, as the exporting relay names it
+    local: str                            # the name it is published under in this graph
+    origin: str                           # the exporting graph
+    options: Optional[SubscribeQoSOptions]
+    queue_size: Optional[int] = DEFAULT_QUEUE_SIZE
+    latch: bool = False
+
+
+@dataclass(frozen=True)
+class RelayConfig:
+    graph: str
+    exports: Tuple[ExportRule, ...]
+    imports: Tuple[ImportRule, ...]
+    source: str = "<string>"
+
+    def outside_name(self, topic: str) -> str:
+        """The name an exported ``topic`` has outside this graph: ``/<graph><topic>``."""
+        return f"/{self.graph}{topic}"
+
+
+def load_config(path: str) -> RelayConfig:
+    try:
+        with open(path, encoding="utf-8") as f:
+            text = f.read()
+    except OSError as exc:
+        raise RelayConfigError(f"{path}: cannot read the relay configuration: {exc}") from None
+    return parse_config(text, source=os.fspath(path))
+
+
+def parse_config(text: str, *, source: str = "<string>") -> RelayConfig:
+    """Parse relay YAML ``text``; ``source`` names it in errors."""
+    try:
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.YAMLError as exc:
+        raise RelayConfigError(f"{source}: not valid YAML: {exc}") from None
+    if root is None:
+        raise RelayConfigError(f"{source}: empty relay configuration; it needs at least 'graph:'")
+    try:
+        return _parse(root, source)
+    except MicrosRtError as exc:  # a ProfileError from the shared option parser: same one-line form
+        if isinstance(exc, RelayConfigError):
+            raise
+        raise RelayConfigError(str(exc)) from None
+
+
+def _parse(root: yaml.Node, source: str) -> RelayConfig:
+    _expect_mapping(root, source, "the top level", "a mapping with 'graph', 'export' and 'import'")
+    graph: Optional[str] = None
+    exports: List[ExportRule] = []
+    imports: List[ImportRule] = []
+    import_nodes: List[Tuple[yaml.ScalarNode, yaml.Node]] = []
+    for key_node, body in _pairs(root, source, ""):
+        key = key_node.value
+        if key == "graph":
+            value = _construct(body) if isinstance(body, yaml.ScalarNode) else None
+            if not isinstance(value, str) or not _GRAPH_NAME.match(value):
+                raise RelayConfigError(f"{_where(source, body)}: graph: {value!r} is invalid: expected a name "
+                                       f"(a letter, then letters, digits, '_'), e.g. robot_a")
+            graph = value
+        elif key == "export":
+            if not _is_null(body):
+                _expect_mapping(body, source, "export", "a mapping of topic names/patterns to options")
+                exports = [_export(k, v, source) for k, v in _pairs(body, source, "export")]
+        elif key == "import":
+            if not _is_null(body):
+                _expect_mapping(body, source, "import", "a mapping of outside topic names to options")
+                import_nodes = _pairs(body, source, "import")
+        else:
+            raise RelayConfigError(f"{_where(source, key_node)}: unknown key {key!r}; expected 'graph', 'export', "
+                                   f"'import'")
+    if graph is None:
+        raise RelayConfigError(f"{source}:1: graph: missing; name this graph (e.g. 'graph: robot_a'): exported "
+                               f"topics are /<graph>/<topic> outside it")
+    imports = [_import(k, v, source, graph) for k, v in import_nodes]
+    for out in exports:
+        for incoming in imports:
+            if out.pattern.exact and out.key == incoming.local:
+                raise RelayConfigError(f"{source}: export: {out.key} is what this relay imports from "
+                                       f"{incoming.origin} ({incoming.outside}): a topic is never sent back out")
+    locals_seen: Dict[str, str] = {}
+    for incoming in imports:
+        if incoming.local in locals_seen:
+            raise RelayConfigError(f"{source}: import: {incoming.outside} and {locals_seen[incoming.local]} are "
+                                   f"both published as {incoming.local}")
+        locals_seen[incoming.local] = incoming.outside
+    return RelayConfig(graph, tuple(exports), tuple(imports), source)
+
+
+def _split(node: yaml.Node, source: str, path: str, own: Tuple[str, ...]) -> Tuple[Dict[str, Tuple[yaml.Node, Any]],
+                                                                                yaml.Node]:
+    """The relay's own keys (``own``) of an options mapping, and a mapping node with the QoS keys left."""
+    if _is_null(node):
+        return {}, node
+    _expect_mapping(node, source, path, "a mapping of option names to values")
+    mine: Dict[str, Tuple[yaml.Node, Any]] = {}
+    rest: List[Tuple[yaml.Node, yaml.Node]] = []
+    for key_node, value_node in _pairs(node, source, path):
+        if key_node.value in own:
+            mine[key_node.value] = (value_node, _construct(value_node) if isinstance(value_node, yaml.ScalarNode)
+                                    else None)
+        else:
+            rest.append((key_node, value_node))
+    left = yaml.MappingNode("tag:yaml.org,2002:map", rest, node.start_mark, node.end_mark)
+    return mine, left
+
+
+def _queue_size(mine: Dict[str, Tuple[yaml.Node, Any]], source: str, path: str) -> Optional[int]:
+    if "queue_size" not in mine:
+        return DEFAULT_QUEUE_SIZE
+    node, value = mine["queue_size"]
+    if value is None and _is_null(node):
+        return None
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise RelayConfigError(f"{_where(source, node)}: {path}.queue_size: {value!r} is invalid: expected a "
+                               f"positive integer, or null for lossless")
+    return value
+
+
+def _flag(mine: Dict[str, Tuple[yaml.Node, Any]], key: str, source: str, path: str) -> bool:
+    if key not in mine:
+        return False
+    node, value = mine[key]
+    if not isinstance(value, bool):
+        raise RelayConfigError(f"{_where(source, node)}: {path}.{key}: {value!r} is invalid: expected true or false")
+    return value
+
+
+def _export(key_node: yaml.ScalarNode, body: yaml.Node, source: str) -> ExportRule:
+    key = key_node.value
+    path = f"export[{key!r}]"
+    try:
+        pattern = TopicPattern.parse(key)
+    except re.error as exc:
+        raise RelayConfigError(f"{_where(source, key_node)}: export: key {key!r} is not a valid regular "
+                               f"expression: {exc}") from None
+    if pattern.exact and not _TOPIC_NAME.match(key):
+        raise RelayConfigError(f"{_where(source, key_node)}: export: {key!r} is not a global topic name "
+                               f"(e.g. /camera/image)")
+    mine, qos_node = _split(body, source, path, ("max_rate", "queue_size", "latch"))
+    max_rate = math.inf
+    if "max_rate" in mine:
+        node, value = mine["max_rate"]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+            raise RelayConfigError(f"{_where(source, node)}: {path}.max_rate: {value!r} is invalid: expected "
+                                   f"messages per second, a number above 0")
+        max_rate = float(value)
+    options = _parse_options(AdvertiseQoSOptions, qos_node, source, path)
+    return ExportRule(key, options, max_rate, _queue_size(mine, source, path), _flag(mine, "latch", source, path),
+                      pattern)
+
+
+def _import(key_node: yaml.ScalarNode, body: yaml.Node, source: str, graph: str) -> ImportRule:
+    outside = key_node.value
+    path = f"import[{outside!r}]"
+    where = _where(source, key_node)
+    if not _TOPIC_NAME.match(outside) or outside.count("/") < 2:
+        raise RelayConfigError(f"{where}: import: {outside!r} is invalid: expected /<graph>/<topic> as the "
+                               f"exporting relay names it (e.g. /robot_a/chatter)")
+    origin = outside.split("/")[1]
+    if origin == graph:
+        raise RelayConfigError(f"{where}: import: {outside!r} is this graph's own export ({graph}): a topic never "
+                               f"comes back to the graph it left")
+    mine, qos_node = _split(body, source, path, ("as", "queue_size", "latch"))
+    local = outside
+    if "as" in mine:
+        node, value = mine["as"]
+        if not isinstance(value, str) or not _TOPIC_NAME.match(value):
+            raise RelayConfigError(f"{_where(source, node)}: {path}.as: {value!r} is invalid: expected a global "
+                                   f"topic name (e.g. /others/chatter)")
+        local = value
+    options = None if _is_null(qos_node) or not qos_node.value else _parse_options(SubscribeQoSOptions, qos_node, source, path)
+    return ImportRule(outside, local, origin, options, _queue_size(mine, source, path),
+                      _flag(mine, "latch", source, path))

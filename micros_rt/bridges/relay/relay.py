@@ -1,0 +1,270 @@
+"""The relay node: named topics of this ROS graph out to other graphs over DDS, and theirs in.
+
+A thin program on micros_rt's public API and the DDS transport:
+
+- **export**: a micros_rt subscription of the local topic (TCPROS from stock roscpp/rospy publishers, DDS
+  from micros_rt ones) whose callback sends each message on a DDS writer of ``/<graph><topic>`` with the
+  rule's QoS, behind the core's lane (:class:`~micros_rt.core.lanes.Lane`: a KEEP_LAST sample superseded
+  before it left is not sent, back-pressure never holds the callback). ``max_rate`` is applied before the
+  lane. The writer's micros_rt tag says ``relay=<graph>`` and the ROS type: ordinary micros_rt readers of
+  other graphs ignore it (they deliver only negotiated writers), ROS 2 nodes read it as any topic, and
+  importing relays learn the type from it.
+- **import**: a :class:`~micros_rt.transports.dds.feed.DDSFeed` that keeps only samples of the exporting
+  graph's relay feeds ``NodeHandle.subscribe_reader`` (the core's deadline, time filter, queue rule and
+  statistics), whose callback publishes on a micros_rt publication of the local name (TCPROS to stock
+  subscribers, DDS to micros_rt ones).
+
+Loops: an import never takes its own graph's exports (``relay=`` must name the import's origin graph, and
+the configuration refuses ``/<own graph>/...``), and an export drops messages this relay published itself
+(an import re-exported under another name would otherwise go round), counted as ``looped``.
+
+Exports are set up when the topic appears on the master (checked every ``poll_period`` s; globs match
+topics that come later), imports when an exporting relay's writer has been discovered (its tag names the
+type). The message classes come from the installed message packages.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from typing import Any, Callable, Dict, List, Optional, Type
+
+import genpy
+import roslib.message
+import rospy
+
+import micros_rt
+from micros_rt.core.lanes import Lane
+from micros_rt.core.runtime import dds_backend
+from micros_rt.log import nonblocking_logger
+from micros_rt.qos.topic_rules import best_match
+from micros_rt.transports.base import BackPressuredWriter, EndpointSpec, PushReader, TransportWriter
+
+from .config import ExportRule, ImportRule, RelayConfig
+
+__all__ = ["Relay"]
+
+_log = nonblocking_logger("rosout.micros_rt.relay")
+
+
+class _Export:
+    """One local topic going out as ``/<graph><topic>``."""
+
+    def __init__(self, relay: "Relay", rule: ExportRule, topic: str, data_class: Type[genpy.Message]) -> None:
+        self.topic = topic
+        self.outside = relay.config.outside_name(topic)
+        self.rule = rule
+        self.node = relay.node
+        self.min_interval = 0.0 if math.isinf(rule.max_rate) else 1.0 / rule.max_rate
+        self.received = self.sent = self.rate_capped = self.looped = self.no_reader = 0
+        self._last_sent = -math.inf
+        tag = {"graph": relay.graph_id, "node": relay.node, "relay": relay.config.graph, "type": data_class._type,
+               "md5": data_class._md5sum}
+        spec = EndpointSpec(self.outside, data_class, rule.queue_size, rule.latch, tag)
+        writer = relay.backend.open_writer(spec, rule.options)
+        self.sender: TransportWriter = (Lane(writer, topic=self.outside, depth=rule.queue_size)
+                                        if isinstance(writer, BackPressuredWriter) else writer)
+        self.sub = relay.nh.subscribe(topic, data_class, self._on_message, rule.queue_size)
+
+    def _on_message(self, msg: Any) -> None:
+        self.received += 1
+        header = getattr(msg, "_connection_header", None) or {}
+        if header.get("callerid") == self.node:
+            self.looped += 1   # this relay's own import of another graph's topic: it never goes back out
+            return
+        now = time.monotonic()
+        if now - self._last_sent < self.min_interval:
+            self.rate_capped += 1
+            return
+        prepared = self.sender.prepare(msg)
+        if prepared is None:
+            self.no_reader += 1  # no relay or ROS 2 node reads it now
+            return
+        self._last_sent = now
+        self.sender.send(prepared)
+        self.sent += 1
+
+    def stats(self) -> Dict[str, Any]:
+        lane_dropped = self.sender.dropped if isinstance(self.sender, Lane) else 0
+        return {"topic": self.topic, "as": self.outside, "received": self.received, "sent": self.sent,
+                "rate_capped": self.rate_capped, "looped": self.looped, "no_reader": self.no_reader,
+                "superseded": lane_dropped, "dropped_queue_full": self.sub.statistics().dropped_queue_full}
+
+    def close(self) -> None:
+        self.sub.unregister()
+        self.sender.close()
+
+
+class _Import:
+    """One other graph's export, published here as ``rule.local``."""
+
+    def __init__(self, relay: "Relay", rule: ImportRule, data_class: Type[genpy.Message]) -> None:
+        from micros_rt.transports.dds.feed import DDSFeed
+
+        self.rule = rule
+        self.feed: Optional[DDSFeed] = None
+        own_graph = relay.graph_id
+
+        def accept(tag: Optional[Dict[str, str]]) -> bool:
+            return tag is not None and tag.get("relay") == rule.origin and tag.get("graph") != own_graph
+
+        def open_reader(depth: Optional[int], wake: Callable[[], None]) -> PushReader:
+            push = PushReader("DDS", depth, wake, blocking=False)
+            tag = {"graph": own_graph, "node": relay.node, "relay_import": relay.config.graph}
+            spec = EndpointSpec(rule.outside, data_class, rule.queue_size, rule.latch, tag)
+            self.feed = DDSFeed(relay.backend, spec, rule.options, push, accept)
+            return push
+
+        self.pub = relay.nh.advertise(rule.local, data_class, rule.queue_size, latch=rule.latch)
+        self.sub = relay.nh.subscribe_reader(f"relay import {rule.outside}", data_class, open_reader,
+                                             self.pub.publish, rule.queue_size, rule.options)
+
+    def stats(self) -> Dict[str, Any]:
+        s = self.sub.statistics()
+        return {"topic": self.rule.outside, "as": self.rule.local, "received": s.received, "published": s.delivered,
+                "dropped_queue_full": s.dropped_queue_full, "dropped_expired": s.dropped_expired,
+                "dropped_filtered": s.dropped_filtered, "refused": self.feed.refused if self.feed else 0,
+                "bad_input": self.feed.bad_input if self.feed else 0,
+                "deadline_missed": s.deadline_missed}
+
+    def close(self) -> None:
+        self.sub.unregister()
+        if self.feed is not None:
+            self.feed.close()
+        self.pub.unregister()
+
+
+class Relay:
+    """Runs a :class:`~micros_rt.bridges.relay.config.RelayConfig` in this process's node (``init_node``
+    first). ``start()`` begins; topics are set up as they appear; ``close()`` ends."""
+
+    def __init__(self, config: RelayConfig, *, poll_period: float = 1.0) -> None:
+        backend = dds_backend()
+        if backend is None:
+            raise micros_rt.DDSUnavailableError("the relay carries topics between graphs over DDS, and DDS did not "
+                                                "start in this process (see the warning above)")
+        from micros_rt.transports.dds.feed import WriterDirectory
+
+        info = micros_rt.node_info()
+        self.config = config
+        self.backend = backend
+        self.node = info.name
+        self.graph_id = info.graph
+        self.nh = micros_rt.NodeHandle()
+        self.poll_period = poll_period
+        self.exports: Dict[str, _Export] = {}
+        self.imports: Dict[str, _Import] = {}
+        self._refused: Dict[str, str] = {}   # topic -> why it is not carried (said once)
+        self._directory = WriterDirectory(backend)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="micros_rt relay", daemon=True)
+        self._lock = threading.Lock()
+
+    def start(self) -> "Relay":
+        self._thread.start()
+        return self
+
+    def __enter__(self) -> "Relay":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- the set-up loop -----------------------------------------------------------------------------
+    def _run(self) -> None:
+        while not self._stop.is_set() and not rospy.is_shutdown():
+            try:
+                self.poll()
+            except Exception as exc:  # the master away for a moment: try again next round
+                _log.warning("micros_rt: relay %s: %s (trying again in %.0f s)", self.config.graph, exc,
+                             self.poll_period)
+            self._stop.wait(self.poll_period)
+
+    def poll(self) -> None:
+        """One round: export topics that appeared, import topics whose exporter was discovered."""
+        local_types = dict(rospy.get_published_topics())
+        import_names = {rule.local for rule in self.config.imports}
+        for topic, type_name in sorted(local_types.items()):
+            if topic in self.exports or topic in import_names:
+                continue
+            export = best_match(((r.pattern, r) for r in self.config.exports), topic)
+            if export is not None:
+                self._try(topic, lambda: self._export(export, topic, type_name))
+        for incoming in self.config.imports:
+            if incoming.outside not in self.imports:
+                self._try(incoming.outside, lambda: self._import(incoming, local_types.get(incoming.local)))
+
+    def _try(self, topic: str, make: Callable[[], Optional[str]]) -> None:
+        try:
+            why = make()
+        except micros_rt.MicrosRtError as exc:
+            why = str(exc)
+        if why is not None and self._refused.get(topic) != why:
+            self._refused[topic] = why
+            _log.error("micros_rt: relay %s: %s", self.config.graph, why)
+
+    def _export(self, rule: ExportRule, topic: str, type_name: str) -> Optional[str]:
+        data_class = _message_class(type_name)
+        if data_class is None:
+            return (f"cannot export {topic}: its type {type_name} is not installed on this host (install the "
+                    f"package that defines it)")
+        with self._lock:
+            self.exports[topic] = export = _Export(self, rule, topic, data_class)
+        _log.info("micros_rt: relay %s: exporting %s (%s) as %s", self.config.graph, topic, type_name,
+                  export.outside)
+        return None
+
+    def _import(self, rule: ImportRule, local_type: Optional[str]) -> Optional[str]:
+        from micros_rt.transports.dds.types import dds_topic_name
+
+        tags = [t for t in self._directory.tags(dds_topic_name(rule.outside))
+                if t.get("relay") == rule.origin and t.get("type")]
+        if not tags:
+            return None  # the exporting relay is not there (yet): nothing to say, it may come later
+        type_name = tags[0]["type"]
+        if local_type is not None and local_type != type_name:
+            return (f"cannot import {rule.outside} as {rule.local}: graph {rule.origin} sends {type_name}, and "
+                    f"{rule.local} is {local_type} in this graph")
+        data_class = _message_class(type_name)
+        if data_class is None:
+            return (f"cannot import {rule.outside}: its type {type_name} is not installed on this host (install "
+                    f"the package that defines it)")
+        if tags[0].get("md5") and tags[0]["md5"] != data_class._md5sum:
+            return (f"cannot import {rule.outside}: graph {rule.origin} has another definition of {type_name} "
+                    f"(md5 {tags[0]['md5']}, here {data_class._md5sum}); build both from the same message package")
+        with self._lock:
+            self.imports[rule.outside] = _Import(self, rule, data_class)
+        _log.info("micros_rt: relay %s: importing %s (%s) as %s", self.config.graph, rule.outside, type_name,
+                  rule.local)
+        return None
+
+    # -- reporting and shutdown ----------------------------------------------------------------------
+    def snapshot(self) -> Dict[str, Any]:
+        with self._lock:
+            exports, imports = list(self.exports.values()), list(self.imports.values())
+        return {"graph": self.config.graph, "exports": [e.stats() for e in exports],
+                "imports": [i.stats() for i in imports], "not_carried": dict(self._refused)}
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive() and self._thread is not threading.current_thread():
+            self._thread.join(timeout=5.0)
+        with self._lock:
+            endpoints: List[Any] = [*self.exports.values(), *self.imports.values()]
+            self.exports.clear()
+            self.imports.clear()
+        for endpoint in endpoints:
+            try:
+                endpoint.close()
+            except Exception as exc:  # a master gone at shutdown: unregistering fails, nothing is left open
+                _log.debug("micros_rt: relay: closing: %s", exc)
+
+
+def _message_class(type_name: str) -> Optional[Type[genpy.Message]]:
+    try:
+        cls = roslib.message.get_message_class(type_name)
+    except (ValueError, ImportError):
+        return None
+    return cls if isinstance(cls, type) and issubclass(cls, genpy.Message) else None
+

@@ -1,0 +1,141 @@
+"""DDS topics outside the negotiation: a pushed reader of writers a program chooses by their tag, and the
+writers other graphs' programs announce (the relay's import side, :mod:`micros_rt.bridges.relay`).
+
+A topic's ordinary DDS reader delivers only samples of writers whose publisher accepted DDS with its node
+(the negotiation), which is what keeps two ROS graphs on one domain apart. A relay between graphs needs
+the opposite on purpose: samples of writers of *another* graph, chosen by their micros_rt tag
+(``relay=<graph>``). :class:`DDSFeed` is that reader: Cyclone hands it samples on its receive thread, it
+keeps those of accepted writers, decodes them and puts them into a :class:`~micros_rt.transports.base.PushReader`,
+which never blocks that thread (a full queue drops its oldest, counted). The subscription it feeds
+(``NodeHandle.subscribe_reader``) does the rest, as for any transport.
+
+:class:`WriterDirectory` lists the writers the participant has discovered on a DDS topic with their tags,
+from Cyclone's built-in DCPSPublication topic: how an importing relay learns the type of a topic it has
+never seen (the exporter's tag names it).
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Any, Callable, Dict, List, Optional
+
+from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
+from cyclonedds.core import DDSException, Listener
+from cyclonedds.qos import Policy, Qos
+
+from ..base import EndpointSpec, PushReader
+from ...log import nonblocking_logger
+from ...qos import SubscribeQoSOptions, plain_reader_qos, reader_qos
+from ...ratelimit import RateLimitedLog
+from .backend import DDSBackend
+from .endpoints import DDSReader, make_user_data, parse_user_data
+from .types import dds_topic_name, dds_type_for
+
+__all__ = ["DDSFeed", "WriterDirectory"]
+
+_log = nonblocking_logger("rosout.micros_rt.dds")
+
+#: ``accept(tag)``: keep samples of a writer with this micros_rt tag (None: a foreign writer, e.g. ROS 2)
+Accept = Callable[[Optional[Dict[str, str]]], bool]
+
+
+class DDSFeed:
+    """Samples of one DDS topic from the writers ``accept`` keeps, into ``push`` (see the module's text)."""
+
+    protocol = "DDS"
+
+    def __init__(self, backend: DDSBackend, spec: EndpointSpec, options: Optional[SubscribeQoSOptions],
+                 push: PushReader, accept: Accept) -> None:
+        self.topic = spec.topic
+        self.dds_type = dds_type_for(spec.data_class)
+        self.dds_topic = dds_topic_name(spec.topic)
+        self._push = push
+        self._accept = accept
+        self.refused = 0      # samples of writers ``accept`` turned away
+        self.bad_input = 0    # samples that were not a valid encoding of the type
+        self._bad_log = RateLimitedLog(_log, interval=10.0)
+        self._lock = threading.Lock()  # Cyclone may call the listener from more than one receive thread
+        user_data = make_user_data(**spec.tag)
+        depth = 1 if spec.latch else spec.queue_size
+        qos = (plain_reader_qos(queue_size=depth, transient_local=spec.latch, user_data=user_data) if options is None
+               else reader_qos(options, queue_size=depth, transient_local=spec.latch, user_data=user_data))
+        # not this process's own writers of the topic (an importing relay's local publication of the same name
+        # would otherwise send every message to this reader too, only to be refused)
+        qos += Qos(Policy.IgnoreLocal.Process)
+        listener = Listener(on_data_available=self._on_data)  # type: ignore[no-untyped-call]
+        self._reader = DDSReader(backend.participant, self.dds_topic, self.dds_type, qos, listener)
+        self.guid = self._reader.guid
+        self._backend = backend
+        backend.announce(add_reader=self.guid)
+        self._on_data(None)  # what arrived before the listener was attached (transient-local history)
+
+    def _on_data(self, _reader: Any) -> None:
+        with self._lock:
+            if self._reader.closed:
+                return
+            while True:
+                try:
+                    samples = self._reader.take_raw(64)
+                except DDSException as exc:  # the reader is being deleted
+                    _log.debug("micros_rt: DDS feed %s: %s", self.dds_topic, exc)
+                    return
+                if not samples:
+                    return
+                for payload, info in samples:
+                    if not info.valid_data:
+                        continue
+                    writer = self._reader.writer_info(info.publication_handle)
+                    if writer is None or not self._accept(writer.tag):
+                        self.refused += 1
+                        continue
+                    try:
+                        msg = self.dds_type.decode(payload)
+                    except ValueError as exc:
+                        self.bad_input += 1
+                        self._bad_log.warning(
+                            writer.guid, f"micros_rt: DDS topic {self.dds_topic}: dropped a sample from writer "
+                            f"{writer.guid} that is not a valid {self.dds_type.type_name} ({exc}); "
+                            f"{self.bad_input} so far")
+                        continue
+                    self._push.put(msg, int(info.source_timestamp), writer.guid)
+
+    def matched_writers(self) -> List[str]:
+        return self._reader.matched_writer_guids()
+
+    def close(self) -> None:
+        self._push.close()
+        with self._lock:
+            if self._reader.closed:
+                return
+            self._backend.announce(remove=self.guid)
+            self._reader.close()
+
+
+class WriterDirectory:
+    """The DDS writers this participant has discovered, with their micros_rt tags (Cyclone's built-in
+    DCPSPublication topic, read, never taken: every call sees all writers alive)."""
+
+    def __init__(self, backend: DDSBackend) -> None:
+        self._reader = BuiltinDataReader(backend.participant.dp, BuiltinTopicDcpsPublication)
+        self._lock = threading.Lock()
+
+    def tags(self, dds_topic: str) -> List[Dict[str, str]]:
+        """Tags of the micros_rt writers of ``dds_topic`` known now (foreign writers have none)."""
+        with self._lock:
+            try:
+                found = self._reader.read(N=1024)
+            except DDSException as exc:
+                _log.debug("micros_rt: reading DCPSPublication: %s", exc)
+                return []
+        out: List[Dict[str, str]] = []
+        for endpoint in found:
+            if getattr(endpoint, "topic_name", None) != dds_topic:
+                continue
+            try:
+                user_data = endpoint.qos[Policy.Userdata].data
+            except (KeyError, AttributeError, TypeError):
+                continue
+            tag = parse_user_data(user_data)
+            if tag is not None:
+                out.append(tag)
+        return out

@@ -1,0 +1,156 @@
+"""The relay between ROS graphs (issue 21): two robots, each its own rosmaster, on one host's loopback and
+this run's DDS domain. Robot A's topics are published by stock nodes (a roscpp ``topic_tools/relay`` and
+stock rospy talkers); robot A's relay exports them; robot B's relay imports them; stock rospy listeners
+in robot B receive them over TCPROS from B's relay. Nothing of A's graph is visible in B's master but what
+B's configuration imports.
+"""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+from typing import Any, Dict, Iterator, List, Tuple
+
+import pytest
+
+import harness
+from helpers import stock_listener, stock_talker
+
+CLI = str(harness.REPO_ROOT / ".venv" / "bin" / "micros-rt")
+TOPIC_TOOLS_RELAY = "/usr/lib/topic_tools/relay"  # roscpp (Debian's topic-tools)
+
+RELAY_A = """\
+graph: robot_a
+export:
+  /chatter: {transport_priority: HIGH}
+  /fast: {max_rate: 5}
+  /map: {latch: true}
+"""
+RELAY_B = """\
+graph: robot_b
+import:
+  /robot_a/chatter: {}
+  /robot_a/fast: {}
+  /robot_a/map: {latch: true, as: /a_map}
+"""
+
+
+def relay(config: Path, *extra: str) -> List[str]:
+    return [CLI, "relay", "--config", str(config), "--json", "--stats-period", "0.5", "--poll-period", "0.3",
+            *extra]
+
+
+def topics(master: harness.RosMaster) -> List[str]:
+    return [t for t, _type in harness.master_call(master, "getTopicTypes")]
+
+
+@pytest.fixture
+def robots(dds_domain: int, tmp_path: Path) -> Iterator[Tuple[harness.RosMaster, harness.RosMaster]]:
+    a = harness.RosMaster(workdir=tmp_path / "master_a", domain_id=dds_domain)
+    b = harness.RosMaster(workdir=tmp_path / "master_b", domain_id=dds_domain)
+    a.start()
+    try:
+        b.start()
+        try:
+            yield a, b
+        finally:
+            b.cleanup()
+    finally:
+        a.cleanup()
+
+
+def _stats_with(peer: harness.Peer, section: str, topic: str, timeout: float = 60) -> Dict[str, Any]:
+    """The relay's first counters that list ``topic`` under ``section`` (it is carried)."""
+    def carried(ev: Dict[str, Any]) -> bool:
+        return ev.get("event") == "stats" and any(e["topic"] == topic for e in ev.get(section, []))
+
+    ev = peer.wait_for(carried, timeout)
+    return next(e for e in ev[section] if e["topic"] == topic)
+
+
+def test_stock_cpp_and_python_topics_cross_to_another_graph(robots: Tuple[harness.RosMaster, harness.RosMaster],
+                                                            spawn: harness.Spawner, tmp_path: Path) -> None:
+    a, b = robots
+    (tmp_path / "a.yaml").write_text(RELAY_A)
+    (tmp_path / "b.yaml").write_text(RELAY_B)
+    # robot A: /chatter published by roscpp (topic_tools relay of a stock rospy talker), /fast at 50 Hz, /map latched
+    spawn(stock_talker("--topic", "/chatter_src", "--rate", 20, "--count", 0, "--duration", 120), env=a.env)
+    spawn([TOPIC_TOOLS_RELAY, "/chatter_src", "/chatter"], env=a.env, name="roscpp_relay")
+    spawn(stock_talker("--topic", "/fast", "--rate", 50, "--count", 0, "--duration", 120, "--prefix", "fast"),
+          env=a.env)
+    spawn(stock_talker("--topic", "/map", "--latch", "--count", 1, "--duration", 120, "--linger", 120,
+                       "--prefix", "the map"), env=a.env)
+    relay_a = spawn(relay(tmp_path / "a.yaml"), env=a.env, name="relay_a")
+    relay_b = spawn(relay(tmp_path / "b.yaml"), env=b.env, name="relay_b")
+    relay_a.wait_for("ready", 60)
+    relay_b.wait_for("ready", 60)
+    for topic in ("/chatter", "/fast", "/map"):
+        _stats_with(relay_a, "exports", topic)
+    for topic in ("/robot_a/chatter", "/robot_a/fast", "/robot_a/map"):
+        _stats_with(relay_b, "imports", topic)
+
+    # robot B: stock rospy listeners; the latched map's listener starts after the map was sent
+    chatter = spawn(stock_listener("--topic", "/robot_a/chatter", "--count", 30, "--duration", 90), env=b.env)
+    fast = spawn(stock_listener("--topic", "/robot_a/fast", "--duration", 90), env=b.env)
+    late_map = spawn(stock_listener("--topic", "/a_map", "--count", 1, "--duration", 90), env=b.env)
+    got = chatter.wait_for_count("recv", 30, timeout=90)
+    seqs = [int(e["data"].split()[-1]) for e in got]
+    assert all(e["data"].startswith("hello ") for e in got), got[:3]
+    assert seqs == list(range(seqs[0], seqs[0] + 30)), seqs  # in order, none lost, none twice
+    assert late_map.wait_for("recv", 60)["data"] == "the map 0"
+
+    # the rate cap: 50 Hz in A, at most 5 Hz on the link
+    start = len(fast.events("recv"))
+    ev0 = _stats_with(relay_a, "exports", "/fast")
+    fast.wait_for_count("recv", start + 10, timeout=60)
+    ev1 = relay_a.wait_for(lambda e: e.get("event") == "stats" and
+                           next(x for x in e["exports"] if x["topic"] == "/fast")["received"] >= ev0["received"] + 100,
+                           60)
+    fast_stats = next(x for x in ev1["exports"] if x["topic"] == "/fast")
+    received, sent = fast_stats["received"] - ev0["received"], fast_stats["sent"] - ev0["sent"]
+    print(f"\n/fast: {received} received in A, {sent} sent over DDS, rate_capped {fast_stats['rate_capped']}")
+    assert sent <= received / 5, (received, sent)          # 50 Hz -> 5 Hz: about a tenth
+    assert fast_stats["rate_capped"] > 0
+
+    # graph isolation: only what B imports is in B's graph, and no import leaks back into A
+    assert "/chatter" not in topics(b) and "/robot_a/chatter" in topics(b) and "/a_map" in topics(b)
+    assert not any(t.startswith("/robot_") for t in topics(a)), topics(a)
+    chatter_b = _stats_with(relay_b, "imports", "/robot_a/chatter")
+    assert chatter_b["refused"] == 0 and chatter_b["bad_input"] == 0, chatter_b
+
+
+def test_a_relay_never_sends_its_imports_back_out(robots: Tuple[harness.RosMaster, harness.RosMaster],
+                                                  spawn: harness.Spawner, tmp_path: Path) -> None:
+    """B imports A's /chatter and exports /robot_a/* (a glob that matches the import): B does not send it
+    out again, so A's import of B's would-be copy never starts."""
+    a, b = robots
+    (tmp_path / "a.yaml").write_text("graph: robot_a\nexport:\n  /chatter: {}\nimport:\n"
+                                     "  /robot_b/robot_a/chatter: {as: /chatter_back}\n")
+    (tmp_path / "b.yaml").write_text("graph: robot_b\nimport:\n  /robot_a/chatter: {}\nexport:\n"
+                                     "  /robot_a/*: {}\n")
+    talker = spawn(stock_talker("--topic", "/chatter", "--rate", 20, "--count", 0, "--duration", 120), env=a.env)
+    talker.wait_for("ready", 30)
+    relay_a = spawn(relay(tmp_path / "a.yaml"), env=a.env, name="relay_a")
+    relay_b = spawn(relay(tmp_path / "b.yaml"), env=b.env, name="relay_b")
+    _stats_with(relay_b, "imports", "/robot_a/chatter")
+    # B has carried 40 messages in: by now both relays have looked for topics to carry many times
+    ev = relay_b.wait_for(lambda e: e.get("event") == "stats" and
+                          any(x["received"] >= 40 for x in e["imports"]), 60)
+    assert ev["exports"] == [], ev
+    last_a = relay_a.events("stats")[-1]
+    assert last_a["imports"] == [] and [x["topic"] for x in last_a["exports"]] == ["/chatter"], last_a
+    assert "/chatter_back" not in topics(a)
+
+
+def test_a_bad_configuration_is_one_line_with_file_line_and_key(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("graph: robot_a\nexport:\n  /chatter: {max_rate: fast}\n")
+    cp = subprocess.run([CLI, "relay", "--config", str(bad), "--check"], capture_output=True, text=True, timeout=60)
+    assert cp.returncode == 1, (cp.stdout, cp.stderr)
+    lines = cp.stderr.strip().splitlines()
+    assert len(lines) == 1 and f"{bad}:3: export['/chatter'].max_rate" in lines[0], cp.stderr
+    good = tmp_path / "good.yaml"
+    good.write_text(RELAY_A)
+    cp = subprocess.run([CLI, "relay", "--config", str(good), "--check"], capture_output=True, text=True, timeout=60)
+    assert cp.returncode == 0 and "graph robot_a, 3 export rules, 0 imports" in cp.stdout, (cp.stdout, cp.stderr)
+
