@@ -7,14 +7,16 @@ B's configuration imports.
 
 from __future__ import annotations
 
+import signal
 import subprocess
 from pathlib import Path
-from typing import Any, Dict, Iterator, List, Tuple
+from typing import Any, Dict, Iterator, List, Optional, Tuple
 
 import pytest
 
 import harness
 from helpers import stock_listener, stock_talker
+from netns import Hosts
 
 CLI = str(harness.REPO_ROOT / ".venv" / "bin" / "micros-rt")
 TOPIC_TOOLS_RELAY = "/usr/lib/topic_tools/relay"  # roscpp (Debian's topic-tools)
@@ -154,3 +156,65 @@ def test_a_bad_configuration_is_one_line_with_file_line_and_key(tmp_path: Path) 
     cp = subprocess.run([CLI, "relay", "--config", str(good), "--check"], capture_output=True, text=True, timeout=60)
     assert cp.returncode == 0 and "graph robot_a, 3 export rules, 0 imports" in cp.stdout, (cp.stdout, cp.stderr)
 
+
+
+@pytest.fixture
+def two_robots(dds_domain: int) -> Iterator[Tuple[Hosts, Dict[str, str], Dict[str, str]]]:
+    """Two hosts (network namespaces through a bridge), each robot its own rosmaster: host 0's is the one
+    Hosts starts, host 1's is started here. Returns the hosts and each robot's environment."""
+    hosts = Hosts(2).up()
+    master_b: "Optional[subprocess.Popen[bytes]]" = None
+    try:
+        env_a = hosts.env(0)
+        env_b = dict(hosts.env(1), ROS_MASTER_URI=f"http://{hosts.ip(1)}:{hosts.master_port}")
+        master_b = subprocess.Popen(hosts.run(1, ["/usr/bin/rosmaster", "--core", "-p", str(hosts.master_port)]),
+                                    env=env_b, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+        def b_up() -> bool:
+            return subprocess.run(hosts.run(1, ["/usr/bin/python3", "-c", "import xmlrpc.client as x; x.ServerProxy("
+                                                f"'{env_b['ROS_MASTER_URI']}').getPid('/t')"]),
+                                  capture_output=True, timeout=10).returncode == 0
+
+        harness.wait_until(b_up, 20, interval=0.2, message="rosmaster in host 1")
+        yield hosts, env_a, env_b
+    finally:
+        if master_b is not None:
+            harness._stop_process(master_b, 5.0, first_signal=signal.SIGTERM)
+        hosts.down()
+
+
+def test_two_robots_over_a_network_survive_a_10_s_cut(two_robots: Tuple[Hosts, Dict[str, str], Dict[str, str]],
+                                                      spawn: harness.Spawner, tmp_path: Path) -> None:
+    """Robot A (host 0): a stock talker at 20 Hz behind roscpp's topic_tools relay, A's relay exports it with
+    a history of 500. Robot B (host 1): B's relay imports it with a 1 s deadline, a stock listener. The link
+    is cut for 10 s: B's relay reports the deadline miss and the recovery, and the listener gets every
+    message, in order, none twice (the writer's history covers the 200 sent during the cut)."""
+    hosts, env_a, env_b = two_robots
+    (tmp_path / "a.yaml").write_text("graph: robot_a\nexport:\n  /chatter: {queue_size: 500}\n")
+    (tmp_path / "b.yaml").write_text("graph: robot_b\nimport:\n  /robot_a/chatter: {queue_size: 500, deadline: 1.0}\n")
+    talker = spawn(hosts.run(0, stock_talker("--topic", "/chatter_src", "--rate", 20, "--count", 0,
+                                             "--duration", 180)), env=env_a, name="talker")
+    spawn(hosts.run(0, [TOPIC_TOOLS_RELAY, "/chatter_src", "/chatter"]), env=env_a, name="roscpp_relay")
+    relay_a = spawn(hosts.run(0, relay(tmp_path / "a.yaml")), env=env_a, name="relay_a")
+    relay_b = spawn(hosts.run(1, relay(tmp_path / "b.yaml")), env=env_b, name="relay_b")
+    listener = spawn(hosts.run(1, stock_listener("--topic", "/robot_a/chatter", "--queue-size", 1000,
+                                                 "--duration", 170)), env=env_b, name="listener")
+    talker.wait_for("ready", 30)
+    _stats_with(relay_a, "exports", "/chatter")
+    _stats_with(relay_b, "imports", "/robot_a/chatter")
+    listener.wait_for_count("recv", 20, timeout=60)
+    hosts.cut(0)
+    relay_b.wait_for("deadline", 30)
+    cut_at = len(talker.events("sent"))
+    harness.wait_until(lambda: len(talker.events("sent")) >= cut_at + 200, 60, interval=0.2,
+                       message="200 messages sent during the cut")
+    hosts.restore(0)
+    recovered = relay_b.wait_for("recovered", 60)
+    after = len(talker.events("sent"))
+    got = listener.wait_for(lambda e: e.get("event") == "recv" and int(e["data"].split()[-1]) >= after + 20, 90)
+    seqs = [int(e["data"].split()[-1]) for e in listener.events("recv")]
+    seqs = seqs[:seqs.index(int(got["data"].split()[-1])) + 1]
+    print(f"\n10 s cut: recovered after {recovered['silent_for']} s silence; listener got {len(seqs)} messages "
+          f"{seqs[0]}..{seqs[-1]}")
+    assert seqs == list(range(seqs[0], seqs[-1] + 1)), [s for i, s in enumerate(seqs[1:]) if s != seqs[i] + 1][:10]
+    assert recovered["silent_for"] >= 5.0, recovered

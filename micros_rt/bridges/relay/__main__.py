@@ -5,6 +5,7 @@ file): carries the configuration's topics between this ROS graph and others over
 The node is named ``relay_<graph>`` unless ``--name`` or a ``__name:=`` remapping says otherwise. A bad
 configuration is one line on stderr naming file, line and key, and exit code 1. ``--json`` prints
 ``{"event": "ready"}`` and then the counters (``{"event": "stats", ...}``) every ``--stats-period`` seconds;
+deadline misses and recoveries of imports as ``{"event": "deadline"}`` and ``{"event": "recovered"}``;
 ``--check`` only validates the file.
 """
 
@@ -62,7 +63,7 @@ def main(argv: List[str]) -> int:
 
     micros_rt.init_node(args.name or f"relay_{config.graph}", argv=[sys.argv[0], *ros_args])
     try:
-        relay = Relay(config, poll_period=args.poll_period)
+        relay = Relay(config, poll_period=args.poll_period, event_cb=_emit if args.json else None)
     except micros_rt.MicrosRtError as exc:
         micros_rt.shutdown("relay: cannot start")
         raise CommandError(str(exc)) from None

@@ -25,6 +25,7 @@ type). The message classes come from the installed message packages.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
@@ -36,6 +37,7 @@ import rospy
 
 import micros_rt
 from micros_rt.core.lanes import Lane
+from micros_rt.qos import DURATION_MAX
 from micros_rt.core.runtime import dds_backend
 from micros_rt.log import nonblocking_logger
 from micros_rt.qos.topic_rules import best_match
@@ -116,9 +118,29 @@ class _Import:
             self.feed = DDSFeed(relay.backend, spec, rule.options, push, accept)
             return push
 
+        self._relay = relay
+        self._silent_since: Optional[float] = None  # a deadline missed, nothing since
+        options = rule.options
+        if options is not None and options.deadline < DURATION_MAX:
+            options = dataclasses.replace(options, deadline_cb=self._on_deadline)
         self.pub = relay.nh.advertise(rule.local, data_class, rule.queue_size, latch=rule.latch)
         self.sub = relay.nh.subscribe_reader(f"relay import {rule.outside}", data_class, open_reader,
-                                             self.pub.publish, rule.queue_size, rule.options)
+                                             self._deliver, rule.queue_size, options)
+
+    def _on_deadline(self, info: micros_rt.DeadlineMissed) -> None:
+        if self._silent_since is None:
+            self._silent_since = time.monotonic() - info.silent_for
+        self._relay.event("deadline", topic=self.rule.outside, silent_for=round(info.silent_for, 3),
+                          total=info.total_count)
+
+    def _deliver(self, msg: Any) -> None:
+        if self._silent_since is not None:
+            silent = time.monotonic() - self._silent_since
+            self._silent_since = None
+            _log.warning("micros_rt: relay %s: %s from graph %s is back after %.1f s of silence",
+                         self._relay.config.graph, self.rule.outside, self.rule.origin, silent)
+            self._relay.event("recovered", topic=self.rule.outside, silent_for=round(silent, 3))
+        self.pub.publish(msg)
 
     def stats(self) -> Dict[str, Any]:
         s = self.sub.statistics()
@@ -139,7 +161,8 @@ class Relay:
     """Runs a :class:`~micros_rt.bridges.relay.config.RelayConfig` in this process's node (``init_node``
     first). ``start()`` begins; topics are set up as they appear; ``close()`` ends."""
 
-    def __init__(self, config: RelayConfig, *, poll_period: float = 1.0) -> None:
+    def __init__(self, config: RelayConfig, *, poll_period: float = 1.0,
+                 event_cb: Optional[Callable[..., None]] = None) -> None:
         backend = dds_backend()
         if backend is None:
             raise micros_rt.DDSUnavailableError("the relay carries topics between graphs over DDS, and DDS did not "
@@ -153,6 +176,7 @@ class Relay:
         self.graph_id = info.graph
         self.nh = micros_rt.NodeHandle()
         self.poll_period = poll_period
+        self._event_cb = event_cb
         self.exports: Dict[str, _Export] = {}
         self.imports: Dict[str, _Import] = {}
         self._refused: Dict[str, str] = {}   # topic -> why it is not carried (said once)
@@ -240,6 +264,12 @@ class Relay:
         return None
 
     # -- reporting and shutdown ----------------------------------------------------------------------
+    def event(self, kind: str, **fields: Any) -> None:
+        """Tell the program's ``event_cb`` (``micros-rt relay --json`` prints it) of a deadline miss or a
+        recovery."""
+        if self._event_cb is not None:
+            self._event_cb(kind, **fields)
+
     def snapshot(self) -> Dict[str, Any]:
         with self._lock:
             exports, imports = list(self.exports.values()), list(self.imports.values())
