@@ -158,38 +158,67 @@ def test_a_bad_configuration_is_one_line_with_file_line_and_key(tmp_path: Path) 
 
 
 
+class Robots:
+    """Hosts (network namespaces through a bridge), each robot its own rosmaster: host 0's is the one Hosts
+    starts, the others' are started here. ``env[i]`` is robot i's environment."""
+
+    def __init__(self, n: int) -> None:
+        self.hosts = Hosts(n)
+        self.env: List[Dict[str, str]] = []
+        self._masters: List["subprocess.Popen[bytes]"] = []
+
+    def up(self) -> "Robots":
+        hosts = self.hosts.up()
+        self.env = [hosts.env(0)]
+        for i in range(1, hosts.n):
+            env = dict(hosts.env(i), ROS_MASTER_URI=f"http://{hosts.ip(i)}:{hosts.master_port}")
+            self.env.append(env)
+            self._masters.append(subprocess.Popen(
+                hosts.run(i, ["/usr/bin/rosmaster", "--core", "-p", str(hosts.master_port)]), env=env,
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+            probe = f"import xmlrpc.client as x; x.ServerProxy('{env['ROS_MASTER_URI']}').getPid('/t')"
+            harness.wait_until(lambda: subprocess.run(hosts.run(i, ["/usr/bin/python3", "-c", probe]),
+                                                      capture_output=True, timeout=10).returncode == 0,
+                               20, interval=0.2, message=f"rosmaster in host {i}")
+        return self
+
+    def tx_bytes(self, i: int) -> int:
+        """Bytes host ``i`` has sent on its link."""
+        cp = subprocess.run(self.hosts.run(i, ["cat", f"/sys/class/net/{self.hosts.link_name(i)}/statistics/tx_bytes"]),
+                            capture_output=True, text=True, timeout=10, check=True)
+        return int(cp.stdout)
+
+    def down(self) -> None:
+        for master in self._masters:
+            harness._stop_process(master, 5.0, first_signal=signal.SIGTERM)
+        self.hosts.down()
+
+
 @pytest.fixture
-def two_robots(dds_domain: int) -> Iterator[Tuple[Hosts, Dict[str, str], Dict[str, str]]]:
-    """Two hosts (network namespaces through a bridge), each robot its own rosmaster: host 0's is the one
-    Hosts starts, host 1's is started here. Returns the hosts and each robot's environment."""
-    hosts = Hosts(2).up()
-    master_b: "Optional[subprocess.Popen[bytes]]" = None
+def two_robots(dds_domain: int) -> Iterator[Robots]:
+    robots = Robots(2)
     try:
-        env_a = hosts.env(0)
-        env_b = dict(hosts.env(1), ROS_MASTER_URI=f"http://{hosts.ip(1)}:{hosts.master_port}")
-        master_b = subprocess.Popen(hosts.run(1, ["/usr/bin/rosmaster", "--core", "-p", str(hosts.master_port)]),
-                                    env=env_b, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-
-        def b_up() -> bool:
-            return subprocess.run(hosts.run(1, ["/usr/bin/python3", "-c", "import xmlrpc.client as x; x.ServerProxy("
-                                                f"'{env_b['ROS_MASTER_URI']}').getPid('/t')"]),
-                                  capture_output=True, timeout=10).returncode == 0
-
-        harness.wait_until(b_up, 20, interval=0.2, message="rosmaster in host 1")
-        yield hosts, env_a, env_b
+        yield robots.up()
     finally:
-        if master_b is not None:
-            harness._stop_process(master_b, 5.0, first_signal=signal.SIGTERM)
-        hosts.down()
+        robots.down()
 
 
-def test_two_robots_over_a_network_survive_a_10_s_cut(two_robots: Tuple[Hosts, Dict[str, str], Dict[str, str]],
-                                                      spawn: harness.Spawner, tmp_path: Path) -> None:
+@pytest.fixture
+def three_robots(dds_domain: int) -> Iterator[Robots]:
+    robots = Robots(3)
+    try:
+        yield robots.up()
+    finally:
+        robots.down()
+
+
+def test_two_robots_over_a_network_survive_a_10_s_cut(two_robots: Robots, spawn: harness.Spawner,
+                                                      tmp_path: Path) -> None:
     """Robot A (host 0): a stock talker at 20 Hz behind roscpp's topic_tools relay, A's relay exports it with
     a history of 500. Robot B (host 1): B's relay imports it with a 1 s deadline, a stock listener. The link
     is cut for 10 s: B's relay reports the deadline miss and the recovery, and the listener gets every
     message, in order, none twice (the writer's history covers the 200 sent during the cut)."""
-    hosts, env_a, env_b = two_robots
+    hosts, (env_a, env_b) = two_robots.hosts, two_robots.env
     (tmp_path / "a.yaml").write_text("graph: robot_a\nexport:\n  /chatter: {queue_size: 500}\n")
     (tmp_path / "b.yaml").write_text("graph: robot_b\nimport:\n  /robot_a/chatter: {queue_size: 500, deadline: 1.0}\n")
     talker = spawn(hosts.run(0, stock_talker("--topic", "/chatter_src", "--rate", 20, "--count", 0,
@@ -218,3 +247,42 @@ def test_two_robots_over_a_network_survive_a_10_s_cut(two_robots: Tuple[Hosts, D
           f"{seqs[0]}..{seqs[-1]}")
     assert seqs == list(range(seqs[0], seqs[-1] + 1)), [s for i, s in enumerate(seqs[1:]) if s != seqs[i] + 1][:10]
     assert recovered["silent_for"] >= 5.0, recovered
+
+
+def test_two_robots_importing_one_topic_get_it_by_multicast(three_robots: Robots, spawn: harness.Spawner,
+                                                            tmp_path: Path) -> None:
+    """Robot A exports a 50 kB topic at 20 Hz; robots B and C import it: A's link carries about one copy of
+    each message (DDS multicast on the hosts' network), not one per importing robot."""
+    hosts, env = three_robots.hosts, three_robots.env
+    (tmp_path / "a.yaml").write_text("graph: robot_a\nexport:\n  /big: {}\n")
+    (tmp_path / "in.yaml").write_text("graph: robot_x\nimport:\n  /robot_a/big: {}\n")
+    spawn(hosts.run(0, stock_talker("--topic", "/big", "--rate", 20, "--count", 0, "--duration", 150,
+                                    "--prefix", "x" * 50_000)), env=env[0], name="talker")
+    relay_a = spawn(hosts.run(0, relay(tmp_path / "a.yaml")), env=env[0], name="relay_a")
+    importers = [spawn(hosts.run(i, relay(tmp_path / "in.yaml", "--name", f"relay_{i}")), env=env[i],
+                       name=f"relay_{i}") for i in (1, 2)]
+    listeners = [spawn(hosts.run(i, stock_listener("--topic", "/robot_a/big", "--duration", 140)), env=env[i])
+                 for i in (1, 2)]
+    for importer in importers:
+        _stats_with(importer, "imports", "/robot_a/big")
+    for listener in listeners:
+        listener.wait_for_count("recv", 10, timeout=60)
+    _stats_with(relay_a, "exports", "/big")
+
+    def big(ev: Dict[str, Any]) -> int:
+        return int(next(x for x in ev["exports"] if x["topic"] == "/big")["sent"])
+
+    # the relay's counters come every 0.5 s: A's link is read just before the first and just after the last
+    # of 200 messages (10 s), so the window differs from the counters' by about 2 %
+    tx0 = three_robots.tx_bytes(0)
+    first = relay_a.wait_for("stats", 10, start=len(relay_a.events()))
+    last = relay_a.wait_for(lambda e: e.get("event") == "stats" and big(e) >= big(first) + 200, 90,
+                            start=len(relay_a.events()))
+    tx1 = three_robots.tx_bytes(0)
+    sent = big(last) - big(first)
+    copies = (tx1 - tx0) / (sent * 50_000)
+    print(f"\nmulticast: {sent} messages of 50 kB exported to 2 robots, A's link carried {copies:.2f} copies")
+    assert 0.8 < copies < 1.5, copies  # one per importer would be 2.0 and more
+    for listener in listeners:
+        seqs = [int(e["data"].split()[-1]) for e in listener.events("recv")]
+        assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), seqs[:20]
