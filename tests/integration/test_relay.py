@@ -25,7 +25,7 @@ RELAY_A = """\
 graph: robot_a
 export:
   /chatter: {transport_priority: HIGH}
-  /fast: {max_rate: 5}
+  /fast: {max_rate: 5, using_best_effort_protocol: true}
   /map: {latch: true}
 """
 RELAY_B = """\

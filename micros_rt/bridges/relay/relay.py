@@ -37,7 +37,7 @@ import rospy
 
 import micros_rt
 from micros_rt.core.lanes import Lane
-from micros_rt.qos import DURATION_MAX
+from micros_rt.qos import DURATION_MAX, SubscribeQoSOptions
 from micros_rt.core.runtime import dds_backend
 from micros_rt.log import nonblocking_logger
 from micros_rt.qos.topic_rules import best_match
@@ -62,7 +62,7 @@ class _Export:
         self.received = self.sent = self.rate_capped = self.looped = self.no_reader = 0
         self._last_sent = -math.inf
         tag = {"graph": relay.graph_id, "node": relay.node, "relay": relay.config.graph, "type": data_class._type,
-               "md5": data_class._md5sum}
+               "md5": data_class._md5sum, "best_effort": "1" if rule.options.using_best_effort_protocol else "0"}
         spec = EndpointSpec(self.outside, data_class, rule.queue_size, rule.latch, tag)
         writer = relay.backend.open_writer(spec, rule.options)
         self.sender: TransportWriter = (Lane(writer, topic=self.outside, depth=rule.queue_size)
@@ -257,6 +257,10 @@ class Relay:
         if tags[0].get("md5") and tags[0]["md5"] != data_class._md5sum:
             return (f"cannot import {rule.outside}: graph {rule.origin} has another definition of {type_name} "
                     f"(md5 {tags[0]['md5']}, here {data_class._md5sum}); build both from the same message package")
+        if tags[0].get("best_effort") == "1" and not (rule.options and rule.options.using_best_effort_protocol):
+            # a reliable reader does not match a best-effort writer: take it as it is sent
+            rule = dataclasses.replace(rule, options=dataclasses.replace(rule.options or SubscribeQoSOptions(),
+                                                                         using_best_effort_protocol=True))
         with self._lock:
             self.imports[rule.outside] = _Import(self, rule, data_class)
         _log.info("micros_rt: relay %s: importing %s (%s) as %s", self.config.graph, rule.outside, type_name,

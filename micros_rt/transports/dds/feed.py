@@ -25,7 +25,7 @@ from cyclonedds.qos import Policy, Qos
 
 from ..base import EndpointSpec, PushReader
 from ...log import nonblocking_logger
-from ...qos import SubscribeQoSOptions, plain_reader_qos, reader_qos
+from ...qos import SubscribeQoSOptions, describe_incompatible_policy, plain_reader_qos, reader_qos
 from ...ratelimit import RateLimitedLog
 from .backend import DDSBackend
 from .endpoints import DDSReader, make_user_data, parse_user_data
@@ -62,12 +62,17 @@ class DDSFeed:
         # not this process's own writers of the topic (an importing relay's local publication of the same name
         # would otherwise send every message to this reader too, only to be refused)
         qos += Qos(Policy.IgnoreLocal.Process)
-        listener = Listener(on_data_available=self._on_data)  # type: ignore[no-untyped-call]
+        listener = Listener(on_data_available=self._on_data,  # type: ignore[no-untyped-call]
+                            on_requested_incompatible_qos=self._on_incompatible)
         self._reader = DDSReader(backend.participant, self.dds_topic, self.dds_type, qos, listener)
         self.guid = self._reader.guid
         self._backend = backend
         backend.announce(add_reader=self.guid)
         self._on_data(None)  # what arrived before the listener was attached (transient-local history)
+
+    def _on_incompatible(self, _reader: Any, status: Any) -> None:
+        self._bad_log.warning(("incompatible", int(status.last_policy_id)), "micros_rt: " + describe_incompatible_policy(
+            int(status.last_policy_id), topic=self.topic, side="subscriber"))
 
     def _on_data(self, _reader: Any) -> None:
         with self._lock:
