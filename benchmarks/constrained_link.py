@@ -11,7 +11,10 @@ Links (the publisher host's egress; the subscriber host's is unshaped):
         router), each class with a 50 ms pfifo
 
 micros_rt: /control at TransportPriority.HIGH (DSCP AF41), /image at LOW; rospy: tcp_nodelay subscribers.
-Both in their default configuration otherwise. Each endpoint is its own process
+Both in their default configuration otherwise. relay (with --stacks rospy,micros_rt,relay): two robots, each its
+own rosmaster; the stock rospy publisher and subscriber of the rospy stack, with ``micros-rt relay`` on each
+host carrying /control (HIGH, history 100) and /image (LOW, history 2) between the graphs over DDS;
+relay_capped: the same with the camera exported at ``max_rate: 2`` (15 Mbit/s of the 40; 5 Hz would be 37). Each endpoint is its own process
 (tests/peers/mrt_link.py). Results: benchmarks/results/latest.json under "constrained_link" (the rest of
 the file is left as it is), constrained_link.md and constrained_link.png (control latency distribution
 per link and stack). Nothing leaves the namespaces: the script checks eth0's tx_packets.
@@ -44,8 +47,10 @@ def sh(*argv: str) -> None:
 class Link:
     """Two hosts joined by a veth pair; the publisher host's egress shaped as ``kind`` says."""
 
-    def __init__(self, kind: str) -> None:
+    def __init__(self, kind: str, masters: int = 1) -> None:
         pid = os.getpid()
+        self.masters = masters
+        self.robot_masters: List["subprocess.Popen[bytes]"] = []
         self.kind = kind
         self.ns = [f"mrtCL{i}_{pid}" for i in range(2)]
         self.dev = [f"cl{i}_{pid}"[:15] for i in range(2)]
@@ -76,23 +81,28 @@ class Link:
             for tos in PRIORITY_TOS:
                 sh(*tc, "filter", "add", "dev", dev, "parent", "1:", "protocol", "ip", "prio", "1", "u32", "match",
                    "ip", "tos", tos, "0xfc", "flowid", "1:10")
-        self.master = subprocess.Popen(
-            ["ip", "netns", "exec", self.ns[0], "/usr/bin/rosmaster", "--core", "-p", "11311"],
-            env=self.env(0), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        deadline = time.monotonic() + 20
-        while time.monotonic() < deadline:
-            probe = subprocess.run(["ip", "netns", "exec", self.ns[0], STOCK_PYTHON, "-c",
-                                    f"import xmlrpc.client as x; x.ServerProxy('http://{self.ip[0]}:11311')"
-                                    f".getPid('/t')"], capture_output=True, timeout=10)
-            if probe.returncode == 0:
-                return self
-            time.sleep(0.2)
-        raise SystemExit("rosmaster did not come up in the publisher's namespace")
+        for i in range(self.masters):
+            self.robot_masters.append(subprocess.Popen(
+                ["ip", "netns", "exec", self.ns[i], "/usr/bin/rosmaster", "--core", "-p", "11311"],
+                env=self.env(i), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+            deadline = time.monotonic() + 20
+            while True:
+                probe = subprocess.run(["ip", "netns", "exec", self.ns[i], STOCK_PYTHON, "-c",
+                                        f"import xmlrpc.client as x; x.ServerProxy('http://{self.ip[i]}:11311')"
+                                        f".getPid('/t')"], capture_output=True, timeout=10)
+                if probe.returncode == 0:
+                    break
+                if time.monotonic() > deadline:
+                    raise SystemExit(f"rosmaster did not come up in namespace {self.ns[i]}")
+                time.sleep(0.2)
+        self.master = self.robot_masters[0]
+        return self
 
     def env(self, i: int) -> Dict[str, str]:
         env = {k: v for k, v in os.environ.items()
                if not k.startswith(("ROS_", "CYCLONEDDS", "PYTHONPATH", "MICROS_RT"))}
-        env.update(ROS_MASTER_URI=f"http://{self.ip[0]}:11311", ROS_IP=self.ip[i],
+        master = self.ip[i] if self.masters > 1 else self.ip[0]  # each robot its own master, or one for both
+        env.update(ROS_MASTER_URI=f"http://{master}:11311", ROS_IP=self.ip[i],
                    ROS_DOMAIN_ID=str(os.getpid() % 200 + 20), PYTHONUNBUFFERED="1",
                    ROS_HOME=f"/tmp/{self.ns[0]}", ROS_LOG_DIR=f"/tmp/{self.ns[0]}")
         return env
@@ -102,12 +112,12 @@ class Link:
                                 stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
 
     def down(self) -> None:
-        if self.master is not None:
-            self.master.terminate()
+        for master in self.robot_masters:
+            master.terminate()
             try:
-                self.master.wait(5)
+                master.wait(5)
             except subprocess.TimeoutExpired:
-                self.master.kill()
+                master.kill()
         for ns in self.ns:
             subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=20)
 
@@ -128,17 +138,38 @@ def events(proc: "subprocess.Popen[str]", timeout: float) -> List[Dict[str, Any]
     return found
 
 
-def one_run(kind: str, stack: str, seconds: float) -> Dict[str, Any]:
-    link = Link(kind).up()
-    try:
-        python = STOCK_PYTHON if stack == "rospy" else MRT_PYTHON
-        extra = ["--stock"] if stack == "rospy" else []
-        sub = link.run(1, [python, str(PEER), "sub", "--seconds", str(seconds + 60), *extra])
+RELAY_EXPORT = ("graph: robot_a\nexport:\n  /control: {transport_priority: HIGH, queue_size: 100}\n"
+                "  /image: {transport_priority: LOW, queue_size: 2%s}\n")
+RELAY_IMPORT = ("graph: robot_b\nimport:\n  /robot_a/control: {as: /control, queue_size: 100}\n"
+                "  /robot_a/image: {as: /image, queue_size: 2}\n")
 
-        pub = link.run(0, [python, str(PEER), "pub", "--seconds", str(seconds), *extra])
+
+def one_run(kind: str, stack: str, seconds: float) -> Dict[str, Any]:
+    relayed = stack.startswith("relay")
+    link = Link(kind, masters=2 if relayed else 1).up()
+    relays: List["subprocess.Popen[str]"] = []
+    try:
+        python = MRT_PYTHON if stack == "micros_rt" else STOCK_PYTHON
+        extra = [] if stack == "micros_rt" else ["--stock"]
+        if relayed:  # the relays start first; the far side's subscriber connects seconds after the near one
+            config = Path(f"/tmp/{link.ns[0]}")
+            config.mkdir(parents=True, exist_ok=True)
+            cap = ", max_rate: 2" if stack == "relay_capped" else ""
+            for i, text in enumerate((RELAY_EXPORT % cap, RELAY_IMPORT)):
+                (config / f"relay{i}.yaml").write_text(text)
+                relays.append(link.run(i, [str(ROOT / ".venv" / "bin" / "micros-rt"), "relay", "--config",
+                                           str(config / f"relay{i}.yaml"), "--poll-period", "0.3", "--json",
+                                           "--stats-period", "2"]))
+        sub = link.run(1, [python, str(PEER), "sub", "--seconds", str(seconds + 60), *extra])
+        pub_extra = ["--start-delay", "8"] if relayed else []
+        pub = link.run(0, [python, str(PEER), "pub", "--seconds", str(seconds), *extra, *pub_extra])
         published = next((e for e in events(pub, seconds + 120) if e.get("event") == "published"), None)
         summary = next((e for e in events(sub, 90) if e.get("event") == "summary"), None)
     finally:
+        relay_stats = []
+        for relay in relays:
+            relay.terminate()
+            relay_stats.append(next((e for e in reversed(events(relay, 10)) if e.get("event") == "stats"), None))
         link.down()
     if published is None or summary is None:
         return {"error": f"no {'published' if published is None else 'summary'} event"}
@@ -149,7 +180,8 @@ def one_run(kind: str, stack: str, seconds: float) -> Dict[str, Any]:
             "control_p99_ms": summary["p99_ms"], "control_max_ms": summary["max_ms"],
             "images_published": published["image"], "images_delivered": summary["image"],
             "image_p50_ms": summary["image_p50_ms"], "transports": summary["transports"],
-            "publisher_statistics": published.get("statistics") or {}, "control_cdf_ms": summary["control_cdf_ms"]}
+            "publisher_statistics": published.get("statistics") or {}, "control_cdf_ms": summary["control_cdf_ms"],
+            **({"relay_statistics": relay_stats} if relays else {})}
 
 
 def eth0_tx() -> Optional[int]:
@@ -164,6 +196,8 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--links", default="tbf,htb")
     ap.add_argument("--rounds", type=int, default=1)
+    ap.add_argument("--stacks", default="rospy,micros_rt",
+                    help="rospy, micros_rt, relay, relay_capped (the camera exported at 2 Hz); comma-separated")
     ap.add_argument("--out", default=str(RESULTS))
     args = ap.parse_args()
     if os.geteuid() != 0:
@@ -173,7 +207,8 @@ def main() -> int:
     results: Dict[str, Dict[str, List[Dict[str, Any]]]] = {}
     for r in range(args.rounds):
         for kind in args.links.split(","):
-            for stack in (("rospy", "micros_rt") if r % 2 == 0 else ("micros_rt", "rospy")):
+            stacks = args.stacks.split(",")
+            for stack in (stacks if r % 2 == 0 else stacks[::-1]):
                 print(f"round {r + 1}/{args.rounds}: {kind} link, {stack} ...", flush=True)
                 results.setdefault(kind, {}).setdefault(stack, []).append(one_run(kind, stack, args.seconds))
     tx_after = eth0_tx()

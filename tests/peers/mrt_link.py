@@ -72,6 +72,9 @@ def main() -> int:
     ap.add_argument("--image-work-ms", type=float, default=0.0,
                     help="sub: each image callback computes in Python this long (holds the GIL: a CPU-bound node)")
     ap.add_argument("--wait-subscribers", type=float, default=60.0)
+    ap.add_argument("--start-delay", type=float, default=0.0,
+                    help="pub: wait this long after the first subscribers before publishing (a relay's far side "
+                         "connects later than the relay)")
     args = ap.parse_args()
 
     import rospy
@@ -103,6 +106,7 @@ def main() -> int:
                 and time.monotonic() < deadline:
             time.sleep(0.05)
         emit("ready", control=control_pub.get_num_connections(), image=image_pub.get_num_connections())
+        time.sleep(args.start_delay)
         frame = bytes(args.width * args.height * 3)
         stop = threading.Event()
         counts: Dict[str, int] = {}
