@@ -47,8 +47,9 @@ def sh(*argv: str) -> None:
 class Link:
     """Two hosts joined by a veth pair; the publisher host's egress shaped as ``kind`` says."""
 
-    def __init__(self, kind: str, masters: int = 1) -> None:
+    def __init__(self, kind: str, masters: int = 1, mtu: int = 1500) -> None:
         pid = os.getpid()
+        self.mtu = mtu
         self.masters = masters
         self.robot_masters: List["subprocess.Popen[bytes]"] = []
         self.kind = kind
@@ -60,7 +61,8 @@ class Link:
     def up(self) -> "Link":
         for ns in self.ns:
             sh("ip", "netns", "add", ns)
-        sh("ip", "link", "add", self.dev[0], "type", "veth", "peer", "name", self.dev[1])
+        sh("ip", "link", "add", self.dev[0], "mtu", str(self.mtu), "type", "veth", "peer", "name", self.dev[1], "mtu",
+           str(self.mtu))
         for i in range(2):
             sh("ip", "link", "set", self.dev[i], "netns", self.ns[i])
             sh("ip", "-n", self.ns[i], "addr", "add", f"{self.ip[i]}/24", "dev", self.dev[i])
@@ -68,7 +70,9 @@ class Link:
             sh("ip", "-n", self.ns[i], "link", "set", "lo", "up")
         tc = ["ip", "netns", "exec", self.ns[0], "tc"]
         dev = self.dev[0]
-        if self.kind == "tbf":
+        if self.kind == "none":
+            pass  # an unshaped veth pair: what a relay costs by itself
+        elif self.kind == "tbf":
             sh(*tc, "qdisc", "add", "dev", dev, "root", "tbf", "rate", "40mbit", "burst", "32kbit", "latency", "50ms")
         else:
             sh(*tc, "qdisc", "add", "dev", dev, "root", "handle", "1:", "htb", "default", "20")
@@ -144,9 +148,9 @@ RELAY_IMPORT = ("graph: robot_b\nimport:\n  /robot_a/control: {as: /control, que
                 "  /robot_a/image: {as: /image, queue_size: 2}\n")
 
 
-def one_run(kind: str, stack: str, seconds: float) -> Dict[str, Any]:
+def one_run(kind: str, stack: str, seconds: float, image: List[str], mtu: int = 1500) -> Dict[str, Any]:
     relayed = stack.startswith("relay")
-    link = Link(kind, masters=2 if relayed else 1).up()
+    link = Link(kind, masters=2 if relayed else 1, mtu=mtu).up()
     relays: List["subprocess.Popen[str]"] = []
     try:
         python = MRT_PYTHON if stack == "micros_rt" else STOCK_PYTHON
@@ -160,9 +164,9 @@ def one_run(kind: str, stack: str, seconds: float) -> Dict[str, Any]:
                 relays.append(link.run(i, [str(ROOT / ".venv" / "bin" / "micros-rt"), "relay", "--config",
                                            str(config / f"relay{i}.yaml"), "--poll-period", "0.3", "--json",
                                            "--stats-period", "2"]))
-        sub = link.run(1, [python, str(PEER), "sub", "--seconds", str(seconds + 60), *extra])
+        sub = link.run(1, [python, str(PEER), "sub", "--seconds", str(seconds + 60), *extra, *image])
         pub_extra = ["--start-delay", "8"] if relayed else []
-        pub = link.run(0, [python, str(PEER), "pub", "--seconds", str(seconds), *extra, *pub_extra])
+        pub = link.run(0, [python, str(PEER), "pub", "--seconds", str(seconds), *extra, *pub_extra, *image])
         published = next((e for e in events(pub, seconds + 120) if e.get("event") == "published"), None)
         summary = next((e for e in events(sub, 90) if e.get("event") == "summary"), None)
     finally:
@@ -194,7 +198,9 @@ def eth0_tx() -> Optional[int]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=10.0)
-    ap.add_argument("--links", default="tbf,htb")
+    ap.add_argument("--links", default="tbf,htb", help="tbf, htb, none (unshaped); comma-separated")
+    ap.add_argument("--image-size", default="640x480", help="the camera's WIDTHxHEIGHT")
+    ap.add_argument("--mtu", type=int, default=1500, help="the link's MTU (9000: jumbo frames)")
     ap.add_argument("--rounds", type=int, default=1)
     ap.add_argument("--stacks", default="rospy,micros_rt",
                     help="rospy, micros_rt, relay, relay_capped (the camera exported at 2 Hz); comma-separated")
@@ -210,7 +216,9 @@ def main() -> int:
             stacks = args.stacks.split(",")
             for stack in (stacks if r % 2 == 0 else stacks[::-1]):
                 print(f"round {r + 1}/{args.rounds}: {kind} link, {stack} ...", flush=True)
-                results.setdefault(kind, {}).setdefault(stack, []).append(one_run(kind, stack, args.seconds))
+                width, height = args.image_size.split("x")
+                results.setdefault(kind, {}).setdefault(stack, []).append(
+                    one_run(kind, stack, args.seconds, ["--width", width, "--height", height], args.mtu))
     tx_after = eth0_tx()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
