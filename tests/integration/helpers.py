@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import re
 import subprocess
+import urllib.parse
 from typing import Any, Dict, List, Optional, Set, Tuple
 
 import harness
@@ -63,6 +64,14 @@ def tcp_links_between(pid_a: int, pid_b: int) -> List[Tuple[str, str]]:
         if pid_a in pids and pid_b in owners.get(peer, set()):
             links.append((local, peer))
     return links
+
+
+def data_links_between(master: harness.RosMaster, a: Tuple[str, int], b: Tuple[str, int]) -> List[Tuple[str, str]]:
+    """TCP connections between nodes ``a`` and ``b`` (name, pid), both directions, other than calls to either
+    node's XML-RPC API (a requestTopic or a tool's query in flight is not a data link)."""
+    api_ports = {urllib.parse.urlparse(harness.lookup_node(master, name)).port for name, _pid in (a, b)}
+    links = tcp_links_between(a[1], b[1]) + tcp_links_between(b[1], a[1])
+    return [(local, peer) for local, peer in links if int(peer.rsplit(":", 1)[1]) not in api_ports]
 
 
 def bus_info(master: harness.RosMaster, node: str) -> List[List[Any]]:

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any, Dict, List, Optional
 
 import harness
-from helpers import bus_info, received, tcp_links_between, transports
+from helpers import bus_info, data_links_between, received, tcp_links_between, transports
 
 MICROS_RT = str(harness.REPO_ROOT / ".venv" / "bin" / "micros-rt")
 PLAIN_TALKER = str(harness.PEERS_DIR / "plain_talker.py")
@@ -70,7 +70,7 @@ def test_two_plain_scripts_talk_dds_and_tcpros_with_stock_nodes(ros_master: harn
     assert {e["callerid"] for e in listener.events("recv") + stock_listener.events("recv")} == {"/run_talker"}
 
     # the kernel's socket table: no TCP link between the two micros-rt run processes, one to the stock node
-    dds_pair = tcp_links_between(talker.pid, listener.pid) + tcp_links_between(listener.pid, talker.pid)
+    dds_pair = data_links_between(ros_master, ("/run_talker", talker.pid), ("/run_listener", listener.pid))
     stock_pair = tcp_links_between(stock_listener.pid, talker.pid)
     print(f"ss: run_talker(pid {talker.pid}) <-> run_listener(pid {listener.pid}): {dds_pair}; "
           f"stock_plain_listener(pid {stock_listener.pid}) -> run_talker: {stock_pair}")

@@ -8,7 +8,7 @@ import time
 import pytest
 
 import harness
-from helpers import bus_info, mrt, received, stock_talker, tcp_links_between, transports
+from helpers import bus_info, data_links_between, mrt, received, stock_talker, transports
 
 
 def test_micros_rt_pair_uses_dds_not_tcp(ros_master: harness.RosMaster, spawn: harness.Spawner) -> None:
@@ -19,8 +19,7 @@ def test_micros_rt_pair_uses_dds_not_tcp(ros_master: harness.RosMaster, spawn: h
     listener.wait_for_count("recv", 20, timeout=30)
     assert set(transports(listener)) == {"DDS"}
     # from outside our bookkeeping: the kernel shows no TCP link between the two processes
-    assert tcp_links_between(listener.pid, talker.pid) == []
-    assert tcp_links_between(talker.pid, listener.pid) == []
+    assert data_links_between(ros_master, ("/dds_listener", listener.pid), ("/dds_talker", talker.pid)) == []
     # and stock rosnode sees a DDS transport on both sides
     sub_conns = [c for c in bus_info(ros_master, "/dds_listener") if c[4] == "/dds_pair"]
     pub_conns = [c for c in bus_info(ros_master, "/dds_talker") if c[4] == "/dds_pair"]

@@ -15,7 +15,7 @@ import argparse
 import json
 import sys
 import threading
-from typing import Any, List, Optional
+from typing import Any, List
 
 from ...cli import CommandError
 
@@ -84,13 +84,7 @@ def main(argv: List[str]) -> int:
     return 0
 
 
-def _run(argv: Optional[List[str]] = None) -> int:
-    try:
-        return main(list(sys.argv[1:] if argv is None else argv))
-    except CommandError as exc:
-        print(f"micros-rt relay: {exc}", file=sys.stderr)
-        return exc.code
-
-
 if __name__ == "__main__":
-    sys.exit(_run())
+    from ...cli import main as _cli_main
+
+    sys.exit(_cli_main(["relay", *sys.argv[1:]]))   # the command's error handling: one line, no traceback
