@@ -121,6 +121,34 @@ def test_stock_cpp_and_python_topics_cross_to_another_graph(robots: Tuple[harnes
     assert chatter_b["refused"] == 0 and chatter_b["bad_input"] == 0, chatter_b
 
 
+def test_a_restarted_relay_and_a_restarted_master_are_back_without_help(
+        robots: Tuple[harness.RosMaster, harness.RosMaster], spawn: harness.Spawner, tmp_path: Path) -> None:
+    """B's relay is stopped and started again, then A's master is restarted: B's stock listener gets new
+    messages again after each, nothing done by hand (micros_rt re-registers the relay with a new master; the
+    relay's TCPROS link to A's stock talker outlives the master)."""
+    a, b = robots
+    (tmp_path / "a.yaml").write_text("graph: robot_a\nexport:\n  /chatter: {}\n")
+    (tmp_path / "b.yaml").write_text("graph: robot_b\nimport:\n  /robot_a/chatter: {}\n")
+    spawn(stock_talker("--topic", "/chatter", "--rate", 20, "--count", 0, "--duration", 150), env=a.env)
+    spawn(relay(tmp_path / "a.yaml"), env=a.env, name="relay_a")
+    relay_b = spawn(relay(tmp_path / "b.yaml"), env=b.env, name="relay_b")
+    listener = spawn(stock_listener("--topic", "/robot_a/chatter", "--duration", 140), env=b.env)
+    listener.wait_for_count("recv", 10, timeout=60)
+
+    def more(n: int, what: str) -> None:
+        start = len(listener.events("recv"))
+        listener.wait_for_count("recv", start + n, timeout=60)
+        print(f"\n{what}: {n} more messages")
+
+    relay_b.stop()
+    spawn(relay(tmp_path / "b.yaml"), env=b.env, name="relay_b2")
+    more(20, "relay B restarted")
+    a.restart()
+    more(20, "master A restarted")
+    # the relay's subscription is registered with the new master again (the stock talker is not: rospy)
+    harness.wait_until(lambda: "/chatter" in topics(a), 30, interval=0.2, message="/chatter in A's new master")
+
+
 def test_a_relay_never_sends_its_imports_back_out(robots: Tuple[harness.RosMaster, harness.RosMaster],
                                                   spawn: harness.Spawner, tmp_path: Path) -> None:
     """B imports A's /chatter and exports /robot_a/* (a glob that matches the import): B does not send it
