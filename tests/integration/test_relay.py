@@ -172,6 +172,55 @@ def test_a_relay_never_sends_its_imports_back_out(robots: Tuple[harness.RosMaste
     assert "/chatter_back" not in topics(a)
 
 
+SET_FLAG_SERVER = """
+import sys, time, rospy
+from std_srvs.srv import SetBool, SetBoolResponse
+rospy.init_node("flag_server")  # rospy's own SIGINT handling: the service is unregistered at shutdown
+def handle(req):
+    if not req.data:
+        time.sleep(6)  # slower than the importing relay's timeout
+    return SetBoolResponse(success=req.data, message="robot A got %s" % req.data)
+rospy.Service("/set_flag", SetBool, handle)
+print('{"event": "ready"}', flush=True)
+end = time.monotonic() + float(sys.argv[1])
+while not rospy.is_shutdown() and time.monotonic() < end:
+    time.sleep(0.1)
+"""
+
+
+def test_a_service_call_in_one_graph_reaches_a_server_in_the_other(
+        robots: Tuple[harness.RosMaster, harness.RosMaster], spawn: harness.Spawner, tmp_path: Path) -> None:
+    """A stock rospy server of std_srvs/SetBool in A; B's relay offers it as /robot_a/set_flag; stock
+    ``rosservice call`` in B gets A's answer, a call slower than the timeout and a call after the server is
+    gone get an error in words, and the relays keep running."""
+    a, b = robots
+    (tmp_path / "a.yaml").write_text("graph: robot_a\nexport_services: [/set_flag]\n")
+    (tmp_path / "b.yaml").write_text("graph: robot_b\nimport_services:\n  /robot_a/set_flag: {timeout: 2}\n")
+    server = spawn([harness.STOCK_PYTHON, "-c", SET_FLAG_SERVER, "120"], env=a.env, name="flag_server")
+    server.wait_for("ready", 30)
+    relay_a = spawn(relay(tmp_path / "a.yaml"), env=a.env, name="relay_a")
+    relay_b = spawn(relay(tmp_path / "b.yaml"), env=b.env, name="relay_b")
+    relay_a.wait_for(lambda e: e.get("event") == "stats" and bool(e.get("services")), 60)
+    relay_b.wait_for(lambda e: e.get("event") == "stats" and bool(e.get("services")), 60)
+
+    def call(data: str) -> "subprocess.CompletedProcess[str]":
+        return subprocess.run(["/usr/bin/python3", "/usr/bin/rosservice", "call", "/robot_a/set_flag", f"data: {data}"],
+                              env=b.env, capture_output=True, text=True, timeout=60)
+
+    ok = call("true")
+    assert ok.returncode == 0 and "success: True" in ok.stdout and "robot A got True" in ok.stdout, ok
+    slow = call("false")
+    assert slow.returncode != 0 and "no answer" in slow.stderr and "within 2 s" in slow.stderr, slow
+    server.stop()
+    relay_b.wait_for(lambda e: e.get("event") == "stats" and any(
+        s.get("uri") == "" for s in e.get("services", [])), 60)
+    gone = call("true")
+    assert gone.returncode != 0 and "does not offer this service now" in gone.stderr, gone
+    assert relay_a.alive() and relay_b.alive()
+    last = relay_b.events("stats")[-1]["services"][0]
+    assert (last["calls"], last["failed"]) == (3, 2), last
+
+
 def test_a_bad_configuration_is_one_line_with_file_line_and_key(tmp_path: Path) -> None:
     bad = tmp_path / "bad.yaml"
     bad.write_text("graph: robot_a\nexport:\n  /chatter: {max_rate: fast}\n")

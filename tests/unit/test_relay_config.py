@@ -20,6 +20,10 @@ export:
 import:
   /robot_b/chatter: {}
   /robot_b/odom: {as: /others/odom, deadline: 0.5}
+export_services: [/add_two_ints]
+import_services:
+  /robot_b/set_flag: {timeout: 2, as: /b/set_flag}
+  /robot_b/reset: {}
 """
 
 
@@ -39,6 +43,10 @@ def test_the_issue_s_example_and_more() -> None:
     assert imports["/robot_b/chatter"].options is None
     odom = imports["/robot_b/odom"]
     assert odom.local == "/others/odom" and odom.options is not None and odom.options.deadline == 0.5
+    assert config.export_services == ("/add_two_ints",)
+    services = {i.outside: i for i in config.import_services}
+    assert (services["/robot_b/set_flag"].local, services["/robot_b/set_flag"].timeout) == ("/b/set_flag", 2.0)
+    assert (services["/robot_b/reset"].local, services["/robot_b/reset"].origin) == ("/robot_b/reset", "robot_b")
 
 
 @pytest.mark.parametrize("text, where", [
@@ -58,6 +66,11 @@ def test_the_issue_s_example_and_more() -> None:
     ("graph: a\nimport:\n  /b/x: {}\n  /b/x: {}\n", "f.yaml:4: import./b/x: duplicate key"),
     ("graph: a\nimport:\n  /b/x: {as: /y}\n  /c/y: {as: /y}\n", "both published as /y"),
     ("graph: a\nexport:\n  /b/x: {}\nimport:\n  /b/x: {}\n", "a topic is never sent back out"),
+    ("graph: a\nexport_services: /x\n", "f.yaml:2: export_services: expected a list"),
+    ("graph: a\nexport_services: [x]\n", "f.yaml:2: export_services: 'x' is not a global service name"),
+    ("graph: a\nimport_services:\n  /b/s: {timeout: 0}\n", "f.yaml:3: import_services['/b/s'].timeout: 0 is invalid"),
+    ("graph: a\nimport_services:\n  /b/s: {retries: 3}\n", "f.yaml:3: import_services['/b/s'].retries: unknown"),
+    ("graph: a\nimport_services:\n  /a/s: {}\n", "f.yaml:3: import_services: '/a/s' is invalid"),
     ("graph: [a\n", "f.yaml: not valid YAML"),
 ])
 def test_errors_name_file_line_and_key(text: str, where: str) -> None:

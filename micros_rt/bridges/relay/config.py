@@ -12,6 +12,9 @@ the line and the key.
     import:                           # topics other graphs export, published in this graph
       /robot_b/chatter: {}            # under the same name
       /robot_b/odom: {as: /others/odom, deadline: 0.5}
+    export_services: [/add_two_ints]  # this graph's services other graphs may call
+    import_services:                  # other graphs' services, offered in this graph
+      /robot_b/add_two_ints: {timeout: 5, as: /b/add_two_ints}
 
 An export's options are :class:`~micros_rt.AdvertiseQoSOptions` keys (the DDS writer's QoS on the link) plus
 ``max_rate`` (Hz, applied before the link: newer messages within 1/max_rate of the last one sent are not
@@ -35,7 +38,8 @@ from ...qos import AdvertiseQoSOptions, SubscribeQoSOptions
 from ...qos.profiles import _construct, _expect_mapping, _is_null, _pairs, _parse_options, _where
 from ...qos.topic_rules import TopicPattern
 
-__all__ = ["ExportRule", "ImportRule", "RelayConfig", "RelayConfigError", "load_config", "parse_config"]
+__all__ = ["ExportRule", "ImportRule", "RelayConfig", "RelayConfigError", "ServiceImport", "load_config",
+           "parse_config"]
 
 _GRAPH_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 _TOPIC_NAME = re.compile(r"^(/[A-Za-z][A-Za-z0-9_]*)+$")
@@ -67,11 +71,21 @@ class ImportRule:
 
 
 @dataclass(frozen=True)
+class ServiceImport:
+    outside: str                          # /<graph>/<service>
+    local: str
+    origin: str
+    timeout: float = 10.0                 # seconds a forwarded call may take
+
+
+@dataclass(frozen=True)
 class RelayConfig:
     graph: str
     exports: Tuple[ExportRule, ...]
     imports: Tuple[ImportRule, ...]
     source: str = "<string>"
+    export_services: Tuple[str, ...] = ()
+    import_services: Tuple[ServiceImport, ...] = ()
 
     def outside_name(self, topic: str) -> str:
         """The name an exported ``topic`` has outside this graph: ``/<graph><topic>``."""
@@ -109,6 +123,8 @@ def _parse(root: yaml.Node, source: str) -> RelayConfig:
     exports: List[ExportRule] = []
     imports: List[ImportRule] = []
     import_nodes: List[Tuple[yaml.ScalarNode, yaml.Node]] = []
+    export_services: List[str] = []
+    service_nodes: List[Tuple[yaml.ScalarNode, yaml.Node]] = []
     for key_node, body in _pairs(root, source, ""):
         key = key_node.value
         if key == "graph":
@@ -125,9 +141,15 @@ def _parse(root: yaml.Node, source: str) -> RelayConfig:
             if not _is_null(body):
                 _expect_mapping(body, source, "import", "a mapping of outside topic names to options")
                 import_nodes = _pairs(body, source, "import")
+        elif key == "export_services":
+            export_services = _service_names(body, source)
+        elif key == "import_services":
+            if not _is_null(body):
+                _expect_mapping(body, source, "import_services", "a mapping of outside service names to options")
+                service_nodes = _pairs(body, source, "import_services")
         else:
             raise RelayConfigError(f"{_where(source, key_node)}: unknown key {key!r}; expected 'graph', 'export', "
-                                   f"'import'")
+                                   f"'import', 'export_services', 'import_services'")
     if graph is None:
         raise RelayConfigError(f"{source}:1: graph: missing; name this graph (e.g. 'graph: robot_a'): exported "
                                f"topics are /<graph>/<topic> outside it")
@@ -143,7 +165,52 @@ def _parse(root: yaml.Node, source: str) -> RelayConfig:
             raise RelayConfigError(f"{source}: import: {incoming.outside} and {locals_seen[incoming.local]} are "
                                    f"both published as {incoming.local}")
         locals_seen[incoming.local] = incoming.outside
-    return RelayConfig(graph, tuple(exports), tuple(imports), source)
+    services = tuple(_service_import(k, v, source, graph) for k, v in service_nodes)
+    return RelayConfig(graph, tuple(exports), tuple(imports), source, tuple(export_services), services)
+
+
+def _service_names(node: yaml.Node, source: str) -> List[str]:
+    if _is_null(node):
+        return []
+    if not isinstance(node, yaml.SequenceNode):
+        raise RelayConfigError(f"{_where(source, node)}: export_services: expected a list of service names "
+                               f"(e.g. [/add_two_ints])")
+    names = []
+    for item in node.value:
+        value = _construct(item) if isinstance(item, yaml.ScalarNode) else None
+        if not isinstance(value, str) or not _TOPIC_NAME.match(value):
+            raise RelayConfigError(f"{_where(source, item)}: export_services: {value!r} is not a global service "
+                                   f"name (e.g. /add_two_ints)")
+        names.append(value)
+    return names
+
+
+def _service_import(key_node: yaml.ScalarNode, body: yaml.Node, source: str, graph: str) -> ServiceImport:
+    outside = key_node.value
+    path = f"import_services[{outside!r}]"
+    where = _where(source, key_node)
+    if not _TOPIC_NAME.match(outside) or outside.count("/") < 2 or outside.split("/")[1] == graph:
+        raise RelayConfigError(f"{where}: import_services: {outside!r} is invalid: expected /<other graph>/<service> "
+                               f"as the exporting relay names it")
+    mine, rest = _split(body, source, path, ("as", "timeout"))
+    if isinstance(rest, yaml.MappingNode) and rest.value:
+        key = rest.value[0][0]
+        raise RelayConfigError(f"{_where(source, key)}: {path}.{key.value}: unknown option; known: as, timeout")
+    local = outside
+    if "as" in mine:
+        node, value = mine["as"]
+        if not isinstance(value, str) or not _TOPIC_NAME.match(value):
+            raise RelayConfigError(f"{_where(source, node)}: {path}.as: {value!r} is invalid: expected a global "
+                                   f"service name")
+        local = value
+    timeout = 10.0
+    if "timeout" in mine:
+        node, value = mine["timeout"]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+            raise RelayConfigError(f"{_where(source, node)}: {path}.timeout: {value!r} is invalid: expected "
+                                   f"seconds, a number above 0")
+        timeout = float(value)
+    return ServiceImport(outside, local, outside.split("/")[1], timeout)
 
 
 def _split(node: yaml.Node, source: str, path: str, own: Tuple[str, ...]) -> Tuple[Dict[str, Tuple[yaml.Node, Any]],

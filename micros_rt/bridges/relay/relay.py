@@ -43,7 +43,8 @@ from micros_rt.log import nonblocking_logger
 from micros_rt.qos.topic_rules import best_match
 from micros_rt.transports.base import BackPressuredWriter, EndpointSpec, PushReader, TransportWriter
 
-from .config import ExportRule, ImportRule, RelayConfig
+from .config import ExportRule, ImportRule, RelayConfig, ServiceImport
+from .services import ANNOUNCE_TOPIC, ServiceCallError, call_service, probe_service
 
 __all__ = ["Relay"]
 
@@ -157,6 +158,59 @@ class _Import:
         self.pub.unregister()
 
 
+class _ServiceExport:
+    """One service of this graph announced to the others (see :mod:`.services`)."""
+
+    def __init__(self, relay: "Relay", name: str, uri: str, header: Dict[str, str]) -> None:
+        from std_msgs.msg import String
+
+        self.name, self.uri = name, uri
+        self.outside = relay.config.outside_name(name)
+        tag = {"graph": relay.graph_id, "node": relay.node, "relay": relay.config.graph, "service": self.outside,
+               "uri": uri, "type": header.get("type", ""), "md5": header.get("md5sum", "")}
+        self.writer = relay.backend.open_writer(EndpointSpec(ANNOUNCE_TOPIC, String, 1, False, tag),
+                                                micros_rt.AdvertiseQoSOptions())
+
+    def stats(self) -> Dict[str, Any]:
+        return {"service": self.name, "as": self.outside, "uri": self.uri}
+
+    def close(self) -> None:
+        self.writer.close()
+
+
+class _ServiceImport:
+    """Another graph's service offered in this graph; each call is forwarded to the announced server."""
+
+    def __init__(self, relay: "Relay", rule: ServiceImport, service_class: Any) -> None:
+        self.rule = rule
+        self.uri = ""
+        self.calls = self.failed = 0
+        self._relay = relay
+        self._class = service_class
+        self.service = rospy.Service(rule.local, service_class, self._call)
+
+    def _call(self, request: Any) -> Any:
+        self.calls += 1
+        if not self.uri:
+            self.failed += 1
+            raise rospy.ServiceException(f"{self.rule.outside}: graph {self.rule.origin} does not offer this service "
+                                         f"now (its relay or server is gone)")
+        try:
+            # the name the server has in its own graph: /robot_a/add_two_ints -> /add_two_ints
+            return call_service(self.uri, "/" + self.rule.outside.split("/", 2)[2], self._class, request,
+                                caller_id=self._relay.node, timeout=self.rule.timeout)
+        except ServiceCallError as exc:
+            self.failed += 1
+            raise rospy.ServiceException(f"{self.rule.outside} (graph {self.rule.origin}, {self.uri}): {exc}") from None
+
+    def stats(self) -> Dict[str, Any]:
+        return {"service": self.rule.outside, "as": self.rule.local, "calls": self.calls, "failed": self.failed,
+                "uri": self.uri}
+
+    def close(self) -> None:
+        self.service.shutdown("relay closing")
+
+
 class Relay:
     """Runs a :class:`~micros_rt.bridges.relay.config.RelayConfig` in this process's node (``init_node``
     first). ``start()`` begins; topics are set up as they appear; ``close()`` ends."""
@@ -179,6 +233,8 @@ class Relay:
         self._event_cb = event_cb
         self.exports: Dict[str, _Export] = {}
         self.imports: Dict[str, _Import] = {}
+        self.service_exports: Dict[str, _ServiceExport] = {}
+        self.service_imports: Dict[str, _ServiceImport] = {}
         self._refused: Dict[str, str] = {}   # topic -> why it is not carried (said once)
         self._directory = WriterDirectory(backend)
         self._stop = threading.Event()
@@ -218,6 +274,10 @@ class Relay:
         for incoming in self.config.imports:
             if incoming.outside not in self.imports:
                 self._try(incoming.outside, lambda: self._import(incoming, local_types.get(incoming.local)))
+        for name in self.config.export_services:
+            self._try(name, lambda: self._export_service(name))
+        if self.config.import_services:
+            self._import_services()
 
     def _try(self, topic: str, make: Callable[[], Optional[str]]) -> None:
         try:
@@ -267,6 +327,66 @@ class Relay:
                   rule.local)
         return None
 
+    def _export_service(self, name: str) -> Optional[str]:
+        """Announce ``name`` while this graph's master knows a server for it (again when it moved)."""
+        try:
+            uri = str(rospy.get_master().lookupService(name)[2] or "")
+        except Exception as exc:  # the master away: keep what is announced, try again next round
+            return f"cannot look up service {name}: {exc}"
+        current = self.service_exports.get(name)
+        if current is not None and current.uri == uri:
+            return None
+        if current is not None:
+            current.close()  # the server went away or moved: withdraw, then announce the new one
+            with self._lock:
+                del self.service_exports[name]
+        if not uri.startswith("rosrpc://"):
+            return None  # not served now
+        try:
+            header = probe_service(uri, name, caller_id=self.node, timeout=5.0)
+        except ServiceCallError as exc:
+            return f"cannot export service {name}: {exc}"
+        with self._lock:
+            self.service_exports[name] = _ServiceExport(self, name, uri, header)
+        _log.info("micros_rt: relay %s: exporting service %s (%s, served at %s)", self.config.graph, name,
+                  header.get("type"), uri)
+        return None
+
+    def _import_services(self) -> None:
+        from micros_rt.transports.dds.types import dds_topic_name
+
+        offered: Dict[str, Dict[str, str]] = {}
+        for announced in self._directory.tags(dds_topic_name(ANNOUNCE_TOPIC)):
+            if announced.get("service") and announced.get("relay") and announced.get("graph") != self.graph_id:
+                offered[announced["service"]] = announced
+        for rule in self.config.import_services:
+            found = offered.get(rule.outside)
+            tag = found if found is not None and found.get("relay") == rule.origin else None
+            existing = self.service_imports.get(rule.outside)
+            if existing is not None:
+                existing.uri = tag["uri"] if tag else ""   # a server that moved or went
+                continue
+            if tag is not None:
+                self._try(rule.outside, lambda: self._import_service(rule, tag))
+
+    def _import_service(self, rule: ServiceImport, tag: Dict[str, str]) -> Optional[str]:
+        try:
+            service_class = roslib.message.get_service_class(tag.get("type", ""))
+        except (ValueError, ImportError):
+            service_class = None
+        if service_class is None:
+            return (f"cannot import service {rule.outside}: its type {tag.get('type')} is not installed on this "
+                    f"host (install the package that defines it)")
+        if tag.get("md5") and tag["md5"] != service_class._md5sum:
+            return (f"cannot import service {rule.outside}: graph {rule.origin} has another definition of "
+                    f"{tag.get('type')} (md5 {tag['md5']}, here {service_class._md5sum})")
+        imported = _ServiceImport(self, rule, service_class)
+        imported.uri = tag["uri"]
+        with self._lock:
+            self.service_imports[rule.outside] = imported
+        _log.info("micros_rt: relay %s: importing service %s as %s", self.config.graph, rule.outside, rule.local)
+        return None
+
     # -- reporting and shutdown ----------------------------------------------------------------------
     def event(self, kind: str, **fields: Any) -> None:
         """Tell the program's ``event_cb`` (``micros-rt relay --json`` prints it) of a deadline miss or a
@@ -277,17 +397,22 @@ class Relay:
     def snapshot(self) -> Dict[str, Any]:
         with self._lock:
             exports, imports = list(self.exports.values()), list(self.imports.values())
+            services: List[Any] = [*self.service_exports.values(), *self.service_imports.values()]
         return {"graph": self.config.graph, "exports": [e.stats() for e in exports],
-                "imports": [i.stats() for i in imports], "not_carried": dict(self._refused)}
+                "imports": [i.stats() for i in imports],
+                "services": [s.stats() for s in services], "not_carried": dict(self._refused)}
 
     def close(self) -> None:
         self._stop.set()
         if self._thread.is_alive() and self._thread is not threading.current_thread():
             self._thread.join(timeout=5.0)
         with self._lock:
-            endpoints: List[Any] = [*self.exports.values(), *self.imports.values()]
+            endpoints: List[Any] = [*self.exports.values(), *self.imports.values(),
+                                    *self.service_exports.values(), *self.service_imports.values()]
             self.exports.clear()
             self.imports.clear()
+            self.service_exports.clear()
+            self.service_imports.clear()
         for endpoint in endpoints:
             try:
                 endpoint.close()

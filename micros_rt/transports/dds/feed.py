@@ -20,7 +20,7 @@ import threading
 from typing import Any, Callable, Dict, List, Optional
 
 from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
-from cyclonedds.core import DDSException, Listener
+from cyclonedds.core import DDSException, InstanceState, Listener, ReadCondition, SampleState, ViewState
 from cyclonedds.qos import Policy, Qos
 
 from ..base import EndpointSpec, PushReader
@@ -122,13 +122,15 @@ class WriterDirectory:
 
     def __init__(self, backend: DDSBackend) -> None:
         self._reader = BuiltinDataReader(backend.participant.dp, BuiltinTopicDcpsPublication)
+        # writers alive now: a deleted writer's sample stays in the reader, its instance disposed
+        self._alive = ReadCondition(self._reader, SampleState.Any | ViewState.Any | InstanceState.Alive)
         self._lock = threading.Lock()
 
     def tags(self, dds_topic: str) -> List[Dict[str, str]]:
         """Tags of the micros_rt writers of ``dds_topic`` known now (foreign writers have none)."""
         with self._lock:
             try:
-                found = self._reader.read(N=1024)
+                found = self._reader.read(N=1024, condition=self._alive)
             except DDSException as exc:
                 _log.debug("micros_rt: reading DCPSPublication: %s", exc)
                 return []
