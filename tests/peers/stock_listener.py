@@ -29,6 +29,7 @@ def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--topic", default="/chatter")
     ap.add_argument("--type", default="std_msgs/String")
+    ap.add_argument("--definition", default="", help="build --type from this message definition (no package)")
     ap.add_argument("--node-name", default=f"stock_listener_{os.getpid()}")
     ap.add_argument("--count", type=int, default=0, help="exit after this many messages (0 = no limit)")
     ap.add_argument("--duration", type=float, default=30.0, help="exit after this many seconds")
@@ -39,7 +40,7 @@ def main() -> int:
     args = ap.parse_args()
 
     t_end = time.monotonic() + args.duration
-    cls = msg_class(args.type)
+    cls = msg_class(args.type, args.definition)
     if args.numpy:
         from rospy.numpy_msg import numpy_msg
 

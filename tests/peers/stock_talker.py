@@ -32,7 +32,14 @@ def emit(event: str, **fields: Any) -> None:
     sys.stdout.flush()
 
 
-def msg_class(type_name: str) -> Any:
+def msg_class(type_name: str, definition: str = "") -> Any:
+    """The installed class of ``type_name``; with ``definition`` (a file of ``gendeps --cat`` text), the class
+    genpy builds from it at run time, as for a message package this host does not have."""
+    if definition:
+        import genpy.dynamic
+
+        with open(definition) as f:
+            return genpy.dynamic.generate_dynamic(type_name, f.read())[type_name]
     cls = roslib.message.get_message_class(type_name)
     if cls is None:
         raise SystemExit(f"unknown message type {type_name!r}")
@@ -89,6 +96,8 @@ def fill(msg: Any, i: int, prefix: str, now: Any) -> None:
         msg.seq = i
         msg.stamp = now
         msg.frame_id = prefix
+    if "sample" in types and hasattr(msg.sample, "value"):  # the run-time type of the relay's test
+        msg.sample.value = float(i)
     if "pose" in types and hasattr(msg.pose, "position"):
         msg.pose.position.x = float(i)
         msg.pose.orientation.w = 1.0
@@ -117,6 +126,7 @@ def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--topic", default="/chatter")
     ap.add_argument("--type", default="std_msgs/String")
+    ap.add_argument("--definition", default="", help="build --type from this message definition (no package)")
     ap.add_argument("--rate", type=float, default=10.0, help="Hz (0 = as fast as possible)")
     ap.add_argument("--count", type=int, default=10, help="messages to send, 0 = until --duration")
     ap.add_argument("--duration", type=float, default=60.0, help="hard upper bound on run time, seconds")
@@ -133,7 +143,7 @@ def main() -> int:
     args = ap.parse_args()
 
     t_end = time.monotonic() + args.duration
-    cls = msg_class(args.type)
+    cls = msg_class(args.type, args.definition)
     rospy.init_node(args.node_name, anonymous=False, disable_rosout=not args.rosout)
     caller_id = rospy.get_caller_id()
     topic = rospy.resolve_name(args.topic)

@@ -20,7 +20,9 @@ the configuration refuses ``/<own graph>/...``), and an export drops messages th
 
 Exports are set up when the topic appears on the master (checked every ``poll_period`` s; globs match
 topics that come later), imports when an exporting relay's writer has been discovered (its tag names the
-type). The message classes come from the installed message packages.
+type). The message classes come from the installed message packages or, for a type whose package is not
+installed, from its definition (:mod:`.msgtypes`: a local publisher's connection header on export, the
+exporter's tag on import).
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ from micros_rt.qos.topic_rules import best_match
 from micros_rt.transports.base import BackPressuredWriter, EndpointSpec, PushReader, TransportWriter
 
 from .config import ExportRule, ImportRule, RelayConfig, ServiceImport
+from .msgtypes import TypeLearningError, class_from_definition, definition_field, installed_class, learn_from_publisher
 from .services import ANNOUNCE_TOPIC, ServiceCallError, call_service, probe_service
 
 __all__ = ["Relay"]
@@ -63,7 +66,8 @@ class _Export:
         self.received = self.sent = self.rate_capped = self.looped = self.no_reader = 0
         self._last_sent = -math.inf
         tag = {"graph": relay.graph_id, "node": relay.node, "relay": relay.config.graph, "type": data_class._type,
-               "md5": data_class._md5sum, "best_effort": "1" if rule.options.using_best_effort_protocol else "0"}
+               "md5": data_class._md5sum, "best_effort": "1" if rule.options.using_best_effort_protocol else "0",
+               "def": definition_field(data_class)}  # importers without the type's package build it from this
         spec = EndpointSpec(self.outside, data_class, rule.queue_size, rule.latch, tag)
         writer = relay.backend.open_writer(spec, rule.options)
         self.sender: TransportWriter = (Lane(writer, topic=self.outside, depth=rule.queue_size)
@@ -289,10 +293,15 @@ class Relay:
             _log.error("micros_rt: relay %s: %s", self.config.graph, why)
 
     def _export(self, rule: ExportRule, topic: str, type_name: str) -> Optional[str]:
-        data_class = _message_class(type_name)
+        data_class = installed_class(type_name)
         if data_class is None:
-            return (f"cannot export {topic}: its type {type_name} is not installed on this host (install the "
-                    f"package that defines it)")
+            try:  # not installed here: the definition its publishers send
+                data_class = learn_from_publisher(rospy.get_master(), topic, caller_id=self.node)
+            except TypeLearningError as exc:
+                return (f"cannot export {topic}: its type {type_name} is not installed on this host and was not "
+                        f"learnt from a publisher: {exc}")
+            _log.info("micros_rt: relay %s: learnt %s from a publisher of %s (its package is not installed here)",
+                      self.config.graph, type_name, topic)
         with self._lock:
             self.exports[topic] = export = _Export(self, rule, topic, data_class)
         _log.info("micros_rt: relay %s: exporting %s (%s) as %s", self.config.graph, topic, type_name,
@@ -310,10 +319,14 @@ class Relay:
         if local_type is not None and local_type != type_name:
             return (f"cannot import {rule.outside} as {rule.local}: graph {rule.origin} sends {type_name}, and "
                     f"{rule.local} is {local_type} in this graph")
-        data_class = _message_class(type_name)
+        data_class = installed_class(type_name)
         if data_class is None:
-            return (f"cannot import {rule.outside}: its type {type_name} is not installed on this host (install "
-                    f"the package that defines it)")
+            try:  # not installed here: the definition in the exporter's tag
+                data_class = class_from_definition(type_name, tags[0].get("md5", ""), tags[0].get("def", ""),
+                                                   compressed=True)
+            except TypeLearningError as exc:
+                return (f"cannot import {rule.outside}: its type {type_name} is not installed on this host, and "
+                        f"{exc}")
         if tags[0].get("md5") and tags[0]["md5"] != data_class._md5sum:
             return (f"cannot import {rule.outside}: graph {rule.origin} has another definition of {type_name} "
                     f"(md5 {tags[0]['md5']}, here {data_class._md5sum}); build both from the same message package")
@@ -419,11 +432,4 @@ class Relay:
             except Exception as exc:  # a master gone at shutdown: unregistering fails, nothing is left open
                 _log.debug("micros_rt: relay: closing: %s", exc)
 
-
-def _message_class(type_name: str) -> Optional[Type[genpy.Message]]:
-    try:
-        cls = roslib.message.get_message_class(type_name)
-    except (ValueError, ImportError):
-        return None
-    return cls if isinstance(cls, type) and issubclass(cls, genpy.Message) else None
 

@@ -21,7 +21,7 @@ import genpy
 
 from micros_rt.exceptions import MicrosRtError
 
-__all__ = ["ANNOUNCE_TOPIC", "ServiceCallError", "call_service", "probe_service"]
+__all__ = ["ANNOUNCE_TOPIC", "ServiceCallError", "call_service", "encode_header", "probe_service", "read_header"]
 
 #: the DDS topic (ROS name) whose writers' tags announce exported services
 ANNOUNCE_TOPIC = "/_micros_rt_relay/services"
@@ -31,7 +31,8 @@ class ServiceCallError(MicrosRtError):
     """A forwarded service call that did not return a response; the message says why."""
 
 
-def _encode_header(fields: Dict[str, str]) -> bytes:
+def encode_header(fields: Dict[str, str]) -> bytes:
+    """A ROS 1 connection header (TCPROS, services and topics alike): length-prefixed ``key=value`` fields."""
     body = b"".join(struct.pack("<I", len(item)) + item
                     for item in (f"{k}={v}".encode() for k, v in fields.items()))
     return struct.pack("<I", len(body)) + body
@@ -42,13 +43,14 @@ def _recv_exact(sock: socket.socket, n: int) -> bytes:
     while n:
         chunk = sock.recv(min(n, 1 << 20))
         if not chunk:
-            raise ServiceCallError("the server closed the connection")
+            raise ServiceCallError("the peer closed the connection")
         chunks.append(chunk)
         n -= len(chunk)
     return b"".join(chunks)
 
 
-def _read_header(sock: socket.socket) -> Dict[str, str]:
+def read_header(sock: socket.socket) -> Dict[str, str]:
+    """The peer's connection header from ``sock``; :class:`ServiceCallError` when the peer closed first."""
     (size,) = struct.unpack("<I", _recv_exact(sock, 4))
     body = _recv_exact(sock, size)
     fields: Dict[str, str] = {}
@@ -77,10 +79,10 @@ def call_service(uri: str, service: str, service_class: Any, request: genpy.Mess
     try:
         with socket.create_connection((host, port), timeout=timeout) as sock:
             sock.settimeout(timeout)
-            sock.sendall(_encode_header({"callerid": caller_id, "service": service,
+            sock.sendall(encode_header({"callerid": caller_id, "service": service,
                                          "md5sum": service_class._md5sum, "type": service_class._type,
                                          "persistent": "0"}))
-            header = _read_header(sock)
+            header = read_header(sock)
             if "error" in header:
                 raise ServiceCallError(f"the server refused the connection: {header['error']}")
             out = io.BytesIO()
@@ -111,8 +113,8 @@ def probe_service(uri: str, service: str, *, caller_id: str, timeout: float) -> 
     try:
         with socket.create_connection((host, port), timeout=timeout) as sock:
             sock.settimeout(timeout)
-            sock.sendall(_encode_header({"callerid": caller_id, "service": service, "md5sum": "*", "probe": "1"}))
-            return _read_header(sock)
+            sock.sendall(encode_header({"callerid": caller_id, "service": service, "md5sum": "*", "probe": "1"}))
+            return read_header(sock)
     except socket.timeout:
         raise ServiceCallError(f"no answer from {host}:{port} within {timeout:g} s") from None
     except OSError as exc:

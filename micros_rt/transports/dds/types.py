@@ -26,7 +26,7 @@ import struct
 import sys
 import threading
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, List, Tuple, Type
+from typing import Any, Callable, Dict, List, Optional, Tuple, Type
 
 import genpy
 import roslib.message
@@ -40,7 +40,8 @@ try:  # genpy imports it too when it is installed; rospy.numpy_msg needs it
 except ImportError:  # pragma: no cover - python3-numpy is a dependency (scripts/setup.sh)
     numpy = None  # type: ignore[assignment]
 
-__all__ = ["DDSType", "MalformedSampleError", "dds_type_for", "dds_topic_name", "dds_type_name"]
+__all__ = ["DDSType", "MalformedSampleError", "dds_type_for", "dds_topic_name", "dds_type_name",
+           "register_message_classes"]
 
 
 class MalformedSampleError(MicrosRtError, ValueError):
@@ -98,13 +99,26 @@ def _parse_type(slot_type: str) -> Tuple[str, bool, int | None]:
     return slot_type, False, None
 
 
+#: message classes built at run time from a definition (``genpy.dynamic``), by ROS type: the nested types of a
+#: type whose package is not installed (see :func:`register_message_classes`)
+_runtime_classes: Dict[str, Type[genpy.Message]] = {}
+
+
+def register_message_classes(classes: Dict[str, Type[genpy.Message]]) -> None:
+    """Make classes built at run time (``genpy.dynamic.generate_dynamic``'s answer) known to the DDS mapping,
+    for types whose package is not installed: a nested field of such a type is looked up here."""
+    with _idl_lock:
+        for ros_type, cls in classes.items():
+            _runtime_classes.setdefault(ros_type, cls)
+
+
 def _msg_class(ros_type: str) -> Type[genpy.Message]:
     if ros_type == "Header":
         ros_type = _HEADER
-    cls = roslib.message.get_message_class(ros_type)
+    cls: Optional[Type[genpy.Message]] = roslib.message.get_message_class(ros_type) or _runtime_classes.get(ros_type)
     if cls is None:
         raise TypeMappingError(f"cannot load the ROS message class {ros_type!r}: is its package installed?")
-    return cls  # type: ignore[no-any-return]
+    return cls
 
 
 def _fields(cls: Any) -> List[Tuple[str, str]]:
