@@ -53,6 +53,7 @@ class DDSFeed:
         self._accept = accept
         self.refused = 0      # samples of writers ``accept`` turned away
         self.bad_input = 0    # samples that were not a valid encoding of the type
+        self.lost = 0         # samples DDS reported lost: the writer's history dropped them before they arrived whole
         self._bad_log = RateLimitedLog(_log, interval=10.0)
         self._lock = threading.Lock()  # Cyclone may call the listener from more than one receive thread
         user_data = make_user_data(**spec.tag)
@@ -63,7 +64,7 @@ class DDSFeed:
         # would otherwise send every message to this reader too, only to be refused)
         qos += Qos(Policy.IgnoreLocal.Process)
         listener = Listener(on_data_available=self._on_data,  # type: ignore[no-untyped-call]
-                            on_requested_incompatible_qos=self._on_incompatible)
+                            on_requested_incompatible_qos=self._on_incompatible, on_sample_lost=self._on_lost)
         self._reader = DDSReader(backend.participant, self.dds_topic, self.dds_type, qos, listener)
         self.guid = self._reader.guid
         self._backend = backend
@@ -73,6 +74,12 @@ class DDSFeed:
     def _on_incompatible(self, _reader: Any, status: Any) -> None:
         self._bad_log.warning(("incompatible", int(status.last_policy_id)), "micros_rt: " + describe_incompatible_policy(
             int(status.last_policy_id), topic=self.topic, side="subscriber"))
+
+    def _on_lost(self, _reader: Any, status: Any) -> None:
+        self.lost = int(status.total_count)
+        self._bad_log.warning("lost", f"micros_rt: DDS topic {self.dds_topic}: {self.lost} samples lost so far (the "
+                              "writer's history dropped them before they arrived whole: a slow receiver, a full "
+                              "socket buffer or a lossy link; a longer queue_size keeps more for resending)")
 
     def _on_data(self, _reader: Any) -> None:
         with self._lock:

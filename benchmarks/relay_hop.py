@@ -1,0 +1,163 @@
+"""What ``micros-rt relay`` costs on its own host (issue 21, deliverable 2): stock rospy publisher and subscriber
+on one host's loopback, either linked directly (one rosmaster) or through two relays (two rosmasters, robot A's
+relay exporting, robot B's importing, DDS on loopback between them), in the same run, alternating.
+
+    .venv/bin/python benchmarks/relay_hop.py                       # both scenarios, 8 s, 3 rounds
+    .venv/bin/python benchmarks/relay_hop.py --scenarios small --rounds 1
+
+Scenarios (tests/peers/mrt_link.py, one publisher process with two threads, one subscriber process):
+  small  /control geometry_msgs/PointStamped at 100 Hz (stamp = wall clock), /image 4x4 at 1 Hz
+  1080p  /control at 100 Hz and /image sensor_msgs/Image 1920x1080 rgb8 at 30 Hz (186 MB/s)
+
+The relayed path has three links where the direct one has one: stock publisher -> relay A (TCPROS), relay A ->
+relay B (DDS), relay B -> stock subscriber (TCPROS). "Per hop" is the difference of the medians divided by the
+two links the relays add. Results: benchmarks/results/relay_hop.json and .md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import random
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Dict, List, Optional
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+from constrained_link import PEER, RELAY_EXPORT, RELAY_IMPORT, events  # noqa: E402
+from run import child_env, eth0_tx, start_master  # noqa: E402
+
+ROOT = HERE.parent
+STOCK_PYTHON = "/usr/bin/python3"
+CLI = str(ROOT / ".venv" / "bin" / "micros-rt")
+SCENARIOS = {
+    "small": ["--control-rate", "100", "--image-rate", "1", "--width", "4", "--height", "4"],
+    "1080p": ["--control-rate", "100", "--image-rate", "30", "--width", "1920", "--height", "1080"],
+}
+
+
+def popen(argv: List[str], env: Dict[str, str], log: Path) -> "subprocess.Popen[str]":
+    return subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=open(log, "w"), text=True,
+                            stdin=subprocess.DEVNULL, start_new_session=True)
+
+
+def one_run(stack: str, scenario: str, seconds: float, logdir: Path, profile: bool = False) -> Dict[str, Any]:
+    domain = random.randrange(100, 200)
+    masters = [start_master(logdir) for _ in range(2 if stack == "relay" else 1)]
+    envs = [child_env("micros_rt", uri, domain) for _, uri in masters]
+    relays: List["subprocess.Popen[str]"] = []
+    procs: List["subprocess.Popen[str]"] = []
+    try:
+        if stack == "relay":
+            for i, text in enumerate((RELAY_EXPORT % "", RELAY_IMPORT)):
+                config = logdir / f"relay{i}.yaml"
+                config.write_text(text)
+                relays.append(popen([CLI, "relay", "--config", str(config), "--poll-period", "0.3", "--json",
+                                     "--stats-period", "2"], envs[i], logdir / f"relay{i}.log"))
+        peer = [STOCK_PYTHON, str(PEER)]
+        sub = popen([*peer, "sub", "--stock", "--seconds", str(seconds + 60), *SCENARIOS[scenario]], envs[-1],
+                    logdir / "sub.log")
+        delay = ["--start-delay", "6"] if stack == "relay" else ["--start-delay", "1"]
+        pub = popen([*peer, "pub", "--stock", "--seconds", str(seconds), *delay, *SCENARIOS[scenario]], envs[0],
+                    logdir / "pub.log")
+        procs = [sub, pub]
+        if profile and relays:  # py-spy on both relays while the publisher sends (its start delay first)
+            spy = str(ROOT / ".venv" / "bin" / "py-spy")
+            procs += [subprocess.Popen(["sh", "-c", f"sleep 7; exec {spy} record -p {relay.pid} -d {seconds - 2:.0f} "
+                                        f"-r 200 -f raw --threads -o {logdir}/relay{i}.spy"],
+                                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                      for i, relay in enumerate(relays)]
+        published = next((e for e in events(pub, seconds + 120) if e.get("event") == "published"), None)
+        summary = next((e for e in events(sub, 90) if e.get("event") == "summary"), None)
+    finally:
+        relay_stats = []
+        for relay in relays:
+            relay.terminate()
+            relay_stats.append(next((e for e in reversed(events(relay, 10)) if e.get("event") == "stats"), None))
+        for proc in procs:
+            try:
+                proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+        for master, _ in masters:
+            master.terminate()
+            master.wait(10)
+    if published is None or summary is None:
+        return {"error": f"no {'published' if published is None else 'summary'} event (logs in {logdir})"}
+    return {"control_published": published["control"], "control_delivered": summary["control"],
+            "control_p50_ms": summary["p50_ms"], "control_p99_ms": summary["p99_ms"],
+            "images_published": published["image"], "images_delivered": summary["image"],
+            "image_p50_ms": summary["image_p50_ms"], **({"relay_statistics": relay_stats} if relays else {})}
+
+
+def median(values: List[float]) -> Optional[float]:
+    values = sorted(v for v in values if v is not None)
+    return values[len(values) // 2] if values else None
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seconds", type=float, default=8.0)
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--scenarios", default="small,1080p", help="small, 1080p; comma-separated")
+    ap.add_argument("--out", default=str(HERE / "results"))
+    ap.add_argument("--profile", action="store_true", help="py-spy the relays (raw stacks in the run's log dir)")
+    args = ap.parse_args()
+    tx_before = eth0_tx()
+    results: Dict[str, Dict[str, List[Dict[str, Any]]]] = {}
+    logroot = Path(tempfile.mkdtemp(prefix="micros_rt_relay_hop_"))
+    for r in range(args.rounds):
+        for scenario in args.scenarios.split(","):
+            stacks = ["direct", "relay"] if r % 2 == 0 else ["relay", "direct"]
+            for stack in stacks:
+                print(f"round {r + 1}/{args.rounds}: {scenario}, {stack} ...", flush=True)
+                logdir = logroot / f"{r}_{scenario}_{stack}"
+                logdir.mkdir()
+                results.setdefault(scenario, {}).setdefault(stack, []).append(
+                    one_run(stack, scenario, args.seconds, logdir, args.profile))
+    tx_after = eth0_tx()
+    lines = ["| scenario | stack | control delivered / published | control p50 ms | p99 ms | images delivered / "
+             "published | image p50 ms |", "|---|---|---|---|---|---|---|"]
+    summary: Dict[str, Any] = {}
+    for scenario, stacks in results.items():
+        for stack, runs in stacks.items():
+            for run in runs:
+                if "error" in run:
+                    lines.append(f"| {scenario} | {stack} | {run['error']} | | | | |")
+                    continue
+                lines.append(f"| {scenario} | {stack} | {run['control_delivered']:,} / {run['control_published']:,} | "
+                             f"{run['control_p50_ms']:.2f} | {run['control_p99_ms']:.2f} | "
+                             f"{run['images_delivered']} / {run['images_published']} | {run['image_p50_ms']:.1f} |")
+        medians = {stack: median([run.get("control_p50_ms") for run in runs]) for stack, runs in stacks.items()}
+        image_medians = {stack: median([run.get("image_p50_ms") for run in runs]) for stack, runs in stacks.items()}
+        if medians.get("direct") is not None and medians.get("relay") is not None:
+            summary[scenario] = {
+                "control_p50_ms": medians, "image_p50_ms": image_medians,
+                "added_per_hop_ms": round((medians["relay"] - medians["direct"]) / 2, 3),
+                "image_added_per_hop_ms": (None if None in (image_medians.get("relay"), image_medians.get("direct"))
+                                           else round((image_medians["relay"] - image_medians["direct"]) / 2, 3))}
+    for scenario, s in summary.items():
+        lines.append(f"\n{scenario}: control p50 direct {s['control_p50_ms']['direct']:.2f} ms, relayed "
+                     f"{s['control_p50_ms']['relay']:.2f} ms: {s['added_per_hop_ms']:.2f} ms per added hop"
+                     + (f"; image p50 {s['image_added_per_hop_ms']:.1f} ms per added hop"
+                        if s["image_added_per_hop_ms"] is not None else ""))
+    report = {"seconds": args.seconds, "rounds": args.rounds,
+              "command": " ".join([".venv/bin/python", "benchmarks/relay_hop.py", *sys.argv[1:]]),
+              "eth0_tx_packets_during_run": None if None in (tx_before, tx_after) else tx_after - tx_before,
+              "summary": summary, "runs": results, "when": time.strftime("%Y-%m-%d %H:%M:%S")}
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "relay_hop.json").write_text(json.dumps(report, indent=1))
+    (out / "relay_hop.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    print(f"eth0 tx packets during the run: {report['eth0_tx_packets_during_run']} (the machine is shared)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
