@@ -90,6 +90,39 @@ class Hosts:
     def run(self, i: int, argv: List[str]) -> List[str]:
         return ["ip", "netns", "exec", self.names[i], *argv]
 
+    #: the classes a DSCP-honouring link serves first: AF41-43, CS5, EF, CS6, CS7 (TOS byte, mask 0xfc)
+    PRIORITY_TOS = ("0x88", "0x90", "0x98", "0xa0", "0xb8", "0xc0", "0xe0")
+
+    def shape_htb_dscp(self, i: int, rate: str = "40mbit") -> None:
+        """Host ``i``'s egress at ``rate``, DSCP honoured as Wi-Fi WMM or a DiffServ router does: htb with a
+        priority class (1:10, :data:`PRIORITY_TOS`) and a default one (1:20), each a 50 ms pfifo."""
+        tc = ["ip", "netns", "exec", self.names[i], "tc"]
+        dev = self.link_name(i)
+        self.sh(*tc, "qdisc", "add", "dev", dev, "root", "handle", "1:", "htb", "default", "20")
+        self.sh(*tc, "class", "add", "dev", dev, "parent", "1:", "classid", "1:1", "htb", "rate", rate)
+        for cls, prio in (("1:10", "0"), ("1:20", "1")):
+            self.sh(*tc, "class", "add", "dev", dev, "parent", "1:1", "classid", cls, "htb", "rate", "20mbit",
+                    "ceil", rate, "prio", prio)
+            self.sh(*tc, "qdisc", "add", "dev", dev, "parent", cls, "pfifo", "limit", "166")  # 50 ms of 1,500 B
+        for tos in self.PRIORITY_TOS:
+            self.sh(*tc, "filter", "add", "dev", dev, "parent", "1:", "protocol", "ip", "prio", "1", "u32", "match",
+                    "ip", "tos", tos, "0xfc", "flowid", "1:10")
+
+    def class_bytes(self, i: int) -> Dict[str, int]:
+        """Bytes each htb class of host ``i``'s link has sent (``tc -s class show``)."""
+        out = subprocess.run(["ip", "netns", "exec", self.names[i], "tc", "-s", "class", "show", "dev",
+                              self.link_name(i)], capture_output=True, text=True, timeout=20, check=True).stdout
+        found: Dict[str, int] = {}
+        current = None
+        for line in out.splitlines():
+            words = line.split()
+            if words[:2] == ["class", "htb"]:
+                current = words[2]
+            elif current and words[:1] == ["Sent"]:
+                found[current] = int(words[1])
+                current = None
+        return found
+
     def cut(self, i: int) -> None:
         self.sh("ip", "-n", self.bridge_ns, "link", "set", f"b{i}_{os.getpid()}", "down")
 

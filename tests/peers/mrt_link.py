@@ -75,6 +75,9 @@ def main() -> int:
     ap.add_argument("--start-delay", type=float, default=0.0,
                     help="pub: wait this long after the first subscribers before publishing (a relay's far side "
                          "connects later than the relay)")
+    ap.add_argument("--start-file", default="",
+                    help="pub: wait (up to --wait-subscribers s) for this file to exist before publishing: the test "
+                         "creates it when the far side's subscriber is connected")
     args = ap.parse_args()
 
     import rospy
@@ -106,6 +109,8 @@ def main() -> int:
                 and time.monotonic() < deadline:
             time.sleep(0.05)
         emit("ready", control=control_pub.get_num_connections(), image=image_pub.get_num_connections())
+        while args.start_file and not os.path.exists(args.start_file) and time.monotonic() < deadline:
+            time.sleep(0.05)
         time.sleep(args.start_delay)
         frame = bytes(args.width * args.height * 3)
         stop = threading.Event()
@@ -168,16 +173,19 @@ def main() -> int:
             got["image_latency"].append(now - msg.header.stamp.to_sec())
 
     if args.stock:
-        rospy.Subscriber("/control", PointStamped, on_control, queue_size=1000, tcp_nodelay=True)
-        rospy.Subscriber("/image", Image, on_image, queue_size=2, tcp_nodelay=True)
+        subs = [rospy.Subscriber("/control", PointStamped, on_control, queue_size=1000, tcp_nodelay=True),
+                rospy.Subscriber("/image", Image, on_image, queue_size=2, tcp_nodelay=True)]
     else:
-        nh.subscribe("/control", PointStamped, on_control, 1000)
-        nh.subscribe("/image", Image, on_image, 2)
+        subs = [nh.subscribe("/control", PointStamped, on_control, 1000), nh.subscribe("/image", Image, on_image, 2)]
     emit("ready")
     end = time.monotonic() + args.seconds
     last_change, last_count = time.monotonic(), -1
+    connected = False
     while time.monotonic() < end:
         time.sleep(0.1)
+        if not connected and all(sub.get_num_connections() > 0 for sub in subs):
+            connected = True
+            emit("connected")  # a publisher of each topic is linked
         with lock:
             count = got["control"] + got["image"]
         if count != last_count:

@@ -7,6 +7,9 @@ configuration is one line on stderr naming file, line and key, and exit code 1. 
 ``{"event": "ready"}`` and then the counters (``{"event": "stats", ...}``) every ``--stats-period`` seconds;
 deadline misses and recoveries of imports as ``{"event": "deadline"}`` and ``{"event": "recovered"}``;
 ``--check`` only validates the file.
+
+Exports of more than one transport priority are carried by one process per priority (:mod:`.processes`: each
+priority's packets get their own DSCP); ``--one-process`` keeps them all in this one.
 """
 
 from __future__ import annotations
@@ -33,12 +36,26 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--poll-period", type=float, default=1.0,
                     help="seconds between looks for new topics to export and exporters to import from")
     ap.add_argument("--check", action="store_true", help="validate the configuration and exit")
+    ap.add_argument("--one-process", action="store_true",
+                    help="carry exports of every transport priority in this process (their DDS packets then all "
+                         "carry the DSCP of the highest)")
+    # a child process of a relay (see processes.py): only the exports of one priority
+    ap.add_argument("--exports-of", default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--family-of", default=None, help=argparse.SUPPRESS)
     return ap
 
 
+_out_lock = threading.Lock()
+
+
+def _write(line: str) -> None:
+    with _out_lock:
+        sys.stdout.write(line + "\n")
+        sys.stdout.flush()
+
+
 def _emit(event: str, **fields: Any) -> None:
-    sys.stdout.write(json.dumps({"event": event, **fields}, default=str) + "\n")
-    sys.stdout.flush()
+    _write(json.dumps({"event": event, **fields}, default=str))
 
 
 def main(argv: List[str]) -> int:
@@ -52,19 +69,42 @@ def main(argv: List[str]) -> int:
         config = load_config(args.config)
     except RelayConfigError as exc:
         raise CommandError(str(exc)) from None
+    from micros_rt.qos import TransportPriority
+
+    from .processes import Children, child_argv, export_priorities, family, process_name
+
+    priorities = export_priorities(config)
+    split = len(priorities) > 1 and not args.one_process and args.exports_of is None
     if args.check:
         print(f"{args.config}: OK: graph {config.graph}, {len(config.exports)} export rules, "
-              f"{len(config.imports)} imports")
+              f"{len(config.imports)} imports"
+              + (f"; exports in {len(priorities)} processes ({', '.join(p.name for p in priorities)})" if split else ""))
         return 0
 
     import micros_rt
 
-    from .relay import Relay
+    from .relay import Relay, Share
 
     micros_rt.init_node(args.name or f"relay_{config.graph}", argv=[sys.argv[0], *ros_args])
+    node = micros_rt.node_info().name
+    if args.exports_of is not None:   # a child: one priority's exports, nothing else
+        share = Share(exports=frozenset([int(TransportPriority.parse(args.exports_of))]), imports=False,
+                      family=family(args.family_of or node, config))
+    else:
+        share = Share(exports=frozenset() if split else None, family=family(node, config))
+    children = None
+    if split:
+        children = Children(
+            priorities,
+            lambda p: child_argv(args.config, process_name(node.rsplit("/", 1)[-1], p), node, p,
+                                 poll_period=args.poll_period, json_events=args.json,
+                                 stats_period=args.stats_period, ros_args=ros_args),
+            lambda p: process_name(node, p), _write).start()
     try:
-        relay = Relay(config, poll_period=args.poll_period, event_cb=_emit if args.json else None)
+        relay = Relay(config, poll_period=args.poll_period, event_cb=_emit if args.json else None, share=share)
     except micros_rt.MicrosRtError as exc:
+        if children is not None:
+            children.close()
         micros_rt.shutdown("relay: cannot start")
         raise CommandError(str(exc)) from None
     stop = threading.Event()
@@ -75,11 +115,13 @@ def main(argv: List[str]) -> int:
             while not stop.is_set() and micros_rt.ok():
                 stop.wait(args.stats_period if args.json else 0.5)
                 if args.json:
-                    _emit("stats", **relay.snapshot())
+                    _emit("stats", **(children.merge(relay.snapshot()) if children else relay.snapshot()))
         except KeyboardInterrupt:
             pass
+        if children is not None:
+            children.close()
         if args.json:
-            _emit("stats", **relay.snapshot())
+            _emit("stats", **(children.merge(relay.snapshot()) if children else relay.snapshot()))
     micros_rt.shutdown("relay stopped")
     return 0
 

@@ -31,7 +31,7 @@ import dataclasses
 import math
 import threading
 import time
-from typing import Any, Callable, Dict, List, Optional, Type
+from typing import Any, Callable, Dict, FrozenSet, List, Optional, Type
 
 import genpy
 import roslib.message
@@ -49,9 +49,20 @@ from .config import ExportRule, ImportRule, RelayConfig, ServiceImport
 from .msgtypes import TypeLearningError, class_from_definition, definition_field, installed_class, learn_from_publisher
 from .services import ANNOUNCE_TOPIC, ServiceCallError, call_service, probe_service
 
-__all__ = ["Relay"]
+__all__ = ["Relay", "Share"]
 
 _log = nonblocking_logger("rosout.micros_rt.relay")
+
+
+@dataclasses.dataclass(frozen=True)
+class Share:
+    """The part of a configuration one relay process carries (``micros-rt relay`` runs one process per transport
+    priority of its exports, see :mod:`.__main__`; one process carries everything by default)."""
+
+    exports: Optional[FrozenSet[int]] = None   # transport priorities exported here; None: all
+    imports: bool = True                       # imports and services
+    family: FrozenSet[str] = frozenset()       # node names of the relay's other processes: what they publish
+                                               # (imports) never goes back out
 
 
 class _Export:
@@ -62,6 +73,7 @@ class _Export:
         self.outside = relay.config.outside_name(topic)
         self.rule = rule
         self.node = relay.node
+        self.family = relay.share.family
         self.min_interval = 0.0 if math.isinf(rule.max_rate) else 1.0 / rule.max_rate
         self.received = self.sent = self.rate_capped = self.looped = self.no_reader = 0
         self._last_sent = -math.inf
@@ -77,7 +89,7 @@ class _Export:
     def _on_message(self, msg: Any) -> None:
         self.received += 1
         header = getattr(msg, "_connection_header", None) or {}
-        if header.get("callerid") == self.node:
+        if header.get("callerid") == self.node or header.get("callerid") in self.family:
             self.looped += 1   # this relay's own import of another graph's topic: it never goes back out
             return
         now = time.monotonic()
@@ -220,7 +232,7 @@ class Relay:
     first). ``start()`` begins; topics are set up as they appear; ``close()`` ends."""
 
     def __init__(self, config: RelayConfig, *, poll_period: float = 1.0,
-                 event_cb: Optional[Callable[..., None]] = None) -> None:
+                 event_cb: Optional[Callable[..., None]] = None, share: Share = Share()) -> None:
         backend = dds_backend()
         if backend is None:
             raise micros_rt.DDSUnavailableError("the relay carries topics between graphs over DDS, and DDS did not "
@@ -229,6 +241,7 @@ class Relay:
 
         info = micros_rt.node_info()
         self.config = config
+        self.share = share
         self.backend = backend
         self.node = info.name
         self.graph_id = info.graph
@@ -273,8 +286,11 @@ class Relay:
             if topic in self.exports or topic in import_names:
                 continue
             export = best_match(((r.pattern, r) for r in self.config.exports), topic)
-            if export is not None:
+            if export is not None and (self.share.exports is None
+                                       or int(export.options.transport_priority) in self.share.exports):
                 self._try(topic, lambda: self._export(export, topic, type_name))
+        if not self.share.imports:
+            return
         for incoming in self.config.imports:
             if incoming.outside not in self.imports:
                 self._try(incoming.outside, lambda: self._import(incoming, local_types.get(incoming.local)))
