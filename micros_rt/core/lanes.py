@@ -16,21 +16,26 @@ rospy's is:
   and topics go on meanwhile.
 
 The fast path (no back-pressure, nothing queued) is one ``try_send`` on the caller's thread: no thread
-hop, no lock. Priority scheduling between lanes (HIGH data first when a link is the bottleneck) belongs
-here too; it comes with the constrained-link work.
+hop, no lock.
+
+Stale samples are not sent: a sample that waited in the lane longer than ``max_age`` (the topic's lifespan,
+``msg_valid_period``, and for a best-effort topic its ``latency_budget`` too, see :func:`max_age_for`) is
+dropped whole before it leaves, counted in ``expired`` (and in ``dropped``). A camera frame that could not
+leave while a radio link was full goes when it is still worth something, or not at all.
 """
 
 from __future__ import annotations
 
 import collections
+import math
 import threading
 import time
-from typing import Any, Deque, Optional
+from typing import Any, Deque, Optional, Tuple
 
 from ..transports.base import BACKOFF_FIRST, BACKOFF_MAX, BackPressuredWriter
 from ..log import nonblocking_logger
 
-__all__ = ["Lane", "LANE_IDLE_EXIT", "LANE_CLOSE_FLUSH"]
+__all__ = ["Lane", "LANE_IDLE_EXIT", "LANE_CLOSE_FLUSH", "max_age_for"]
 
 _log = nonblocking_logger("rosout.micros_rt")
 
@@ -40,19 +45,34 @@ LANE_IDLE_EXIT = 2.0
 LANE_CLOSE_FLUSH = 1.0
 
 
+def max_age_for(options: Any) -> float:
+    """How long a sample of a publication with ``options`` (:class:`~micros_rt.qos.AdvertiseQoSOptions`) may
+    wait in its lane: its lifespan, and for best effort also its latency budget (0: no budget, no limit)."""
+    if options is None:
+        return math.inf
+    age = float(options.msg_valid_period)
+    budget = float(options.latency_budget)
+    if options.using_best_effort_protocol and budget > 0:
+        age = min(age, budget)
+    return age
+
+
 class Lane:
     """One publication's lane to one back-pressured writer (see the module's text)."""
 
-    def __init__(self, writer: BackPressuredWriter, *, topic: str, depth: Optional[int]) -> None:
+    def __init__(self, writer: BackPressuredWriter, *, topic: str, depth: Optional[int],
+                 max_age: float = math.inf) -> None:
         self.writer = writer
         self.protocol = writer.protocol
         self.topic = topic
         self.depth = depth                      # None: lossless, publish() waits instead of queueing
-        self.dropped = 0                        # superseded before they left (KEEP_LAST)
+        self.max_age = max_age                  # seconds a sample may wait here before it is not worth sending
+        self.dropped = 0                        # superseded before they left (KEEP_LAST), or expired
+        self.expired = 0                        # waited longer than max_age: dropped, not sent
         self.delayed = 0                        # KEEP_LAST samples handed to the lane's thread
-        self._queue: Deque[Any] = collections.deque()
+        self._queue: Deque[Tuple[Any, float]] = collections.deque()   # (prepared sample, when it came)
         self._active = False                    # samples wait here: publish() must queue behind them
-        self._inflight: Any = None              # the sample the lane's thread is trying to send
+        self._inflight: Any = None              # the (sample, when) the lane's thread is trying to send
         self._superseded = False                # ... and newer ones pushed it out of the newest `depth`
         self._cond = threading.Condition()
         self._thread: Optional[threading.Thread] = None
@@ -75,7 +95,7 @@ class Lane:
         self.delayed += 1
         with self._cond:
             self._active = True
-            self._queue.append(prepared)
+            self._queue.append((prepared, time.monotonic()))
             pending = len(self._queue) + (1 if self._inflight is not None and not self._superseded else 0)
             while pending > self.depth:
                 if self._inflight is not None and not self._superseded:
@@ -91,16 +111,27 @@ class Lane:
             else:
                 self._cond.notify()
 
+    def _stale(self, item: Tuple[Any, float]) -> bool:
+        """True (and counted) when ``item`` waited longer than ``max_age`` (under the lock)."""
+        if time.monotonic() - item[1] <= self.max_age:
+            return False
+        self.expired += 1
+        self.dropped += 1
+        self._burst += 1
+        return True
+
     def _next(self, idle_since: float) -> Any:
-        """The sample to try (under the lock); None to stop the thread."""
+        """The (sample, when) to try (under the lock); None to stop the thread."""
         with self._cond:
             while True:
-                if self._inflight is not None and not self._superseded:
+                if self._inflight is not None and not self._superseded and not self._stale(self._inflight):
                     return self._inflight
                 self._inflight, self._superseded = None, False
-                if self._queue:
-                    self._inflight = self._queue.popleft()
-                    return self._inflight
+                while self._queue:
+                    item = self._queue.popleft()
+                    if not self._stale(item):
+                        self._inflight = item
+                        return item
                 self._active = False
                 if self._closed or time.monotonic() - idle_since > LANE_IDLE_EXIT:
                     self._thread = None
@@ -115,7 +146,7 @@ class Lane:
             if item is None:
                 return
             try:
-                sent = self.writer.try_send(item)
+                sent = self.writer.try_send(item[0])
             except Exception:
                 _log.exception("micros_rt: topic %s: sending a queued %s sample failed; dropped", self.topic,
                                self.protocol)
@@ -129,9 +160,12 @@ class Lane:
                         self._inflight, self._superseded = None, False
                     burst, self._burst = self._burst, 0
                 if burst > 0:
-                    _log.warning("micros_rt: topic %s: %d %s samples were superseded before the link had room "
-                                 "for them and were not sent (queue_size=%d keeps the newest, as ROS does; %d in "
-                                 "all)", self.topic, burst, self.protocol, self.depth or 0, self.dropped)
+                    _log.warning("micros_rt: topic %s: %d %s samples were superseded%s before the link had room for "
+                                 "them and were not sent (queue_size=%d keeps the newest, as ROS does; %d in all%s)",
+                                 self.topic, burst, self.protocol,
+                                 "" if math.isinf(self.max_age) else f" or older than {self.max_age:g} s",
+                                 self.depth or 0, self.dropped,
+                                 f", {self.expired} out of date" if self.expired else "")
                 pause = BACKOFF_FIRST
                 idle_since = time.monotonic()
                 continue

@@ -14,7 +14,7 @@ import rospy
 import rospy.topics
 
 from . import rospy_compat as compat
-from .lanes import Lane
+from .lanes import Lane, max_age_for
 from .registry import EndpointRegistry
 from .rospy_compat import short
 from .stats import PublisherStatistics
@@ -82,7 +82,7 @@ class _Publication:
         # back-pressure never holds another topic's publish(), and a KEEP_LAST publish() never waits (as rospy's)
         depth = None if is_lossless(queue_size) else queue_size
         self.senders: Tuple[TransportWriter, ...] = tuple(
-            Lane(w, topic=topic, depth=depth) if isinstance(w, BackPressuredWriter) else w
+            Lane(w, topic=topic, depth=depth, max_age=max_age_for(options)) if isinstance(w, BackPressuredWriter) else w
             for w in ((self.dds,) if self.dds is not None else ()) + self.mirrors)
         self.lanes = tuple(s for s in self.senders if isinstance(s, Lane))
         #: every writer of the topic, in sending order: TCPROS first (rospy serializes inside its send and
@@ -238,7 +238,8 @@ class _Publication:
 
     def statistics(self) -> PublisherStatistics:
         return PublisherStatistics(published=self.published, dropped=sum(lane.dropped for lane in self.lanes),
-                                   blocked_seconds=self.blocked_seconds)
+                                   blocked_seconds=self.blocked_seconds,
+                                   expired=sum(lane.expired for lane in self.lanes))
 
     def close(self) -> None:
         """Release the DDS links and writer and unregister from rospy (the registry calls this once)."""

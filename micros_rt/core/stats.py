@@ -33,13 +33,16 @@ class SubscriberStatistics:
 
 @dataclass(frozen=True)
 class PublisherStatistics:
-    """A snapshot of one publication's counters: messages published, dropped (never, except a
-    best-effort or KEEP_LAST DDS link can lose them downstream, counted by the subscriber), and the
-    seconds ``publish()`` spent blocked on back-pressure (``queue_size=None``)."""
+    """A snapshot of one publication's counters: messages published, dropped before they left (KEEP_LAST
+    samples superseded while the link had no room, and those out of date: ``expired``, older than their
+    lifespan or a best-effort topic's latency budget; a best-effort or KEEP_LAST DDS link can still lose
+    messages downstream, counted by the subscriber), and the seconds ``publish()`` spent blocked on
+    back-pressure (``queue_size=None``)."""
 
     published: int
     dropped: int
     blocked_seconds: float
+    expired: int = 0
 
 
 class LatencyStats:

@@ -68,6 +68,8 @@ def main() -> int:
     ap.add_argument("--control-priority", default="HIGH")
     ap.add_argument("--image-priority", default="LOW")
     ap.add_argument("--image-best-effort", action="store_true")
+    ap.add_argument("--image-lifespan", type=float, default=float("inf"),
+                    help="pub: the camera's msg_valid_period (s): frames older than this are not sent")
     ap.add_argument("--stock", action="store_true", help="plain rospy (no micros_rt)")
     ap.add_argument("--image-work-ms", type=float, default=0.0,
                     help="sub: each image callback computes in Python this long (holds the GIL: a CPU-bound node)")
@@ -103,7 +105,8 @@ def main() -> int:
             image_pub = nh.advertise_with_qos(
                 "/image", Image, 2,
                 micros_rt.AdvertiseQoSOptions(transport_priority=micros_rt.TransportPriority[args.image_priority],
-                                              using_best_effort_protocol=args.image_best_effort))
+                                              using_best_effort_protocol=args.image_best_effort,
+                                              msg_valid_period=args.image_lifespan))
         deadline = time.monotonic() + args.wait_subscribers
         while (control_pub.get_num_connections() < 1 or image_pub.get_num_connections() < 1) \
                 and time.monotonic() < deadline:

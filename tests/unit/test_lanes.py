@@ -272,3 +272,32 @@ def test_a_large_write_that_waits_marks_the_socket_congested_then_small_writes_r
     harness.wait_until(lambda: not endpoints.socket_congested(), 10, message="quiet again")
     endpoints.sample_write(4, small, _small=binding_write, _until=endpoints._congested_until)
     assert calls == [("binding", 1), ("released", 2), ("released", 3), ("binding", 4)]
+
+
+def test_samples_older_than_max_age_are_not_sent_and_are_counted() -> None:
+    valve = _Valve()
+    lane = Lane(valve, topic="/camera", depth=10, max_age=0.2)
+    valve.open.clear()                     # the link has no room
+    for i in range(3):
+        lane.send(i)                       # they wait in the lane
+    harness.wait_until(lambda: valve.tries >= 3, 10, interval=0.01, message="the lane's thread tried")
+    time.sleep(0.3)                        # (the age being tested) they are now older than max_age
+    lane.send(3)                           # a fresh one
+    valve.open.set()
+    harness.wait_until(lambda: 3 in valve.sent, 10, interval=0.01, message="the fresh sample sent")
+    assert valve.sent == [3], valve.sent   # the stale three never left
+    assert lane.expired == 3 and lane.dropped == 3
+    lane.close()
+
+
+def test_max_age_is_the_lifespan_and_for_best_effort_also_the_budget() -> None:
+    import math
+
+    from micros_rt import AdvertiseQoSOptions
+    from micros_rt.core.lanes import max_age_for
+
+    assert max_age_for(AdvertiseQoSOptions()) == math.inf
+    assert max_age_for(AdvertiseQoSOptions(msg_valid_period=0.5, latency_budget=0.1)) == 0.5  # reliable: retried
+    assert max_age_for(AdvertiseQoSOptions(msg_valid_period=0.5, latency_budget=0.1,
+                                           using_best_effort_protocol=True)) == 0.1
+    assert max_age_for(AdvertiseQoSOptions(using_best_effort_protocol=True)) == math.inf  # no budget: no limit
