@@ -16,7 +16,8 @@ from pathlib import Path
 from typing import Any, Dict, List, Tuple
 
 import harness
-from helpers import bus_info, tcp_links_between
+from helpers import bus_info, stock_listener, tcp_links_between
+from test_relay import robots  # noqa: F401  (the two-master fixture)
 
 VENV_BIN = harness.REPO_ROOT / ".venv" / "bin"
 ROSLAUNCH = "/usr/bin/roslaunch"
@@ -136,3 +137,27 @@ def test_launch_example_runs_with_profile_and_absolute_prefix(fresh_master: harn
     assert min(gaps) >= 5, gaps  # 20 Hz through the profile's 0.5 s time filter: ~10 apart
     echo = harness.rostopic(fresh_master, "echo", "-n", "1", "/demo/speech", timeout=30).stdout
     assert "hello world" in echo  # a stock subscriber gets TCPROS from the same talker
+
+
+def test_a_relay_in_a_launch_file_sends_the_robots_topic_to_another_graph(
+        robots: Tuple[harness.RosMaster, harness.RosMaster], spawn: harness.Spawner, tmp_path: Path) -> None:
+    """examples/launch/micros_rt_run_demo/launch/relay.launch in robot A's graph (the talker under micros-rt run,
+    the relay as a launch file node with respawn), a relay and a stock listener in robot B's graph."""
+    a, b = robots
+    env: Dict[str, str] = dict(a.env)
+    env["ROS_PACKAGE_PATH"] = str(harness.REPO_ROOT / "examples" / "launch")
+    launch = spawn([harness.STOCK_PYTHON, ROSLAUNCH, "micros_rt_run_demo", "relay.launch",
+                    f"micros_rt:={VENV_BIN / 'micros-rt'}"], env=env, name="roslaunch_relay")
+    (tmp_path / "b.yaml").write_text("graph: robot_b\nimport:\n  /robot_a/demo/speech: {}\n")
+    spawn([str(VENV_BIN / "micros-rt"), "relay", "--config", str(tmp_path / "b.yaml")], env=b.env, name="relay_b")
+    listener = spawn(stock_listener("--topic", "/robot_a/demo/speech", "--count", 6, "--duration", 90), env=b.env)
+    got = listener.wait_for_count("recv", 6, timeout=90)
+    seqs = [int(e["data"].split()[-1]) for e in got]
+    print(f"robot B heard A's launched talker through the launched relay: {seqs}")
+    assert all(e["data"].startswith("hello world ") for e in got), got[:2]
+    gaps = [y - x for x, y in zip(seqs, seqs[1:])]
+    assert min(gaps) >= 2, seqs       # 20 Hz in A, at most 5 Hz on the link (config/relay.yaml's max_rate)
+    stats = launch.wait_for(lambda e: e.get("event") == "stats" and bool(e.get("exports")), 30)
+    assert stats["exports"][0]["topic"] == "/demo/speech" and stats["exports"][0]["as"] == "/robot_a/demo/speech"
+    subscribers = dict((t, n) for t, n in harness.master_call(a, "getSystemState")[1])
+    assert "/relay_robot_a" in subscribers["/demo/speech"], subscribers  # the launch file's node name
