@@ -45,15 +45,18 @@ def sh(*argv: str) -> None:
 
 
 class Link:
-    """Two hosts joined by a veth pair; the publisher host's egress shaped as ``kind`` says."""
+    """Two hosts joined by a veth pair; the publisher host's egress shaped as ``kind`` says.
 
-    def __init__(self, kind: str, masters: int = 1, mtu: int = 1500) -> None:
+    Also examples/relay_demo.py's two robots (``names``: its namespaces' names).
+    """
+
+    def __init__(self, kind: str, masters: int = 1, mtu: int = 1500, names: Optional[List[str]] = None) -> None:
         pid = os.getpid()
         self.mtu = mtu
         self.masters = masters
         self.robot_masters: List["subprocess.Popen[bytes]"] = []
         self.kind = kind
-        self.ns = [f"mrtCL{i}_{pid}" for i in range(2)]
+        self.ns = names or [f"mrtCL{i}_{pid}" for i in range(2)]
         self.dev = [f"cl{i}_{pid}"[:15] for i in range(2)]
         self.ip = [f"10.79.{pid % 200 + 20}.{i + 1}" for i in range(2)]
         self.master: Optional["subprocess.Popen[bytes]"] = None
@@ -111,9 +114,9 @@ class Link:
                    ROS_HOME=f"/tmp/{self.ns[0]}", ROS_LOG_DIR=f"/tmp/{self.ns[0]}")
         return env
 
-    def run(self, i: int, argv: List[str]) -> "subprocess.Popen[str]":
+    def run(self, i: int, argv: List[str], stderr: Any = subprocess.DEVNULL) -> "subprocess.Popen[str]":
         return subprocess.Popen(["ip", "netns", "exec", self.ns[i], *argv], env=self.env(i), text=True,
-                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+                                stdout=subprocess.PIPE, stderr=stderr)
 
     def down(self) -> None:
         for master in self.robot_masters:

@@ -8,7 +8,8 @@ pub: /control (geometry_msgs/PointStamped, --control-rate Hz, queue 100, stamp =
 (a loop more than two periods behind starts again from now: it does not catch up in a burst). It reports
 how many of each it published in the window. --stock runs on plain rospy instead of micros_rt (run it
 with /usr/bin/python3, without micros_rt, for the comparison).
-sub: both topics; control latency (receive time - stamp) percentiles, counts, transports.
+sub: both topics; control latency (receive time - stamp) percentiles, counts, transports; with --progress-period,
+what arrived in each period as a 'progress' event (examples/relay_demo.py prints them).
 """
 
 from __future__ import annotations
@@ -70,6 +71,10 @@ def main() -> int:
     ap.add_argument("--image-best-effort", action="store_true")
     ap.add_argument("--image-lifespan", type=float, default=float("inf"),
                     help="pub: the camera's msg_valid_period (s): frames older than this are not sent")
+    ap.add_argument("--image-topic", default="/image", help="the camera's topic name")
+    ap.add_argument("--progress-period", type=float, default=0.0,
+                    help="sub: every this many seconds after the first message, a 'progress' event: messages "
+                         "and control latency p50/p99 of that period")
     ap.add_argument("--stock", action="store_true", help="plain rospy (no micros_rt)")
     ap.add_argument("--image-work-ms", type=float, default=0.0,
                     help="sub: each image callback computes in Python this long (holds the GIL: a CPU-bound node)")
@@ -97,13 +102,13 @@ def main() -> int:
     if args.mode == "pub":
         if args.stock:
             control_pub = rospy.Publisher("/control", PointStamped, queue_size=100)
-            image_pub = rospy.Publisher("/image", Image, queue_size=2)
+            image_pub = rospy.Publisher(args.image_topic, Image, queue_size=2)
         else:
             control_pub = nh.advertise_with_qos(
                 "/control", PointStamped, 100,
                 micros_rt.AdvertiseQoSOptions(transport_priority=micros_rt.TransportPriority[args.control_priority]))
             image_pub = nh.advertise_with_qos(
-                "/image", Image, 2,
+                args.image_topic, Image, 2,
                 micros_rt.AdvertiseQoSOptions(transport_priority=micros_rt.TransportPriority[args.image_priority],
                                               using_best_effort_protocol=args.image_best_effort,
                                               msg_valid_period=args.image_lifespan))
@@ -177,15 +182,26 @@ def main() -> int:
 
     if args.stock:
         subs = [rospy.Subscriber("/control", PointStamped, on_control, queue_size=1000, tcp_nodelay=True),
-                rospy.Subscriber("/image", Image, on_image, queue_size=2, tcp_nodelay=True)]
+                rospy.Subscriber(args.image_topic, Image, on_image, queue_size=2, tcp_nodelay=True)]
     else:
-        subs = [nh.subscribe("/control", PointStamped, on_control, 1000), nh.subscribe("/image", Image, on_image, 2)]
+        subs = [nh.subscribe("/control", PointStamped, on_control, 1000),
+                nh.subscribe(args.image_topic, Image, on_image, 2)]
     emit("ready")
     end = time.monotonic() + args.seconds
     last_change, last_count = time.monotonic(), -1
     connected = False
+    progress_at, seen = 0.0, {"control": 0, "image": 0, "latency": 0}  # the last progress event's counts
     while time.monotonic() < end:
         time.sleep(0.1)
+        with lock:
+            if args.progress_period and not progress_at and got["control"] + got["image"]:
+                progress_at = time.monotonic() + args.progress_period  # periods start at the first message
+            if progress_at and time.monotonic() >= progress_at:
+                progress_at += args.progress_period
+                period = [x * 1e3 for x in got["latency"][seen["latency"]:]]
+                emit("progress", control=got["control"] - seen["control"], image=got["image"] - seen["image"],
+                     period=args.progress_period, p50_ms=percentile(period, 0.5), p99_ms=percentile(period, 0.99))
+                seen = {"control": got["control"], "image": got["image"], "latency": len(got["latency"])}
         if not connected and all(sub.get_num_connections() > 0 for sub in subs):
             connected = True
             emit("connected")  # a publisher of each topic is linked
