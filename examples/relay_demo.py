@@ -44,7 +44,7 @@ MICROS_RT = str(ROOT / ".venv" / "bin" / "micros-rt")
 RELAY_A = """\
 graph: robot_a                    # outside A these are /robot_a/control and /robot_a/camera/image
 export:
-  /control: {transport_priority: HIGH, queue_size: 100}             # its packets first (DSCP AF41)
+  /control: {transport_priority: HIGH, queue_size: 100}             # DSCP AF41: first where honoured
   /camera/image: {using_best_effort_protocol: true, max_rate: %g}    # newest frames only, at most %g Hz
 """
 # Robot B's relay: which other graphs' topics B's graph gets, under which names.
@@ -64,6 +64,7 @@ class Process:
         self._stderr: IO[str] = open(log, "w")
         self.proc = link.run(robot, argv, stderr=self._stderr)
         self.events: "queue.Queue[Dict[str, Any]]" = queue.Queue()
+        self.ended = threading.Event()  # its stdout closed: every event it printed is in self.events
         threading.Thread(target=self._read, daemon=True).start()
 
     def _read(self) -> None:
@@ -73,6 +74,7 @@ class Process:
                 self.events.put(json.loads(line))
             except ValueError:
                 continue
+        self.ended.set()
 
     def wait_for(self, event: str, timeout: float, what: str) -> Dict[str, Any]:
         deadline = time.monotonic() + timeout
@@ -81,14 +83,16 @@ class Process:
                 found = self.events.get(timeout=max(0.0, min(0.5, deadline - time.monotonic())))
                 if found.get("event") == event:
                     return found
-                continue
             except queue.Empty:
-                pass
-            if self.proc.poll() is not None and self.events.empty():
-                raise DemoError(f"{self.name} exited (code {self.proc.returncode}) before {what}; its errors:\n"
-                                + self.tail())
+                if self.ended.is_set():
+                    try:
+                        code: Any = self.proc.wait(5)
+                    except subprocess.TimeoutExpired:
+                        code = "none yet"
+                    raise DemoError(f"{self.name} exited (code {code}) while the demo waited for {what}; its "
+                                    f"errors:\n" + self.tail()) from None
             if time.monotonic() >= deadline:
-                raise DemoError(f"{self.name}: no {what} within {timeout:.0f} s; its errors:\n" + self.tail())
+                raise DemoError(f"{self.name}: waited {timeout:.0f} s for {what}, in vain; its errors:\n" + self.tail())
 
     def tail(self) -> str:
         text = self.log.read_text(errors="replace").strip().splitlines()[-15:]
@@ -148,26 +152,26 @@ def run(args: argparse.Namespace, link: Link, work: Path, started: List[Process]
         relays.append(start(robot, f"relay {graph}", [MICROS_RT, "relay", "--config", str(work / f"relay_{graph}.yaml"),
                                                       "--json", "--stats-period", "1", "--poll-period", "0.3"]))
     for relay in relays:
-        relay.wait_for("ready", 60, "'ready'")
+        relay.wait_for("ready", 60, "it to start")
     image = ["--image-topic", "/camera/image", "--width", "640", "--height", "480"]
     sub = start(1, "robot B's subscriber", [STOCK_PYTHON, str(PEER), "sub", "--stock", "--seconds",
                                             str(args.seconds + 120), "--progress-period", "1", *image])
-    sub.wait_for("ready", 60, "'ready'")
+    sub.wait_for("ready", 60, "it to start")
     go = work / "go"
     pub = start(0, "robot A's publisher", [STOCK_PYTHON, str(PEER), "pub", "--stock", "--seconds", str(args.seconds),
                                            "--start-file", str(go), *image])
     print("robot A: stock rospy node publishing /control (1 kHz) and /camera/image (640x480, 30 Hz)\n"
           "robot B: stock rospy node subscribing to /control and /camera/image", flush=True)
-    pub.wait_for("ready", 90, "'ready'")
-    sub.wait_for("connected", 90, "connection to B's relay")
+    pub.wait_for("ready", 90, "it to start")
+    sub.wait_for("connected", 90, "its connection to B's relay")
     go.touch()  # both relays carry the topics: A starts publishing
     print(f"at robot B's subscriber, every second ({args.seconds:g} s):", flush=True)
     for second in range(1, math.ceil(args.seconds) + 1):
-        p = sub.wait_for("progress", 30, "messages")
+        p = sub.wait_for("progress", 30, "a second's messages")
         print(f"  {second:3d} s  /control {p['control']:5,}/s  latency p50 {ms(p['p50_ms']):>8}  "
               f"p99 {ms(p['p99_ms']):>8}   /camera/image {p['image']:2d} frames/s", flush=True)
-    published = pub.wait_for("published", 60, "end of publishing")
-    summary = sub.wait_for("summary", 60, "summary")
+    published = pub.wait_for("published", 60, "the end of publishing")
+    summary = sub.wait_for("summary", 60, "its summary")
     print(f"summary, robot A published -> robot B's stock subscriber received:\n"
           f"  /control       {published['control']:,} -> {summary['control']:,}, latency p50 {ms(summary['p50_ms'])}, "
           f"p99 {ms(summary['p99_ms'])}, max {ms(summary['max_ms'])}\n"
