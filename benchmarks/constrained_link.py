@@ -14,7 +14,9 @@ micros_rt: /control at TransportPriority.HIGH (DSCP AF41), /image at LOW; rospy:
 Both in their default configuration otherwise. relay (with --stacks rospy,micros_rt,relay): two robots, each its
 own rosmaster; the stock rospy publisher and subscriber of the rospy stack, with ``micros-rt relay`` on each
 host carrying /control (HIGH, history 100) and /image (LOW, history 2) between the graphs over DDS;
-relay_capped: the same with the camera exported at ``max_rate: 2`` (15 Mbit/s of the 40; 5 Hz would be 37). Each endpoint is its own process
+relay_capped: the same with the camera exported at ``max_rate: 2`` (15 Mbit/s of the 40; 5 Hz would be 37);
+relay_one_process: robot A's relay with ``--one-process`` (both exports in one process, so both carry the DSCP of
+HIGH; by default the relay runs a process per priority). Each endpoint is its own process
 (tests/peers/mrt_link.py). Results: benchmarks/results/latest.json under "constrained_link" (the rest of
 the file is left as it is), constrained_link.md and constrained_link.png (control latency distribution
 per link and stack). Nothing leaves the namespaces: the script checks eth0's tx_packets.
@@ -25,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -153,9 +156,10 @@ RELAY_IMPORT = ("graph: robot_b\nimport:\n  /robot_a/control: {as: /control, que
 
 def one_run(kind: str, stack: str, seconds: float, image: List[str], mtu: int = 1500) -> Dict[str, Any]:
     relayed = stack.startswith("relay")
-    link = Link(kind, masters=2 if relayed else 1, mtu=mtu).up()
+    link = Link(kind, masters=2 if relayed else 1, mtu=mtu)
     relays: List["subprocess.Popen[str]"] = []
     try:
+        link.up()
         python = MRT_PYTHON if stack == "micros_rt" else STOCK_PYTHON
         extra = [] if stack == "micros_rt" else ["--stock"]
         if relayed:  # the relays start first; the far side's subscriber connects seconds after the near one
@@ -164,9 +168,10 @@ def one_run(kind: str, stack: str, seconds: float, image: List[str], mtu: int = 
             cap = ", max_rate: 2" if stack == "relay_capped" else ""
             for i, text in enumerate((RELAY_EXPORT % cap, RELAY_IMPORT)):
                 (config / f"relay{i}.yaml").write_text(text)
+                one = ["--one-process"] if stack == "relay_one_process" and i == 0 else []
                 relays.append(link.run(i, [str(ROOT / ".venv" / "bin" / "micros-rt"), "relay", "--config",
                                            str(config / f"relay{i}.yaml"), "--poll-period", "0.3", "--json",
-                                           "--stats-period", "2"]))
+                                           "--stats-period", "2", *one]))
         sub = link.run(1, [python, str(PEER), "sub", "--seconds", str(seconds + 60), *extra, *image])
         pub_extra = ["--start-delay", "8"] if relayed else []
         pub = link.run(0, [python, str(PEER), "pub", "--seconds", str(seconds), *extra, *pub_extra, *image])
@@ -178,6 +183,7 @@ def one_run(kind: str, stack: str, seconds: float, image: List[str], mtu: int = 
             relay.terminate()
             relay_stats.append(next((e for e in reversed(events(relay, 10)) if e.get("event") == "stats"), None))
         link.down()
+        shutil.rmtree(f"/tmp/{link.ns[0]}", ignore_errors=True)  # the relays' configs, ROS_HOME and logs
     if published is None or summary is None:
         return {"error": f"no {'published' if published is None else 'summary'} event"}
     intended = published["intended_control"]
@@ -206,7 +212,8 @@ def main() -> int:
     ap.add_argument("--mtu", type=int, default=1500, help="the link's MTU (9000: jumbo frames)")
     ap.add_argument("--rounds", type=int, default=1)
     ap.add_argument("--stacks", default="rospy,micros_rt",
-                    help="rospy, micros_rt, relay, relay_capped (the camera exported at 2 Hz); comma-separated")
+                    help="rospy, micros_rt, relay, relay_capped (the camera exported at 2 Hz), relay_one_process; "
+                         "comma-separated")
     ap.add_argument("--out", default=str(RESULTS))
     args = ap.parse_args()
     if os.geteuid() != 0:
