@@ -32,7 +32,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Any, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 ROOT = Path(__file__).resolve().parents[1]
 PEER = ROOT / "tests" / "peers" / "mrt_link.py"
@@ -175,13 +175,9 @@ def one_run(kind: str, stack: str, seconds: float, image: List[str], mtu: int = 
         sub = link.run(1, [python, str(PEER), "sub", "--seconds", str(seconds + 60), *extra, *image])
         pub_extra = ["--start-delay", "8"] if relayed else []
         pub = link.run(0, [python, str(PEER), "pub", "--seconds", str(seconds), *extra, *pub_extra, *image])
-        published = next((e for e in events(pub, seconds + 120) if e.get("event") == "published"), None)
-        summary = next((e for e in events(sub, 90) if e.get("event") == "summary"), None)
+        published, summary = outcome(pub, sub, seconds)
     finally:
-        relay_stats = []
-        for relay in relays:
-            relay.terminate()
-            relay_stats.append(next((e for e in reversed(events(relay, 10)) if e.get("event") == "stats"), None))
+        relay_stats = stop_relays(relays)
         link.down()
         shutil.rmtree(f"/tmp/{link.ns[0]}", ignore_errors=True)  # the relays' configs, ROS_HOME and logs
     if published is None or summary is None:
@@ -195,6 +191,36 @@ def one_run(kind: str, stack: str, seconds: float, image: List[str], mtu: int = 
             "image_p50_ms": summary["image_p50_ms"], "transports": summary["transports"],
             "publisher_statistics": published.get("statistics") or {}, "control_cdf_ms": summary["control_cdf_ms"],
             **({"relay_statistics": relay_stats} if relays else {})}
+
+
+def outcome(pub: "subprocess.Popen[str]", sub: "subprocess.Popen[str]",
+            seconds: float) -> Tuple[Optional[Dict[str, Any]], Optional[Dict[str, Any]]]:
+    """The publisher's ``published`` and the subscriber's ``summary`` events (tests/peers/mrt_link.py)."""
+    published = next((e for e in events(pub, seconds + 120) if e.get("event") == "published"), None)
+    summary = next((e for e in events(sub, 90) if e.get("event") == "summary"), None)
+    return published, summary
+
+
+def stop_relays(relays: List["subprocess.Popen[str]"]) -> List[Optional[Dict[str, Any]]]:
+    """Stop ``micros-rt relay --json`` processes; each one's last ``stats`` event."""
+    found = []
+    for relay in relays:
+        relay.terminate()
+        found.append(next((e for e in reversed(events(relay, 10)) if e.get("event") == "stats"), None))
+    return found
+
+
+def markdown_table(columns: List[str], results: Dict[str, Dict[str, List[Dict[str, Any]]]],
+                   cells: Callable[[Dict[str, Any]], List[str]]) -> List[str]:
+    """A markdown table of ``results[group][stack]`` runs: the group, the stack, then ``cells(run)`` (a run with
+    an ``error`` shows it instead)."""
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    for group, stacks in results.items():
+        for stack, runs in stacks.items():
+            for run in runs:
+                row = [run["error"]] + [""] * (len(columns) - 3) if "error" in run else cells(run)
+                lines.append("| " + " | ".join([group, stack, *row]) + " |")
+    return lines
 
 
 def eth0_tx() -> Optional[int]:
@@ -240,18 +266,13 @@ def main() -> int:
     data = json.loads(latest.read_text()) if latest.exists() else {}
     data["constrained_link"] = report
     latest.write_text(json.dumps(data, indent=1))
-    lines = ["| link | stack | control published | delivered | p50 ms | p99 ms | images published / delivered |"
-             " image p50 ms |", "|---|---|---|---|---|---|---|---|"]
-    for kind, stacks in results.items():
-        for stack, runs in stacks.items():
-            for run in runs:
-                if "error" in run:
-                    lines.append(f"| {kind} | {stack} | {run['error']} | | | | | |")
-                    continue
-                lines.append(f"| {kind} | {stack} | {run['control_published']:,} of {run['control_intended']:,} "
-                             f"({run['control_published_share']:.1%}) | {run['control_delivered']:,} | "
-                             f"{run['control_p50_ms']:.1f} | {run['control_p99_ms']:.1f} | "
-                             f"{run['images_published']} / {run['images_delivered']} | {run['image_p50_ms']:.0f} |")
+    lines = markdown_table(
+        ["link", "stack", "control published", "delivered", "p50 ms", "p99 ms", "images published / delivered",
+         "image p50 ms"], results,
+        lambda run: [f"{run['control_published']:,} of {run['control_intended']:,} "
+                     f"({run['control_published_share']:.1%})", f"{run['control_delivered']:,}",
+                     f"{run['control_p50_ms']:.1f}", f"{run['control_p99_ms']:.1f}",
+                     f"{run['images_published']} / {run['images_delivered']}", f"{run['image_p50_ms']:.0f}"])
     (out / "constrained_link.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     print(f"eth0 tx packets during the run: {report['eth0_tx_packets_during_run']}")

@@ -29,7 +29,7 @@ from typing import Any, Dict, List, Optional
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from constrained_link import PEER, RELAY_EXPORT, RELAY_IMPORT, events  # noqa: E402
+from constrained_link import PEER, RELAY_EXPORT, RELAY_IMPORT, markdown_table, outcome, stop_relays  # noqa: E402
 from run import child_env, eth0_tx, start_master  # noqa: E402
 
 ROOT = HERE.parent
@@ -72,13 +72,9 @@ def one_run(stack: str, scenario: str, seconds: float, logdir: Path, profile: bo
                                         f"-r 200 -f raw --threads -o {logdir}/relay{i}.spy"],
                                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
                       for i, relay in enumerate(relays)]
-        published = next((e for e in events(pub, seconds + 120) if e.get("event") == "published"), None)
-        summary = next((e for e in events(sub, 90) if e.get("event") == "summary"), None)
+        published, summary = outcome(pub, sub, seconds)
     finally:
-        relay_stats = []
-        for relay in relays:
-            relay.terminate()
-            relay_stats.append(next((e for e in reversed(events(relay, 10)) if e.get("event") == "stats"), None))
+        relay_stats = stop_relays(relays)
         for proc in procs:
             try:
                 proc.wait(timeout=15)
@@ -121,18 +117,14 @@ def main() -> int:
                 results.setdefault(scenario, {}).setdefault(stack, []).append(
                     one_run(stack, scenario, args.seconds, logdir, args.profile))
     tx_after = eth0_tx()
-    lines = ["| scenario | stack | control delivered / published | control p50 ms | p99 ms | images delivered / "
-             "published | image p50 ms |", "|---|---|---|---|---|---|---|"]
+    lines = markdown_table(
+        ["scenario", "stack", "control delivered / published", "control p50 ms", "p99 ms",
+         "images delivered / published", "image p50 ms"], results,
+        lambda run: [f"{run['control_delivered']:,} / {run['control_published']:,}", f"{run['control_p50_ms']:.2f}",
+                     f"{run['control_p99_ms']:.2f}", f"{run['images_delivered']} / {run['images_published']}",
+                     f"{run['image_p50_ms']:.1f}"])
     summary: Dict[str, Any] = {}
     for scenario, stacks in results.items():
-        for stack, runs in stacks.items():
-            for run in runs:
-                if "error" in run:
-                    lines.append(f"| {scenario} | {stack} | {run['error']} | | | | |")
-                    continue
-                lines.append(f"| {scenario} | {stack} | {run['control_delivered']:,} / {run['control_published']:,} | "
-                             f"{run['control_p50_ms']:.2f} | {run['control_p99_ms']:.2f} | "
-                             f"{run['images_delivered']} / {run['images_published']} | {run['image_p50_ms']:.1f} |")
         medians = {stack: median([run.get("control_p50_ms") for run in runs]) for stack, runs in stacks.items()}
         image_medians = {stack: median([run.get("image_p50_ms") for run in runs]) for stack, runs in stacks.items()}
         if medians.get("direct") is not None and medians.get("relay") is not None:
