@@ -77,13 +77,16 @@ def test_a_process_per_priority_puts_relayed_control_first_on_a_link_that_honour
 
 
 def _children(pid: int) -> List[int]:
-    """Child processes of ``pid``, whichever of its threads started them."""
+    """Child processes of ``pid``: every process whose parent (``/proc/N/stat``'s 4th field) it is. Unlike
+    ``/proc/pid/task/*/children`` this does not miss a child while the kernel moves it between threads."""
     found: List[int] = []
-    for task in Path(f"/proc/{pid}/task").iterdir():
+    for stat in Path("/proc").glob("[0-9]*/stat"):
         try:
-            found += [int(c) for c in (task / "children").read_text().split()]
-        except OSError:  # a thread that ended meanwhile
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):  # a process that ended meanwhile
             continue
+        if int(fields[1]) == pid:
+            found.append(int(stat.parent.name))
     return found
 
 
@@ -102,8 +105,10 @@ def test_a_killed_priority_process_is_started_again(robots: Tuple[harness.RosMas
     spawn(relay(tmp_path / "b.yaml"), env=b.env, name="relay_b")
     listener = spawn(stock_listener("--topic", "/robot_a/chatter", "--duration", 140), env=b.env)
     listener.wait_for_count("recv", 10, timeout=60)
+    harness.wait_until(lambda: len(_children(relay_a.proc.pid)) == 2, 60, interval=0.2,
+                       message="relay A's two processes (HIGH and LOW)")
+    assert "exited with code" not in relay_a.stderr_tail(200), relay_a.stderr_tail(40)
     children = _children(relay_a.proc.pid)
-    assert len(children) == 2, children     # HIGH and LOW
     high = next(pid for pid in children if "HIGH" in Path(f"/proc/{pid}/cmdline").read_text())
     os.kill(high, signal.SIGKILL)
     harness.wait_until(lambda: high not in _children(relay_a.proc.pid) and len(_children(relay_a.proc.pid)) == 2,
