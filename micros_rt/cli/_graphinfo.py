@@ -4,6 +4,10 @@ for micros_rt nodes their ``microsRtInfo`` (QoS, links, the negotiation's verdic
 
 Collecting (:func:`snapshot`) does the network calls; joining the answers into links (:func:`build_links`)
 and describing QoS (:func:`describe_publisher_qos`, ...) are pure functions.
+
+A ``micros-rt relay`` node's answer has a ``relay`` section (what it carries between graphs):
+:func:`relay_marking` turns it into how the tools mark the relay's subscription of an exported topic
+("relayed out as /robot_a/chatter ...") and its publication of an imported one ("relayed in from graph ...").
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ __all__ = [
     "describe_subscriber_qos",
     "master_uri",
     "probe_node",
+    "relay_marking",
     "resolve_topic",
     "snapshot",
 ]
@@ -123,6 +128,11 @@ class NodeReport:
     def subscription(self, topic: str) -> Optional[Dict[str, Any]]:
         return _find(self.info, "subscriptions", topic)
 
+    def relay(self) -> Optional[Dict[str, Any]]:
+        """The ``relay`` section of a ``micros-rt relay`` node's answer (None for any other node)."""
+        section = (self.info or {}).get("relay")
+        return section if isinstance(section, dict) and "error" not in section else None
+
 
 def _find(info: Optional[Dict[str, Any]], section: str, topic: str) -> Optional[Dict[str, Any]]:
     for item in (info or {}).get(section, []):
@@ -179,9 +189,15 @@ class Link:
     #: the negotiation's verdict kind when the publisher judged a DDS offer of this subscriber
     verdict: Optional[str] = None
     matched: Optional[bool] = None  # DDS: has discovery matched the subscriber's reader yet
+    #: the link's ends as relays mark them (:func:`relay_marking`): the subscriber exporting the topic to other
+    #: graphs, the publisher importing it from one; empty for links between ordinary nodes
+    relayed: List[Dict[str, Any]] = field(default_factory=list)
 
     def to_dict(self) -> Dict[str, Any]:
-        return asdict(self)
+        out = asdict(self)
+        if not self.relayed:
+            del out["relayed"]   # the JSON of links between ordinary nodes stays as it was
+        return out
 
 
 @dataclass
@@ -198,8 +214,12 @@ class GraphSnapshot:
         report = self.nodes.get(node) or NodeReport(node, None, UNREACHABLE)
         ep = report.publication(topic) if publisher else report.subscription(topic)
         qos = _endpoint_qos(ep)
-        return {"node": node, "uri": report.uri, "kind": report.kind, "qos": qos,
-                "description": _describe(report, qos, publisher=publisher)}
+        out = {"node": node, "uri": report.uri, "kind": report.kind, "qos": qos,
+               "description": _describe(report, qos, publisher=publisher)}
+        marking = relay_marking(report, topic, publisher=publisher)
+        if marking is not None:
+            out["relay"] = marking
+        return out
 
 
 def _endpoint_qos(ep: Optional[Dict[str, Any]]) -> Optional[Dict[str, Any]]:
@@ -284,6 +304,67 @@ def describe_subscriber_qos(qos: Mapping[str, Any]) -> str:
     return ", ".join(parts)
 
 
+def _rate(value: Any) -> str:
+    return "no max_rate" if value is None else f"max_rate {float(value):g} Hz"
+
+
+def relay_marking(report: NodeReport, topic: str, *, publisher: bool) -> Optional[Dict[str, Any]]:
+    """How a relay node's end of ``topic`` is marked: its subscription of a topic it exports (``direction``
+    ``out``) or its publication of a topic it imports (``in``), with a ``description`` in words; None when
+    ``report`` is no relay or does not carry ``topic`` that way.
+
+    >>> r = NodeReport("/relay_robot_a", None, MICROS_RT, info={"relay": {"graph": "robot_a", "exports": [
+    ...     {"topic": "/chatter", "outside": "/robot_a/chatter", "qos": {"transport_priority": "HIGH"},
+    ...      "max_rate": 5, "counters": {"received": 9, "sent": 5, "rate_capped": 4}}]}})
+    >>> relay_marking(r, "/chatter", publisher=False)["description"]
+    'relayed out as /robot_a/chatter (DDS, HIGH, reliable, max_rate 5 Hz) by relay node /relay_robot_a; sent 5 of 9 received (rate capped 4)'
+    """
+    section = report.relay()
+    if section is None:
+        return None
+    graph = str(section.get("graph", "?"))
+    parent = section.get("parent")
+    process = f" (a process of relay {parent})" if parent else ""
+    if not publisher:
+        for ex in section.get("exports") or []:
+            if ex.get("topic") != topic:
+                continue
+            qos = ex.get("qos") or {}
+            counters = dict(ex.get("counters") or {})
+            how = ", ".join([str(ex.get("protocol", "DDS")), str(qos.get("transport_priority", "NORMAL")),
+                             "best effort" if qos.get("using_best_effort_protocol") else "reliable",
+                             _rate(ex.get("max_rate"))])
+            dropped = [f"{label} {counters[key]}" for key, label in (
+                ("rate_capped", "rate capped"), ("no_reader", "no reader"), ("superseded", "superseded"),
+                ("dropped_queue_full", "queue full"), ("looped", "looped")) if counters.get(key)]
+            summary = f"relayed out as {ex.get('outside')} ({how}) by relay node {report.name}{process}"
+            text = (f"{summary}; sent {counters.get('sent', 0)} of {counters.get('received', 0)} received"
+                    + (f" ({', '.join(dropped)})" if dropped else ""))
+            return {"direction": "out", "relay_node": report.name, "relay": parent or report.name, "graph": graph,
+                    "outside": ex.get("outside"), "protocol": ex.get("protocol", "DDS"),
+                    "transport_priority": qos.get("transport_priority"), "max_rate": ex.get("max_rate"),
+                    "counters": counters, "summary": summary, "description": text}
+        return None
+    for im in section.get("imports") or []:
+        if im.get("local") != topic:
+            continue
+        counters = dict(im.get("counters") or {})
+        exporters = [str(e) for e in im.get("exporters") or []]
+        seen = f"exported by {', '.join(exporters)}" if exporters else "no exporting relay seen now"
+        dropped = [f"{label} {counters[key]}" for key, label in (
+            ("dropped_queue_full", "queue full"), ("dropped_expired", "expired"), ("dropped_filtered", "filtered"),
+            ("refused", "refused"), ("bad_input", "bad input"), ("lost", "lost"),
+            ("deadline_missed", "deadline missed")) if counters.get(key)]
+        summary = (f"relayed in from graph {im.get('origin')} (outside topic {im.get('outside')}, {seen}) by relay "
+                   f"node {report.name}")
+        text = (f"{summary}; published {counters.get('published', 0)} of {counters.get('received', 0)} received"
+                + (f" ({', '.join(dropped)})" if dropped else ""))
+        return {"direction": "in", "relay_node": report.name, "relay": report.name, "graph": graph,
+                "origin": im.get("origin"), "outside": im.get("outside"), "exporters": exporters,
+                "protocol": im.get("protocol", "DDS"), "counters": counters, "summary": summary, "description": text}
+    return None
+
+
 def _tcpros_reason(pub: NodeReport, sub: NodeReport, topic: str) -> Tuple[str, Optional[str]]:
     """(why this link is TCPROS, verdict kind or None)."""
     for node in (pub, sub):
@@ -334,6 +415,8 @@ def build_links(topic: str, publishers: Sequence[str], subscribers: Sequence[str
         pub_qos = _endpoint_qos(pub.publication(topic))
         link = Link(topic, p, s, protocol, pub.kind, sub.kind, pub_qos, _endpoint_qos(sub.subscription(topic)),
                     transport_priority=str(pub_qos.get("transport_priority")) if pub_qos else None)
+        link.relayed = [m for m in (relay_marking(pub, topic, publisher=True),
+                                    relay_marking(sub, topic, publisher=False)) if m is not None]
         if protocol == "DDS":
             for item in (pub.publication(topic) or {}).get("links", []):
                 if item.get("subscriber") == s and "matched" in item:

@@ -1,22 +1,29 @@
 """``micros-rt graph``: the live graph's nodes and topics, every link coloured by protocol and labelled with
-its QoS, as Graphviz (``--dot``) or a picture (``--png``, drawn by Graphviz's ``dot``)."""
+its QoS, as Graphviz (``--dot``) or a picture (``--png``, drawn by Graphviz's ``dot``).
+
+``micros-rt relay`` nodes are drawn as relays (a hexagon, with their graph), and each topic they carry
+between graphs gets an edge to (export) or from (import) an ``outside: /robot_a/chatter`` pseudo-node, the
+DDS topic other graphs see, labelled ``relay out`` / ``relay in``."""
 
 from __future__ import annotations
 
 import shutil
 import subprocess
 import sys
-from typing import Dict, List, Set
+from typing import Any, Dict, List, Set
 
 from . import CommandError
 from ._args import ArgumentParser
-from ._graphinfo import MICROS_RT, GraphSnapshot, Master, snapshot
+from ._graphinfo import MICROS_RT, GraphSnapshot, Master, relay_marking, snapshot
 
 __all__ = ["main", "to_dot", "PROTOCOL_COLOURS"]
 
 #: Link colour per protocol (a colour-blind-safe pair), and for links that carry nothing yet.
 PROTOCOL_COLOURS = {"DDS": "#1f77b4", "TCPROS": "#e66100"}
 OTHER_COLOUR = "#888888"
+#: Relay nodes' fill and their edges to and from other graphs.
+RELAY_FILL = "#e4d7f0"
+RELAY_COLOUR = "#7b3294"
 #: Plumbing every ROS graph has; shown with --all.
 HIDDEN_TOPICS = frozenset({"/rosout", "/rosout_agg"})
 HIDDEN_NODES = frozenset({"/rosout"})
@@ -90,6 +97,31 @@ def _short_sub(qos: Dict[str, object]) -> str:
     return ", ".join(words)
 
 
+def _outside_lines(relays: Dict[str, Dict[str, Any]]) -> List[str]:
+    """The ``outside:`` pseudo-nodes (DDS topics between graphs) and the relays' edges to and from them."""
+    nodes: Dict[str, str] = {}
+    edges: List[str] = []
+    for name, section in sorted(relays.items()):
+        for ex in section.get("exports") or []:
+            outside = str(ex.get("outside"))
+            nodes.setdefault(outside, "to other graphs")
+            qos = ex.get("qos") or {}
+            words = ["relay out", f"{ex.get('protocol', 'DDS')} {qos.get('transport_priority', 'NORMAL')}"
+                     + (", best effort" if qos.get("using_best_effort_protocol") else "")]
+            if ex.get("max_rate") is not None:
+                words.append(f"max_rate {float(ex['max_rate']):g} Hz")
+            edges.append(f"  {_q('n:' + name)} -> {_q('o:' + outside)} [label={_q(chr(10).join(words))}, "
+                         f"color={_q(RELAY_COLOUR)}, fontcolor={_q(RELAY_COLOUR)}, penwidth=2, style=bold];")
+        for im in section.get("imports") or []:
+            outside = str(im.get("outside"))
+            nodes.setdefault(outside, f"from graph {im.get('origin')}")
+            words = ["relay in", f"from graph {im.get('origin')}", f"as {im.get('local')}"]
+            edges.append(f"  {_q('o:' + outside)} -> {_q('n:' + name)} [label={_q(chr(10).join(words))}, "
+                         f"color={_q(RELAY_COLOUR)}, fontcolor={_q(RELAY_COLOUR)}, penwidth=2, style=bold];")
+    return [f"  {_q('o:' + outside)} [label={_q(f'outside: {outside}' + chr(10) + where)}, shape=box, "
+            f"style=\"dashed,rounded\", color={_q(RELAY_COLOUR)}];" for outside, where in sorted(nodes.items())] + edges
+
+
 def to_dot(snap: GraphSnapshot, *, include_all: bool = False) -> str:
     """Graphviz source for ``snap``: nodes as ellipses, topics as boxes, node->topic per publisher
     (labelled with its QoS), topic->node per link (coloured by protocol, labelled with the publisher,
@@ -104,12 +136,23 @@ def to_dot(snap: GraphSnapshot, *, include_all: bool = False) -> str:
         shown.update(snap.subscribers.get(t, []))
     if not include_all:
         shown -= HIDDEN_NODES
+    relays: Dict[str, Dict[str, Any]] = {}
     for name in sorted(shown):
         report = snap.nodes.get(name)
         kind = report.kind if report is not None else "unreachable"
+        section = report.relay() if report is not None else None
+        if section is not None:
+            relays[name] = section
+            label = f"{name}\nrelay, graph {section.get('graph', '?')}"
+            if section.get("parent"):
+                label += f"\nprocess of {section['parent']}"
+            lines.append(f"  {_q('n:' + name)} [label={_q(label)}, shape=hexagon, style=filled, "
+                         f"fillcolor={_q(RELAY_FILL)}];")
+            continue
         fill = "#d6e6f5" if kind == MICROS_RT else "#eeeeee"
         lines.append(f"  {_q('n:' + name)} [label={_q(name + chr(10) + kind)}, shape=ellipse, style=filled, "
                      f"fillcolor={_q(fill)}];")
+    lines += _outside_lines(relays)
     for t in topics:
         lines.append(f"  {_q('t:' + t)} [label={_q(t + chr(10) + snap.types.get(t, '?'))}, shape=box];")
         for pub in sorted(snap.publishers.get(t, [])):
@@ -118,6 +161,9 @@ def to_dot(snap: GraphSnapshot, *, include_all: bool = False) -> str:
             report = snap.nodes.get(pub)
             ep = report.publication(t) if report is not None else None
             label = _short_pub(dict(ep.get("qos") or {})) if ep else "stock"
+            marking = relay_marking(report, t, publisher=True) if report is not None else None
+            if marking is not None:
+                label += f"\nrelayed in from graph {marking['origin']}"
             lines.append(f"  {_q('n:' + pub)} -> {_q('t:' + t)} [label={_q(label)}, color={_q(OTHER_COLOUR)}];")
         linked = set()
         for link in snap.links:
@@ -129,6 +175,7 @@ def to_dot(snap: GraphSnapshot, *, include_all: bool = False) -> str:
                 words.append(_short_sub(link.subscriber_qos))
             if link.verdict and link.verdict != "accepted":
                 words.append(f"DDS declined: {link.verdict}")
+            words += [f"relayed out as {m['outside']}" for m in link.relayed if m["direction"] == "out"]
             colour = PROTOCOL_COLOURS.get(link.protocol, OTHER_COLOUR)
             lines.append(f"  {_q('t:' + t)} -> {_q('n:' + link.subscriber)} [label={_q(chr(10).join(words))}, "
                          f"color={_q(colour)}, fontcolor={_q(colour)}, penwidth=2];")
@@ -137,7 +184,8 @@ def to_dot(snap: GraphSnapshot, *, include_all: bool = False) -> str:
                          f"color={_q(OTHER_COLOUR)}];")
     lines += ["  subgraph cluster_legend {", '    label="links"; fontsize=9; color="#cccccc";',
               '    node [shape=plaintext, fontsize=9];']
-    for i, (proto, colour) in enumerate(PROTOCOL_COLOURS.items()):
+    legend = dict(PROTOCOL_COLOURS, **({"relay (between graphs)": RELAY_COLOUR} if relays else {}))
+    for i, (proto, colour) in enumerate(legend.items()):
         lines.append(f'    "legend_{i}a" [label=""]; "legend_{i}b" [label={_q(proto)}, fontcolor={_q(colour)}];')
         lines.append(f'    "legend_{i}a" -> "legend_{i}b" [color={_q(colour)}, penwidth=2];')
     lines += ["  }", "}", ""]

@@ -66,6 +66,8 @@ def format_info(data: Dict[str, Any]) -> str:
         for ep in data[key]:
             sides[(key, ep["node"])] = ep["description"]
             lines.append(f" * {ep['node']} ({ep['uri'] or 'unknown URI'})  [{ep['kind']}] {ep['description']}")
+            if ep.get("relay"):
+                lines.append(f"     {ep['relay']['description']}")
         lines.append("")
     lines.append("Links:" if data["links"] else "Links: None")
     for link in data["links"]:
@@ -78,6 +80,8 @@ def format_info(data: Dict[str, Any]) -> str:
         if link["reason"]:
             label = "DDS declined" if link["verdict"] else "why TCPROS"
             lines.append(f"     {label}: {link['reason']}")
+        for marking in link.get("relayed", []):
+            lines.append(f"     {marking['summary']}")
     return "\n".join(lines)
 
 

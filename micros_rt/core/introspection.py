@@ -8,6 +8,9 @@ its protocol. A publication also gives the negotiation's last verdict per subscr
 (accepted, or declined with its kind and reason in words). A stock node has no such method: its server
 answers with a fault, which is how the tools tell the two apart.
 
+Programs built on micros_rt add a section of their own with :func:`register_section` (the relay's
+``"relay"``: what it carries between graphs); the tools read the sections they know and ignore the others.
+
 >>> json.loads(answer("/micros_rt_cli")[2])["node"]                     # doctest: +SKIP
 '/talker'
 """
@@ -17,13 +20,14 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import threading
 import time
 from typing import Any, Callable, Dict, List, Optional
 
 from . import rospy_compat as compat
 from ..negotiation import Verdict
 
-__all__ = ["INFO_METHOD", "INFO_VERSION", "answer", "install", "node_info"]
+__all__ = ["INFO_METHOD", "INFO_VERSION", "answer", "install", "node_info", "register_section", "unregister_section"]
 
 #: The XML-RPC method name on the node API.
 INFO_METHOD = "microsRtInfo"
@@ -31,6 +35,44 @@ INFO_METHOD = "microsRtInfo"
 INFO_VERSION = 1
 #: The node state the answers describe (set by :func:`install`; the node module owns it)
 _node_state: Optional[Callable[[], Any]] = None
+#: Extra sections of the answer: name -> callable returning a JSON-able dict (see :func:`register_section`)
+_sections: Dict[str, Callable[[], Dict[str, Any]]] = {}
+_sections_lock = threading.Lock()
+#: The answer's own keys, which no section may take
+_CORE_KEYS = frozenset({"version", "node", "pid", "time", "graph", "dds", "profile", "publications", "subscriptions"})
+
+
+def register_section(name: str, provider: Callable[[], Dict[str, Any]]) -> None:
+    """Add ``name: provider()`` to every ``microsRtInfo`` answer of this process (a program's own state, e.g.
+    the relay's ``"relay"``). ``provider`` runs on the XML-RPC thread at each call and returns a dict of
+    JSON-able values; if it raises, the section is ``{"error": "<what it said>"}``. Registering a name again
+    replaces the provider.
+
+    >>> register_section("relay", lambda: {"graph": "robot_a"})             # doctest: +SKIP
+    """
+    if not name or not isinstance(name, str) or name in _CORE_KEYS:
+        raise ValueError(f"microsRtInfo section name {name!r} is empty or one of the answer's own keys "
+                         f"({', '.join(sorted(_CORE_KEYS))})")
+    with _sections_lock:
+        _sections[name] = provider
+
+
+def unregister_section(name: str) -> None:
+    """Remove a section added by :func:`register_section` (no error if there is none)."""
+    with _sections_lock:
+        _sections.pop(name, None)
+
+
+def _extra_sections() -> Dict[str, Any]:
+    with _sections_lock:
+        providers = sorted(_sections.items())
+    out: Dict[str, Any] = {}
+    for name, provider in providers:
+        try:
+            out[name] = provider()
+        except Exception as exc:  # a program's own bug must not cost the tools the node's core info
+            out[name] = {"error": f"{type(exc).__name__}: {exc}"}
+    return out
 
 
 def _verdict_dict(verdict: Verdict) -> Dict[str, Any]:
@@ -85,6 +127,9 @@ def node_info() -> Dict[str, Any]:
         "profile": None if _node.profile is None else _node.profile.source,
         "publications": [_publication_info(p) for p in _node.publications.all()],
         "subscriptions": [_subscription_info(s) for s in _node.subscriptions.all()],
+        # the profile's links of limited bandwidth and the TCPROS connections paced across each
+        "links": [] if getattr(_node, "pacer", None) is None else _node.pacer.snapshot(),
+        **_extra_sections(),
     }
 
 

@@ -89,9 +89,10 @@ def main(argv: List[str]) -> int:
     node = micros_rt.node_info().name
     if args.exports_of is not None:   # a child: one priority's exports, nothing else
         share = Share(exports=frozenset([int(TransportPriority.parse(args.exports_of))]), imports=False,
-                      family=family(args.family_of or node, config))
+                      family=family(args.family_of or node, config), parent=args.family_of)
     else:
-        share = Share(exports=frozenset() if split else None, family=family(node, config))
+        share = Share(exports=frozenset() if split else None, family=family(node, config),
+                      children=tuple(process_name(node, p) for p in priorities) if split else ())
     children = None
     if split:
         children = Children(

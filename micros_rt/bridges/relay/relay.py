@@ -31,13 +31,14 @@ import dataclasses
 import math
 import threading
 import time
-from typing import Any, Callable, Dict, FrozenSet, List, Optional, Type
+from typing import Any, Callable, Dict, FrozenSet, List, Optional, Tuple, Type
 
 import genpy
 import roslib.message
 import rospy
 
 import micros_rt
+from micros_rt.core import introspection
 from micros_rt.core.lanes import Lane
 from micros_rt.qos import DURATION_MAX, SubscribeQoSOptions
 from micros_rt.core.runtime import dds_backend
@@ -63,6 +64,8 @@ class Share:
     imports: bool = True                       # imports and services
     family: FrozenSet[str] = frozenset()       # node names of the relay's other processes: what they publish
                                                # (imports) never goes back out
+    children: Tuple[str, ...] = ()             # the first process: node names of its child processes
+    parent: Optional[str] = None               # a child: the first process's node name
 
 
 class _Export:
@@ -109,6 +112,13 @@ class _Export:
         return {"topic": self.topic, "as": self.outside, "received": self.received, "sent": self.sent,
                 "rate_capped": self.rate_capped, "looped": self.looped, "no_reader": self.no_reader,
                 "superseded": lane_dropped, "dropped_queue_full": self.sub.statistics().dropped_queue_full}
+
+    def info(self) -> Dict[str, Any]:
+        """This export in the node's ``microsRtInfo`` (section ``relay``), for the ``micros-rt`` tools."""
+        return {"topic": self.topic, "outside": self.outside, "protocol": "DDS", "process": self.node,
+                "qos": self.rule.options.to_dict(),
+                "max_rate": None if math.isinf(self.rule.max_rate) else self.rule.max_rate,
+                "queue_size": self.rule.queue_size, "latch": self.rule.latch, "counters": self.stats()}
 
     def close(self) -> None:
         self.sub.unregister()
@@ -166,6 +176,19 @@ class _Import:
                 "dropped_filtered": s.dropped_filtered, "refused": self.feed.refused if self.feed else 0,
                 "bad_input": self.feed.bad_input if self.feed else 0, "lost": self.feed.lost if self.feed else 0,
                 "deadline_missed": s.deadline_missed}
+
+    def info(self) -> Dict[str, Any]:
+        """This import in the node's ``microsRtInfo`` (section ``relay``): the exporting relays seen now are
+        those whose DDS writers of the outside topic discovery knows."""
+        from micros_rt.transports.dds.types import dds_topic_name
+
+        exporters = sorted({t.get("node", "") for t in self._relay._directory.tags(dds_topic_name(self.rule.outside))
+                            if t.get("relay") == self.rule.origin and t.get("graph") != self._relay.graph_id} - {""})
+        options = self.rule.options
+        return {"outside": self.rule.outside, "local": self.rule.local, "origin": self.rule.origin,
+                "exporters": exporters, "protocol": "DDS", "process": self._relay.node,
+                "qos": None if options is None else options.to_dict(), "queue_size": self.rule.queue_size,
+                "latch": self.rule.latch, "counters": self.stats()}
 
     def close(self) -> None:
         self.sub.unregister()
@@ -259,6 +282,7 @@ class Relay:
         self._lock = threading.Lock()
 
     def start(self) -> "Relay":
+        introspection.register_section("relay", self.info)   # what the micros-rt tools show of this relay
         self._thread.start()
         return self
 
@@ -431,7 +455,17 @@ class Relay:
                 "imports": [i.stats() for i in imports],
                 "services": [s.stats() for s in services], "not_carried": dict(self._refused)}
 
+    def info(self) -> Dict[str, Any]:
+        """The ``relay`` section of this node's ``microsRtInfo``: the graph, this process's place among the
+        relay's processes, and what it carries (each export and import with its QoS and counters)."""
+        with self._lock:
+            exports, imports = list(self.exports.values()), list(self.imports.values())
+        return {"graph": self.config.graph, "node": self.node, "parent": self.share.parent,
+                "children": list(self.share.children), "exports": [e.info() for e in exports],
+                "imports": [i.info() for i in imports], "not_carried": dict(self._refused)}
+
     def close(self) -> None:
+        introspection.unregister_section("relay")
         self._stop.set()
         if self._thread.is_alive() and self._thread is not threading.current_thread():
             self._thread.join(timeout=5.0)
