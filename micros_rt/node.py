@@ -30,6 +30,7 @@ from .core.registry import EndpointRegistry
 from .core.subscription import DeadlineMissed, Subscriber, _Subscription
 from .log import flush as flush_logs
 from .transports.base import ProfileBackend, close_profile_backends, profile_backends
+from .transports.pacing import LinkPacer
 from .transports.dds.participant import close_participant
 from .exceptions import NodeNotInitializedError, QoSTypeError
 from .negotiation.hints import TransportHints
@@ -78,6 +79,7 @@ def init_node(name: str, argv: Optional[List[str]] = None, anonymous: bool = Fal
     with _node.lock:
         _node.initialized = True
         _node.profile = profile
+        _node.pacer = LinkPacer(profile.links) if profile is not None and profile.links else None
         _node.graph = _graph_id()
     rospy.on_shutdown(_close_all)
     threading.Thread(target=_housekeeping_loop, name="micros_rt housekeeping", daemon=True).start()
@@ -127,6 +129,11 @@ def _housekeeping_loop() -> None:
         except Exception:
             _log.exception("micros_rt: checking the ROS master failed (will retry)")
         now = time.monotonic()
+        if _node.pacer is not None:
+            try:
+                _node.pacer.rebalance()
+            except Exception:
+                _log.exception("micros_rt: sharing the profile's links among TCPROS connections failed (will retry)")
         for p in _node.publications.all():
             try:
                 p.housekeeping(now)
@@ -254,7 +261,7 @@ class NodeHandle:
 
         pub = _node.publications.acquire(
             resolved, lambda: _Publication(resolved, data_class, queue_size, latch, effective, dds=dds_backend(),
-                                           tag=_tag(), extra=_profile_backends()), reuse)
+                                           tag=_tag(), extra=_profile_backends(), pacer=_node.pacer), reuse)
         return Publisher(pub, _node.publications)
 
     # subscribers ----------------------------------------------------------

@@ -39,6 +39,7 @@ from ..qos import AdvertiseQoSOptions, is_lossless, priority_tos
 from ..log import nonblocking_logger
 
 if TYPE_CHECKING:
+    from ..transports.pacing import LinkPacer
     from ..transports.dds.backend import DDSBackend, DDSTopicWriter
 
 __all__ = ["Publisher"]
@@ -52,8 +53,9 @@ class _Publication:
 
     def __init__(self, topic: str, data_class: Type[genpy.Message], queue_size: Optional[int], latch: bool,
                  options: AdvertiseQoSOptions, *, dds: "Optional[DDSBackend]", tag: Dict[str, str],
-                 extra: Tuple[ProfileBackend, ...] = ()) -> None:
+                 extra: Tuple[ProfileBackend, ...] = (), pacer: "Optional[LinkPacer]" = None) -> None:
         self.topic = topic
+        self._pacer = pacer
         self.data_class = data_class
         self.latch = latch
         self.options = options
@@ -138,11 +140,16 @@ class _Publication:
                                   latch=self.latch, qos=self.options, node=compat.caller_id())
 
     def on_tcpros_connection(self, conn: Any, sock: Any) -> None:
-        """A TCPROS subscriber connected (rospy thread): mark its socket with our transport priority."""
+        """A TCPROS subscriber connected (rospy thread): mark its socket with our transport priority, and
+        pace it when it crosses one of the profile's links of limited bandwidth."""
         prio = self.options.transport_priority
         if sock is not None and mark_socket(sock, prio):
             _log.debug("micros_rt: topic %s: TCPROS link to %s marked TOS 0x%02x (%s)", self.topic,
                        getattr(conn, "endpoint_id", "?"), priority_tos(prio), prio.name)
+        paced = self._pacer.attach(sock, self.topic, prio) if self._pacer is not None and sock is not None else None
+        if paced:
+            _log.info("micros_rt: topic %s: TCPROS link to %s %s", self.topic, getattr(conn, "endpoint_id", "?"),
+                      paced)
 
     def _connection_closed(self, conn: compat.DDSConnection) -> None:
         with self.lock:

@@ -21,6 +21,7 @@ if TYPE_CHECKING:
     from .publication import _Publication
     from .subscription import _Subscription
     from ..transports.dds.backend import DDSBackend
+    from ..transports.pacing import LinkPacer
 
 _log = nonblocking_logger("rosout.micros_rt")  # rospy prints it and sends it to /rosout
 
@@ -36,6 +37,8 @@ class _NodeState:
     lock: threading.RLock = field(default_factory=threading.RLock)
     dds: "Optional[DDSBackend]" = None
     dds_start: Optional[threading.Thread] = None
+    #: TCP pacing across the profile's links of limited bandwidth (None: the profile names none)
+    pacer: "Optional[LinkPacer]" = None
 
 
 _node = _NodeState()

@@ -8,6 +8,11 @@ Format::
     subscribers:
       /chatter: {time_filter_duration: 1.0, deadline: 0.5}
       "/camera/*": {transport_hints: [TCPROS]}
+    links:
+      radio: {peers: [10.0.0.0/24], bandwidth: 40Mbit}
+
+``links`` names links of limited bandwidth (:mod:`micros_rt.qos.links`): this node's TCPROS connections of
+topics below HIGH to peers across one are paced below its rate, leaving room for HIGH topics.
 
 ``transport_hints`` (subscribers only) lists the transports the subscriber offers, in order, as
 ``TransportHints`` in code (which wins when it gives any). Across a constrained link a large LOW topic over
@@ -42,6 +47,7 @@ import yaml
 
 from micros_rt.exceptions import MicrosRtError, ProfileError, UnsupportedQoSError
 from micros_rt.negotiation.protocol import DDS, TCPROS
+from micros_rt.qos.links import LinkSpec, LinkSpecError, parse_link
 from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions
 from micros_rt.qos.topic_rules import TopicPattern, best_match
 
@@ -86,6 +92,8 @@ class QoSProfile:
         self._transports: dict[str, tuple[str, ...]] = {}
         # the raw ``mqtt`` section (broker and per-topic MQTT rules), validated by micros_rt.transports.mqtt.backend
         self.mqtt: Any = None
+        #: the ``links`` section: links of limited bandwidth, in file order
+        self.links: tuple[LinkSpec, ...] = ()
 
     def __repr__(self) -> str:
         return (
@@ -128,15 +136,19 @@ class QoSProfile:
             return cls(publishers, subscribers, source=source)
         _expect_mapping(root, source, "the top level", "a mapping with 'publishers'/'subscribers'")
         mqtt: Any = None
+        links: tuple[LinkSpec, ...] = ()
         for section_node, body in _pairs(root, source, ""):
             section = section_node.value
             if section == "mqtt":
                 mqtt = _construct(body)
                 continue
+            if section == "links":
+                links = _parse_links(body, source)
+                continue
             if section not in _SECTIONS:
                 raise ProfileError(
                     f"{_where(source, section_node)}: unknown section {section!r}; "
-                    f"expected {', '.join(repr(s) for s in _SECTIONS)}"
+                    f"expected {', '.join(repr(s) for s in (*_SECTIONS, 'links', 'mqtt'))}"
                 )
             if _is_null(body):
                 continue
@@ -165,6 +177,7 @@ class QoSProfile:
         profile = cls(publishers, subscribers, source=source)
         profile._transports = transports
         profile.mqtt = mqtt
+        profile.links = links
         return profile
 
     def advertise_options(self, topic: str) -> AdvertiseQoSOptions | None:
@@ -250,6 +263,20 @@ def _construct(node: yaml.Node) -> Any:
         return loader.construct_object(node, deep=True)
     finally:
         loader.dispose()
+
+
+def _parse_links(node: yaml.Node, source: str) -> tuple[LinkSpec, ...]:
+    if _is_null(node):
+        return ()
+    _expect_mapping(node, source, "links", "a mapping of link names to {bandwidth, peers or interface}")
+    found: list[LinkSpec] = []
+    for name_node, body in _pairs(node, source, "links"):
+        try:
+            found.append(parse_link(name_node.value, _construct(body)))
+        except LinkSpecError as exc:
+            where = f"links.{name_node.value}.{exc.key}" if exc.key else f"links.{name_node.value}"
+            raise ProfileError(f"{_where(source, body)}: {where}: {exc.text}") from None
+    return tuple(found)
 
 
 def _take_transport_hints(node: yaml.Node, source: str, path: str) -> tuple[str, ...] | None:

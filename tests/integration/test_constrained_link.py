@@ -90,3 +90,36 @@ def test_a_profile_sends_the_camera_over_tcp_and_the_control_topic_keeps_its_lat
     # measured 3.5-3.6 ms (p99 30-41 ms); the camera on DDS: 26 ms (p99 ~100 ms)
     assert summary["p50_ms"] < 15.0, summary
     assert summary["image"] >= 10, summary
+
+
+def test_a_link_in_the_publishers_profile_paces_the_camera_and_control_keeps_milliseconds(
+        shaped_pair: Hosts, spawn: harness.Spawner, tmp_path: Any) -> None:
+    # The camera over TCPROS (the test above) still fills the link's 50 ms queue: TCP grows its window until
+    # a packet is lost, and control's datagrams wait behind the queue (p99 30-41 ms). The publisher's profile
+    # names the link and its rate: the camera's TCP connection is paced below it (SO_MAX_PACING_RATE), the
+    # queue stays short, and the control topic's tail is the link's serialisation, not its queue.
+    sub_profile, pub_profile = tmp_path / "sub.yaml", tmp_path / "pub.yaml"
+    sub_profile.write_text("subscribers:\n  /image: {transport_hints: [TCPROS]}\n")
+    pub_profile.write_text(f"links:\n  radio: {{peers: [{shaped_pair.ip(1)}], bandwidth: 40Mbit}}\n")
+    sub = spawn(shaped_pair.run(1, link("sub", "--seconds", 90)),
+                env={**shaped_pair.env(1), "MICROS_RT_QOS_PROFILE": str(sub_profile)}, name="sub")
+    sub.wait_for("ready", 60)
+    pub = spawn(shaped_pair.run(0, link("pub", "--seconds", SECONDS)),
+                env={**shaped_pair.env(0), "MICROS_RT_QOS_PROFILE": str(pub_profile)}, name="pub")
+    pub.wait_for("ready", 90)
+    published = pub.wait_for("published", SECONDS + 90)
+    summary = sub.wait_for("summary", 120)
+    print(f"\n40 Mbit/s tbf link, camera over TCPROS paced by the publisher's profile: control published "
+          f"{published['control']} of {published['intended_control']}, delivered {summary['control']} (p50 "
+          f"{summary['p50_ms']:.1f} ms, p99 {summary['p99_ms']:.1f} ms); images published {published['image']}, "
+          f"delivered {summary['image']}; links {published['links']}")
+    assert summary["transports"] == ["DDS"] and summary["image_transports"] == ["TCPROS"], summary
+    # the camera's one connection, to the subscriber's host, was paced below 36 Mbit/s (90 % of the link)
+    (radio,) = published["links"]
+    (camera,) = radio["connections"]
+    assert camera["topic"] == "/image" and camera["peer"] == shaped_pair.ip(1), radio
+    assert 1e6 < camera["rate_bps"] <= 36e6 + 1, radio
+    assert published["control"] >= 0.9 * published["intended_control"], published
+    assert summary["control"] >= 0.99 * published["control"], (summary, published)
+    assert summary["p99_ms"] < 15.0, summary
+    assert summary["image"] >= 10, summary

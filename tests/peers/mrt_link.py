@@ -145,15 +145,20 @@ def main() -> int:
         elapsed = time.monotonic() - t0
         threads[0].join(args.seconds + 30)
         stats: Dict[str, Any] = {}
+        links: List[Any] = []
         if not args.stock:
             import dataclasses
+
+            from micros_rt.core.introspection import node_info   # what `micros-rt topic info` reads
+
+            links = node_info()["links"]   # the profile's links, each paced connection's rate and use
 
             stats = {"control": dataclasses.asdict(control_pub.statistics()),
                      "image": dataclasses.asdict(image_pub.statistics())}
             for name, p in (("control", control_pub), ("image", image_pub)):  # how often the link had no room
                 stats[name]["delayed"] = sum(lane.delayed for lane in getattr(p._pub, "lanes", ()))
         emit("published", control=counts["control"], image=counts.get("image", 0), seconds=elapsed,
-             intended_control=int(args.control_rate * args.seconds), statistics=stats)
+             intended_control=int(args.control_rate * args.seconds), statistics=stats, links=links)
         time.sleep(5.0)  # let what is in flight arrive (the subscriber reports on its own)
         emit("done")
         return 0
