@@ -15,6 +15,9 @@ Both in their default configuration otherwise. relay (with --stacks rospy,micros
 own rosmaster; the stock rospy publisher and subscriber of the rospy stack, with ``micros-rt relay`` on each
 host carrying /control (HIGH, history 100) and /image (LOW, history 2) between the graphs over DDS;
 relay_capped: the same with the camera exported at ``max_rate: 2`` (15 Mbit/s of the 40; 5 Hz would be 37);
+micros_rt_tcp: micros_rt with the camera over TCPROS (the subscriber's profile: ``/image: {transport_hints:
+[TCPROS]}``); micros_rt_paced: that, and the publisher's profile naming the link (``links: {radio: {peers:
+[<far host>], bandwidth: 40Mbit}}``), so the camera's TCP connection is paced at 36 Mbit/s.
 relay_one_process: robot A's relay with ``--one-process`` (both exports in one process, so both carry the DSCP of
 HIGH; by default the relay runs a process per priority). Each endpoint is its own process
 (tests/peers/mrt_link.py). Results: benchmarks/results/latest.json under "constrained_link" (the rest of
@@ -117,9 +120,10 @@ class Link:
                    ROS_HOME=f"/tmp/{self.ns[0]}", ROS_LOG_DIR=f"/tmp/{self.ns[0]}")
         return env
 
-    def run(self, i: int, argv: List[str], stderr: Any = subprocess.DEVNULL) -> "subprocess.Popen[str]":
-        return subprocess.Popen(["ip", "netns", "exec", self.ns[i], *argv], env=self.env(i), text=True,
-                                stdout=subprocess.PIPE, stderr=stderr)
+    def run(self, i: int, argv: List[str], stderr: Any = subprocess.DEVNULL,
+            env: Optional[Dict[str, str]] = None) -> "subprocess.Popen[str]":
+        return subprocess.Popen(["ip", "netns", "exec", self.ns[i], *argv], env={**self.env(i), **(env or {})},
+                                text=True, stdout=subprocess.PIPE, stderr=stderr)
 
     def down(self) -> None:
         for master in self.robot_masters:
@@ -154,17 +158,33 @@ RELAY_IMPORT = ("graph: robot_b\nimport:\n  /robot_a/control: {as: /control, que
                 "  /robot_a/image: {as: /image, queue_size: 2}\n")
 
 
+def profiles(stack: str, directory: Path, far_host: str) -> Tuple[Dict[str, str], Dict[str, str]]:
+    """The publisher's and the subscriber's environment for a micros_rt stack: micros_rt_tcp, the camera over
+    TCPROS (the subscriber's profile); micros_rt_paced, that and the link in the publisher's profile."""
+    pub: Dict[str, str] = {}
+    sub: Dict[str, str] = {}
+    if stack in ("micros_rt_tcp", "micros_rt_paced"):
+        (directory / "sub.yaml").write_text("subscribers:\n  /image: {transport_hints: [TCPROS]}\n")
+        sub["MICROS_RT_QOS_PROFILE"] = str(directory / "sub.yaml")
+    if stack == "micros_rt_paced":
+        (directory / "pub.yaml").write_text(f"links:\n  radio: {{peers: [{far_host}], bandwidth: 40Mbit}}\n")
+        pub["MICROS_RT_QOS_PROFILE"] = str(directory / "pub.yaml")
+    return pub, sub
+
+
 def one_run(kind: str, stack: str, seconds: float, image: List[str], mtu: int = 1500) -> Dict[str, Any]:
     relayed = stack.startswith("relay")
     link = Link(kind, masters=2 if relayed else 1, mtu=mtu)
     relays: List["subprocess.Popen[str]"] = []
     try:
         link.up()
-        python = MRT_PYTHON if stack == "micros_rt" else STOCK_PYTHON
-        extra = [] if stack == "micros_rt" else ["--stock"]
+        mrt = stack.startswith("micros_rt")
+        python = MRT_PYTHON if mrt else STOCK_PYTHON
+        extra = [] if mrt else ["--stock"]
+        config = Path(f"/tmp/{link.ns[0]}")
+        config.mkdir(parents=True, exist_ok=True)
+        pub_env, sub_env = profiles(stack, config, link.ip[1])
         if relayed:  # the relays start first; the far side's subscriber connects seconds after the near one
-            config = Path(f"/tmp/{link.ns[0]}")
-            config.mkdir(parents=True, exist_ok=True)
             cap = ", max_rate: 2" if stack == "relay_capped" else ""
             for i, text in enumerate((RELAY_EXPORT % cap, RELAY_IMPORT)):
                 (config / f"relay{i}.yaml").write_text(text)
@@ -172,9 +192,10 @@ def one_run(kind: str, stack: str, seconds: float, image: List[str], mtu: int = 
                 relays.append(link.run(i, [str(ROOT / ".venv" / "bin" / "micros-rt"), "relay", "--config",
                                            str(config / f"relay{i}.yaml"), "--poll-period", "0.3", "--json",
                                            "--stats-period", "2", *one]))
-        sub = link.run(1, [python, str(PEER), "sub", "--seconds", str(seconds + 60), *extra, *image])
+        sub = link.run(1, [python, str(PEER), "sub", "--seconds", str(seconds + 60), *extra, *image], env=sub_env)
         pub_extra = ["--start-delay", "8"] if relayed else []
-        pub = link.run(0, [python, str(PEER), "pub", "--seconds", str(seconds), *extra, *pub_extra, *image])
+        pub = link.run(0, [python, str(PEER), "pub", "--seconds", str(seconds), *extra, *pub_extra, *image],
+                       env=pub_env)
         published, summary = outcome(pub, sub, seconds)
     finally:
         relay_stats = stop_relays(relays)
@@ -189,6 +210,7 @@ def one_run(kind: str, stack: str, seconds: float, image: List[str], mtu: int = 
             "control_p99_ms": summary["p99_ms"], "control_max_ms": summary["max_ms"],
             "images_published": published["image"], "images_delivered": summary["image"],
             "image_p50_ms": summary["image_p50_ms"], "transports": summary["transports"],
+            "image_transports": summary.get("image_transports", []),
             "publisher_statistics": published.get("statistics") or {}, "control_cdf_ms": summary["control_cdf_ms"],
             **({"relay_statistics": relay_stats} if relays else {})}
 
@@ -237,9 +259,10 @@ def main() -> int:
     ap.add_argument("--image-size", default="640x480", help="the camera's WIDTHxHEIGHT")
     ap.add_argument("--mtu", type=int, default=1500, help="the link's MTU (9000: jumbo frames)")
     ap.add_argument("--rounds", type=int, default=1)
-    ap.add_argument("--stacks", default="rospy,micros_rt",
-                    help="rospy, micros_rt, relay, relay_capped (the camera exported at 2 Hz), relay_one_process; "
-                         "comma-separated")
+    ap.add_argument("--stacks", default="rospy,micros_rt,micros_rt_tcp,micros_rt_paced",
+                    help="rospy, micros_rt, micros_rt_tcp (camera over TCPROS), micros_rt_paced (and the link in "
+                         "the publisher's profile), relay, relay_capped (the camera exported at 2 Hz), "
+                         "relay_one_process; comma-separated")
     ap.add_argument("--out", default=str(RESULTS))
     args = ap.parse_args()
     if os.geteuid() != 0:
