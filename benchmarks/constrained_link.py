@@ -18,6 +18,8 @@ relay_capped: the same with the camera exported at ``max_rate: 2`` (15 Mbit/s of
 micros_rt_tcp: micros_rt with the camera over TCPROS (the subscriber's profile: ``/image: {transport_hints:
 [TCPROS]}``); micros_rt_paced: that, and the publisher's profile naming the link (``links: {radio: {peers:
 [<far host>], bandwidth: 40Mbit}}``), so the camera's TCP connection is paced at 36 Mbit/s.
+relay_link: robot A's relay told the link's rate (``link_bandwidth: 40Mbit``: its LOW process asks for a
+16.5 kB UDP send buffer, so it never queues more than ~33 kB in the link);
 relay_one_process: robot A's relay with ``--one-process`` (both exports in one process, so both carry the DSCP of
 HIGH; by default the relay runs a process per priority). Each endpoint is its own process
 (tests/peers/mrt_link.py). Results: benchmarks/results/latest.json under "constrained_link" (the rest of
@@ -186,7 +188,8 @@ def one_run(kind: str, stack: str, seconds: float, image: List[str], mtu: int = 
         pub_env, sub_env = profiles(stack, config, link.ip[1])
         if relayed:  # the relays start first; the far side's subscriber connects seconds after the near one
             cap = ", max_rate: 2" if stack == "relay_capped" else ""
-            for i, text in enumerate((RELAY_EXPORT % cap, RELAY_IMPORT)):
+            link_line = "link_bandwidth: 40Mbit\n" if stack == "relay_link" else ""
+            for i, text in enumerate((RELAY_EXPORT % cap + link_line, RELAY_IMPORT)):
                 (config / f"relay{i}.yaml").write_text(text)
                 one = ["--one-process"] if stack == "relay_one_process" and i == 0 else []
                 relays.append(link.run(i, [str(ROOT / ".venv" / "bin" / "micros-rt"), "relay", "--config",
@@ -261,7 +264,8 @@ def main() -> int:
     ap.add_argument("--rounds", type=int, default=1)
     ap.add_argument("--stacks", default="rospy,micros_rt,micros_rt_tcp,micros_rt_paced",
                     help="rospy, micros_rt, micros_rt_tcp (camera over TCPROS), micros_rt_paced (and the link in "
-                         "the publisher's profile), relay, relay_capped (the camera exported at 2 Hz), "
+                         "the publisher's profile), relay, relay_link (relay A told the link's rate), relay_capped (the "
+                         "camera exported at 2 Hz), "
                          "relay_one_process; comma-separated")
     ap.add_argument("--out", default=str(RESULTS))
     args = ap.parse_args()

@@ -13,9 +13,11 @@ waits behind the camera in the link's queue (measured: p50 40 ms, p99 126 ms; wi
 from __future__ import annotations
 
 import os
+import re
 import signal
+import subprocess
 from pathlib import Path
-from typing import Iterator, List, Tuple
+from typing import Any, Dict, Iterator, List, Tuple
 
 import pytest
 
@@ -38,12 +40,27 @@ def robots_on_radio(dds_domain: int) -> Iterator[Robots]:
         robots.down()
 
 
-def test_a_process_per_priority_puts_relayed_control_first_on_a_link_that_honours_dscp(
-        robots_on_radio: Robots, spawn: harness.Spawner, tmp_path: Path) -> None:
-    hosts, (env_a, env_b) = robots_on_radio.hosts, robots_on_radio.env
+@pytest.fixture
+def robots_on_fifo_radio(dds_domain: int) -> Iterator[Robots]:
+    robots = Robots(2)
+    try:
+        robots.up()
+        hosts = robots.hosts   # robot A's egress: 40 Mbit/s, one 50 ms FIFO queue (nothing honours DSCP)
+        hosts.sh("ip", "netns", "exec", hosts.names[0], "tc", "qdisc", "add", "dev", hosts.link_name(0), "root",
+                 "tbf", "rate", "40mbit", "burst", "32kbit", "latency", "50ms")
+        yield robots
+    finally:
+        robots.down()
+
+
+def _camera_and_control(robots: Robots, spawn: harness.Spawner, tmp_path: Path, a_extra: str = "") -> Dict[str, Any]:
+    """A stock publisher of /control (1 kHz) and /image (640x480, 30 Hz) in robot A, relayed (HIGH, LOW) to a
+    stock subscriber in robot B for SECONDS: the publisher's and subscriber's events, link bytes per htb class,
+    relay A's stats and process."""
+    hosts, (env_a, env_b) = robots.hosts, robots.env
     (tmp_path / "a.yaml").write_text("graph: robot_a\nexport:\n"
                                      "  /control: {transport_priority: HIGH, queue_size: 100}\n"
-                                     "  /image: {transport_priority: LOW, queue_size: 2}\n")
+                                     "  /image: {transport_priority: LOW, queue_size: 2}\n" + a_extra)
     (tmp_path / "b.yaml").write_text("graph: robot_b\nimport:\n  /robot_a/control: {as: /control, queue_size: 100}\n"
                                      "  /robot_a/image: {as: /image, queue_size: 2}\n")
     relay = [CLI, "relay", "--json", "--stats-period", "1", "--poll-period", "0.3", "--config"]
@@ -62,6 +79,14 @@ def test_a_process_per_priority_puts_relayed_control_first_on_a_link_that_honour
     summary = sub.wait_for("summary", 120)
     sent = {cls: n - before.get(cls, 0) for cls, n in hosts.class_bytes(0).items()}
     stats = relay_a.wait_for(lambda e: e.get("event") == "stats" and len(e["exports"]) == 2, 30)
+    return {"published": published, "summary": summary, "sent": sent, "stats": stats, "relay_a": relay_a,
+            "send_buffers": _send_buffers(hosts, relay_a.proc.pid)}
+
+
+def test_a_process_per_priority_puts_relayed_control_first_on_a_link_that_honours_dscp(
+        robots_on_radio: Robots, spawn: harness.Spawner, tmp_path: Path) -> None:
+    run = _camera_and_control(robots_on_radio, spawn, tmp_path)
+    published, summary, sent, stats = run["published"], run["summary"], run["sent"], run["stats"]
     print(f"\nrelayed over 40 Mbit/s htb (DSCP honoured), a process per priority: control delivered "
           f"{summary['control']} of {published['control']}, p50 {summary['p50_ms']:.1f} ms, p99 "
           f"{summary['p99_ms']:.1f} ms; images {summary['image']}; link bytes by class {sent}")
@@ -74,6 +99,40 @@ def test_a_process_per_priority_puts_relayed_control_first_on_a_link_that_honour
     # in one process: p50 40 ms (the link's queue); a process per priority 0.6 ms
     assert summary["p50_ms"] < 10.0, summary
     assert summary["image"] >= 10, summary
+
+
+def test_link_bandwidth_keeps_the_low_process_short_in_a_fifo_link(
+        robots_on_fifo_radio: Robots, spawn: harness.Spawner, tmp_path: Path) -> None:
+    # On a FIFO link nothing tells the processes' packets apart: the LOW process's camera datagrams fill the
+    # 50 ms queue (control p50/p99 23-25/31-32 ms through relays, benchmarks/results/relay_link.md). Told the
+    # link's rate, the LOW process asks for a 16.5 kB send buffer, and never has more than ~33 kB queued.
+    run = _camera_and_control(robots_on_fifo_radio, spawn, tmp_path, "link_bandwidth: 40Mbit\n")
+    published, summary, relay_a = run["published"], run["summary"], run["relay_a"]
+    print(f"\nrelayed over 40 Mbit/s tbf (FIFO), link_bandwidth 40Mbit: control delivered {summary['control']} of "
+          f"{published['control']}, p50 {summary['p50_ms']:.1f} ms, p99 {summary['p99_ms']:.1f} ms; images "
+          f"{summary['image']}")
+    buffers = run["send_buffers"]
+    print(f"UDP send buffers (SO_SNDBUF as the kernel holds them) per relay process: {buffers}")
+    assert 33_000 in buffers["LOW"], buffers   # 16,500 B asked, doubled by the kernel (socket(7))
+    assert 33_000 not in buffers["HIGH"], buffers
+    assert summary["control"] >= 0.99 * published["control"], (summary, published)
+    assert summary["p50_ms"] < 10.0 and summary["p99_ms"] < 20.0, summary
+    assert summary["image"] >= 10, summary
+
+
+def _send_buffers(hosts: Any, relay_pid: int) -> Dict[str, List[int]]:
+    """The UDP sockets' send buffers (``ss -m``'s ``tb``) of each child of ``relay_pid``, by the priority it
+    exports (its ``--exports-of``)."""
+    out = subprocess.run(hosts.run(0, ["ss", "-uapmnH"]), capture_output=True, text=True, timeout=20,
+                         check=True).stdout
+    sockets = re.sub(r"\n\s+", " ", out).split("\n")   # ss puts skmem on a continuation line
+    found: Dict[str, List[int]] = {}
+    for pid in _children(relay_pid):
+        argv = Path(f"/proc/{pid}/cmdline").read_text().split("\0")
+        priority = argv[argv.index("--exports-of") + 1]
+        found[priority] = [int(m) for line in sockets if f"pid={pid}," in line
+                           for m in re.findall(r"\btb(\d+)", line)]
+    return found
 
 
 def _children(pid: int) -> List[int]:

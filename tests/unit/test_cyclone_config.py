@@ -14,6 +14,7 @@ from micros_rt.transports.dds.participant import (
     cyclone_config,
     lease_duration,
     micros_rt_defaults,
+    send_buffer,
 )
 from micros_rt.exceptions import DDSUnavailableError
 
@@ -143,3 +144,16 @@ def test_loopback_discovery_reaches_a_sixty_node_robot_inside_the_domains_ports(
     assert LOOPBACK_MAX_PARTICIPANT_INDEX + 1 >= 60
     # Cyclone's ports: 7400 + 250 x domain + 10 (+1 user data) + 2 x index: the highest stays in its domain
     assert 10 + 2 * LOOPBACK_MAX_PARTICIPANT_INDEX + 1 < 250
+
+
+@pytest.mark.parametrize("raw, size", [("", None), ("16384", 16384), ("16kB", 16384), ("1 MiB", 1 << 20)])
+def test_send_buffer_from_environment(raw: str, size: object) -> None:
+    assert send_buffer({"MICROS_RT_SEND_BUFFER": raw}) == size
+    config = micros_rt_defaults({"MICROS_RT_SEND_BUFFER": raw, "ROS_IP": "127.0.0.1"})
+    assert ("<SocketSendBufferSize" in config) == (size is not None), config
+
+
+@pytest.mark.parametrize("raw", ["small", "16 bytes", "100", "-5k"])
+def test_a_bad_send_buffer_says_what_is_expected(raw: str) -> None:
+    with pytest.raises(DDSUnavailableError, match="MICROS_RT_SEND_BUFFER"):
+        send_buffer({"MICROS_RT_SEND_BUFFER": raw})

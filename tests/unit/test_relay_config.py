@@ -7,7 +7,7 @@ import math
 import pytest
 
 from micros_rt import TransportPriority
-from micros_rt.bridges.relay.config import RelayConfigError, parse_config
+from micros_rt.bridges.relay.config import RelayConfigError, parse_config, send_buffer_for
 
 GOOD = """\
 graph: robot_a
@@ -72,6 +72,8 @@ def test_the_issue_s_example_and_more() -> None:
     ("graph: a\nimport_services:\n  /b/s: {retries: 3}\n", "f.yaml:3: import_services['/b/s'].retries: unknown"),
     ("graph: a\nimport_services:\n  /a/s: {}\n", "f.yaml:3: import_services: '/a/s' is invalid"),
     ("graph: [a\n", "f.yaml: not valid YAML"),
+    ("graph: a\nlink_bandwidth: 40MB\n", "f.yaml:2: link_bandwidth: '40MB' is not a bandwidth"),
+    ("graph: a\nlink_bandwidth: {rate: 4}\n", "f.yaml:2: link_bandwidth: "),
 ])
 def test_errors_name_file_line_and_key(text: str, where: str) -> None:
     with pytest.raises(RelayConfigError) as info:
@@ -79,3 +81,11 @@ def test_errors_name_file_line_and_key(text: str, where: str) -> None:
     message = str(info.value)
     assert where in message, message
     assert "\n" not in message.strip() or where == "f.yaml: not valid YAML", message
+
+
+def test_link_bandwidth_sizes_the_low_process_send_buffer() -> None:
+    config = parse_config("graph: a\nexport:\n  /image: {transport_priority: LOW}\nlink_bandwidth: 40 Mbit/s\n")
+    assert config.link_bandwidth == 40e6
+    assert parse_config("graph: a\n").link_bandwidth is None
+    # ~3.3 ms of the link (the kernel holds twice that), never below 16 kB (smaller starved the camera)
+    assert send_buffer_for(40e6) == 16_500 and send_buffer_for(1e9) == 412_500 and send_buffer_for(1e6) == 16_384

@@ -15,6 +15,7 @@ priority's packets get their own DSCP); ``--one-process`` keeps them all in this
 from __future__ import annotations
 
 import argparse
+import os
 import json
 import sys
 import threading
@@ -63,7 +64,7 @@ def main(argv: List[str]) -> int:
     ros_args = [a for a in argv if ":=" in a]
     args = _parser().parse_args([a for a in argv if ":=" not in a])
 
-    from .config import RelayConfigError, load_config
+    from .config import RelayConfigError, load_config, send_buffer_for
 
     try:
         config = load_config(args.config)
@@ -85,6 +86,12 @@ def main(argv: List[str]) -> int:
 
     from .relay import Relay, Share
 
+    # this process's exports: a child's one priority; the first process's, unless children carry them
+    mine = [TransportPriority.parse(args.exports_of)] if args.exports_of is not None else ([] if split else priorities)
+    if config.link_bandwidth is not None and mine and max(mine) < TransportPriority.HIGH:
+        # only exports below HIGH cross the link from here: keep what this process queues in it short
+        # (before init_node starts DDS; a value the user set stays)
+        os.environ.setdefault("MICROS_RT_SEND_BUFFER", str(send_buffer_for(config.link_bandwidth)))
     micros_rt.init_node(args.name or f"relay_{config.graph}", argv=[sys.argv[0], *ros_args])
     node = micros_rt.node_info().name
     if args.exports_of is not None:   # a child: one priority's exports, nothing else

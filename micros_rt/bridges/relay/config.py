@@ -15,12 +15,19 @@ the line and the key.
     export_services: [/add_two_ints]  # this graph's services other graphs may call
     import_services:                  # other graphs' services, offered in this graph
       /robot_b/add_two_ints: {timeout: 5, as: /b/add_two_ints}
+    link_bandwidth: 40Mbit            # the slow link the exports cross (optional; see below)
 
 An export's options are :class:`~micros_rt.AdvertiseQoSOptions` keys (the DDS writer's QoS on the link) plus
 ``max_rate`` (Hz, applied before the link: newer messages within 1/max_rate of the last one sent are not
 sent, counted), ``queue_size`` (the writer's history; null: lossless) and ``latch``. An import's options are
 :class:`~micros_rt.SubscribeQoSOptions` keys (deadline, time filter, ...) plus ``as``, ``queue_size`` and
 ``latch``. Option values are checked as in a QoS profile (:mod:`micros_rt.qos.profiles`).
+
+``link_bandwidth`` (bits per second, ``40Mbit`` as in a profile's ``links``) is the rate of the link the
+exports cross. The relay process that carries only exports below HIGH then asks for a small UDP send buffer
+(:func:`send_buffer_for`): what it has queued in the link never exceeds about twice that, so HIGH exports
+(another process, another socket) wait at most a few milliseconds behind it on a link that does not honour
+DSCP.
 """
 
 from __future__ import annotations
@@ -35,11 +42,12 @@ import yaml
 
 from ...exceptions import MicrosRtError
 from ...qos import AdvertiseQoSOptions, SubscribeQoSOptions
+from ...qos.links import parse_bandwidth
 from ...qos.profiles import _construct, _expect_mapping, _is_null, _pairs, _parse_options, _where
 from ...qos.topic_rules import TopicPattern
 
 __all__ = ["ExportRule", "ImportRule", "RelayConfig", "RelayConfigError", "ServiceImport", "load_config",
-           "parse_config"]
+           "parse_config", "send_buffer_for"]
 
 _GRAPH_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 _TOPIC_NAME = re.compile(r"^(/[A-Za-z][A-Za-z0-9_]*)+$")
@@ -86,10 +94,27 @@ class RelayConfig:
     source: str = "<string>"
     export_services: Tuple[str, ...] = ()
     import_services: Tuple[ServiceImport, ...] = ()
+    link_bandwidth: Optional[float] = None   #: bits per second of the link the exports cross, if given
 
     def outside_name(self, topic: str) -> str:
         """The name an exported ``topic`` has outside this graph: ``/<graph><topic>``."""
         return f"/{self.graph}{topic}"
+
+
+#: the queue a LOW relay process may keep in the link, in seconds of the link's rate (the kernel doubles
+#: what is asked: 2 x 3.3 ms at 40 Mbit/s is 16.5 kB asked, 33 kB held)
+_QUEUE_SECONDS = 0.0033
+#: below this the camera starved (measured on 40 Mbit/s tbf: 16 kB asked, 33 frames in 6 s; 8 kB, 21; 4 kB, 2)
+_MIN_SEND_BUFFER = 16 * 1024
+
+
+def send_buffer_for(bandwidth: float) -> int:
+    """The UDP send buffer (bytes) a relay process of LOW exports asks for on a link of ``bandwidth`` bit/s.
+
+    >>> send_buffer_for(40e6), send_buffer_for(1e9), send_buffer_for(5e6)
+    (16500, 412500, 16384)
+    """
+    return max(_MIN_SEND_BUFFER, int(bandwidth / 8 * _QUEUE_SECONDS))
 
 
 def load_config(path: str) -> RelayConfig:
@@ -125,6 +150,7 @@ def _parse(root: yaml.Node, source: str) -> RelayConfig:
     import_nodes: List[Tuple[yaml.ScalarNode, yaml.Node]] = []
     export_services: List[str] = []
     service_nodes: List[Tuple[yaml.ScalarNode, yaml.Node]] = []
+    link_bandwidth: Optional[float] = None
     for key_node, body in _pairs(root, source, ""):
         key = key_node.value
         if key == "graph":
@@ -147,9 +173,14 @@ def _parse(root: yaml.Node, source: str) -> RelayConfig:
             if not _is_null(body):
                 _expect_mapping(body, source, "import_services", "a mapping of outside service names to options")
                 service_nodes = _pairs(body, source, "import_services")
+        elif key == "link_bandwidth":
+            try:
+                link_bandwidth = parse_bandwidth(_construct(body) if isinstance(body, yaml.ScalarNode) else body)
+            except ValueError as exc:
+                raise RelayConfigError(f"{_where(source, body)}: link_bandwidth: {exc}") from None
         else:
             raise RelayConfigError(f"{_where(source, key_node)}: unknown key {key!r}; expected 'graph', 'export', "
-                                   f"'import', 'export_services', 'import_services'")
+                                   f"'import', 'export_services', 'import_services', 'link_bandwidth'")
     if graph is None:
         raise RelayConfigError(f"{source}:1: graph: missing; name this graph (e.g. 'graph: robot_a'): exported "
                                f"topics are /<graph>/<topic> outside it")
@@ -166,7 +197,8 @@ def _parse(root: yaml.Node, source: str) -> RelayConfig:
                                    f"both published as {incoming.local}")
         locals_seen[incoming.local] = incoming.outside
     services = tuple(_service_import(k, v, source, graph) for k, v in service_nodes)
-    return RelayConfig(graph, tuple(exports), tuple(imports), source, tuple(export_services), services)
+    return RelayConfig(graph, tuple(exports), tuple(imports), source, tuple(export_services), services,
+                       link_bandwidth)
 
 
 def _service_names(node: yaml.Node, source: str) -> List[str]:
