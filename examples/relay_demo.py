@@ -46,6 +46,7 @@ graph: robot_a                    # outside A these are /robot_a/control and /ro
 export:
   /control: {transport_priority: HIGH, queue_size: 100}             # DSCP AF41: first where honoured
   /camera/image: {using_best_effort_protocol: true, max_rate: %g}    # newest frames only, at most %g Hz
+link_bandwidth: 40Mbit            # the link's rate: the camera's process keeps its queue in it short
 """
 # Robot B's relay: which other graphs' topics B's graph gets, under which names.
 RELAY_B = """\

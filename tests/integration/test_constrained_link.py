@@ -10,6 +10,9 @@ without the GIL, and while the socket is congested the control topic's samples l
 
 from __future__ import annotations
 
+import collections
+import re
+import subprocess
 from typing import Any, Iterator, List
 
 import pytest
@@ -104,11 +107,26 @@ def test_a_link_in_the_publishers_profile_paces_the_camera_and_control_keeps_mil
     sub = spawn(shaped_pair.run(1, link("sub", "--seconds", 90)),
                 env={**shaped_pair.env(1), "MICROS_RT_QOS_PROFILE": str(sub_profile)}, name="sub")
     sub.wait_for("ready", 60)
+    # what leaves the publisher's host, IP header and all: each topic's packets carry its own DSCP
+    capture = subprocess.Popen(shaped_pair.run(0, ["tcpdump", "-i", shaped_pair.link_name(0), "-nn", "-v", "-l",
+                                                   "-c", "3000", "src", "host", shaped_pair.ip(0)]),
+                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     pub = spawn(shaped_pair.run(0, link("pub", "--seconds", SECONDS)),
                 env={**shaped_pair.env(0), "MICROS_RT_QOS_PROFILE": str(pub_profile)}, name="pub")
     pub.wait_for("ready", 90)
     published = pub.wait_for("published", SECONDS + 90)
     summary = sub.wait_for("summary", 120)
+    try:
+        dump, _ = capture.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        capture.kill()
+        dump, _ = capture.communicate()
+    marks = collections.Counter(re.findall(r"\(tos (0x[0-9a-f]+),.*? proto (\w+) ", dump))
+    print(f"\npackets from the publisher's host by (TOS, protocol), of {sum(marks.values())} captured: {dict(marks)}")
+    # one process, two DSCP values: the HIGH control topic's DDS datagrams AF41 (0x88), the LOW camera's
+    # TCPROS segments CS1+ (0x28); Cyclone alone would have marked both 0x88
+    assert marks[("0x88", "UDP")] >= 50 and marks[("0x28", "TCP")] >= 500, marks
+    assert marks[("0x28", "UDP")] == 0 and marks[("0x88", "TCP")] == 0, marks
     print(f"\n40 Mbit/s tbf link, camera over TCPROS paced by the publisher's profile: control published "
           f"{published['control']} of {published['intended_control']}, delivered {summary['control']} (p50 "
           f"{summary['p50_ms']:.1f} ms, p99 {summary['p99_ms']:.1f} ms); images published {published['image']}, "
