@@ -53,7 +53,8 @@ def sh(*argv: str) -> None:
 
 
 class Link:
-    """Two hosts joined by a veth pair; the publisher host's egress shaped as ``kind`` says.
+    """Two hosts joined by a veth pair; the publisher host's egress shaped as ``kind`` says; ``loopback``:
+    one namespace, both ends on its 127.0.0.1 (a host's CPU as the bottleneck, no link).
 
     Also examples/relay_demo.py's two robots (``names``: its namespaces' names).
     """
@@ -67,9 +68,15 @@ class Link:
         self.ns = names or [f"mrtCL{i}_{pid}" for i in range(2)]
         self.dev = [f"cl{i}_{pid}"[:15] for i in range(2)]
         self.ip = [f"10.79.{pid % 200 + 20}.{i + 1}" for i in range(2)]
+        if kind == "loopback":
+            self.ns, self.ip = [self.ns[0]] * 2, ["127.0.0.1"] * 2
         self.master: Optional["subprocess.Popen[bytes]"] = None
 
     def up(self) -> "Link":
+        if self.kind == "loopback":
+            sh("ip", "netns", "add", self.ns[0])
+            sh("ip", "-n", self.ns[0], "link", "set", "lo", "up")
+            return self._masters_up()
         for ns in self.ns:
             sh("ip", "netns", "add", ns)
         sh("ip", "link", "add", self.dev[0], "mtu", str(self.mtu), "type", "veth", "peer", "name", self.dev[1], "mtu",
@@ -96,6 +103,9 @@ class Link:
             for tos in PRIORITY_TOS:
                 sh(*tc, "filter", "add", "dev", dev, "parent", "1:", "protocol", "ip", "prio", "1", "u32", "match",
                    "ip", "tos", tos, "0xfc", "flowid", "1:10")
+        return self._masters_up()
+
+    def _masters_up(self) -> "Link":
         for i in range(self.masters):
             self.robot_masters.append(subprocess.Popen(
                 ["ip", "netns", "exec", self.ns[i], "/usr/bin/rosmaster", "--core", "-p", "11311"],
@@ -134,7 +144,7 @@ class Link:
                 master.wait(5)
             except subprocess.TimeoutExpired:
                 master.kill()
-        for ns in self.ns:
+        for ns in dict.fromkeys(self.ns):
             subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=20)
 
 
@@ -258,7 +268,8 @@ def eth0_tx() -> Optional[int]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=10.0)
-    ap.add_argument("--links", default="tbf,htb", help="tbf, htb, none (unshaped); comma-separated")
+    ap.add_argument("--links", default="tbf,htb",
+                    help="tbf, htb, none (unshaped), loopback (one host: both ends on 127.0.0.1); comma-separated")
     ap.add_argument("--image-size", default="640x480", help="the camera's WIDTHxHEIGHT")
     ap.add_argument("--mtu", type=int, default=1500, help="the link's MTU (9000: jumbo frames)")
     ap.add_argument("--rounds", type=int, default=1)
@@ -271,6 +282,8 @@ def main() -> int:
     args = ap.parse_args()
     if os.geteuid() != 0:
         raise SystemExit("constrained_link.py makes network namespaces and qdiscs: run it as root")
+    if "loopback" in args.links.split(",") and any(stack.startswith("relay") for stack in args.stacks.split(",")):
+        raise SystemExit("--links loopback is one host with one master; the relay stacks need two robots (tbf, htb, none)")
     tx_before = eth0_tx()
     t0 = time.monotonic()
     results: Dict[str, Dict[str, List[Dict[str, Any]]]] = {}
