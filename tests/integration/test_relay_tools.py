@@ -47,6 +47,20 @@ def by_node(endpoints: List[Dict[str, Any]]) -> Dict[str, Dict[str, Any]]:
     return {ep["node"]: ep for ep in endpoints}
 
 
+
+def _at(lines: List[str], prefix: str) -> int:
+    """The index of the first of ``lines`` that starts with ``prefix``."""
+    return next(i for i, line in enumerate(lines) if line.startswith(prefix))
+
+
+def _assert_marked(lines: List[str], endpoint: str, link: str, marked: str) -> None:
+    """``topic info``'s text: the line under ``endpoint`` starts with ``marked`` (then its counters), and the
+    link's lines under ``link`` carry the marking without them."""
+    at = _at(lines, endpoint)
+    assert lines[at + 1].strip().startswith(marked), lines[at + 1]
+    at = _at(lines, link)
+    assert marked.rsplit("; ", 1)[0] in [line.strip() for line in lines[at + 1:at + 6]], lines[at:at + 6]
+
 def test_topic_info_and_graph_mark_relayed_links(robots: Tuple[harness.RosMaster, harness.RosMaster],
                                                  spawn: harness.Spawner, tmp_path: Path) -> None:
     a, b = robots
@@ -90,13 +104,10 @@ def test_topic_info_and_graph_mark_relayed_links(robots: Tuple[harness.RosMaster
     marked = (f"relayed out as /robot_a/chatter (DDS, HIGH, reliable, max_rate 50 Hz) by relay node "
               f"{RELAY_A_HIGH} (a process of relay {RELAY_A_FIRST})")
     lines = text.splitlines()
-    at = next(i for i, line in enumerate(lines) if line.startswith(f" * {RELAY_A_HIGH} ("))
-    assert lines[at + 1].strip().startswith(marked + "; sent "), lines[at + 1]
-    at = next(i for i, line in enumerate(lines) if line.startswith(f" * {TALKER} -> {RELAY_A_HIGH}: TCPROS"))
-    assert marked in [line.strip() for line in lines[at + 1:at + 6]], lines[at:at + 6]
-    plain_at = next(i for i, line in enumerate(lines) if line.startswith(f" * {PLAIN} ("))
+    _assert_marked(lines, f" * {RELAY_A_HIGH} (", f" * {TALKER} -> {RELAY_A_HIGH}: TCPROS", marked + "; sent ")
+    plain_at = _at(lines, f" * {PLAIN} (")
     assert "relayed" not in lines[plain_at + 1], lines[plain_at + 1]
-    at = next(i for i, line in enumerate(lines) if line.startswith(f" * {TALKER} -> {PLAIN}: TCPROS"))
+    at = _at(lines, f" * {TALKER} -> {PLAIN}: TCPROS")
     assert not any("relayed" in line for line in lines[at:at + 4]), lines[at:at + 4]
 
     # the first process names its children (its own microsRtInfo)
@@ -123,11 +134,9 @@ def test_topic_info_and_graph_mark_relayed_links(robots: Tuple[harness.RosMaster
     marked = (f"relayed in from graph robot_a (outside topic /robot_a/chatter, exported by {RELAY_A_HIGH}) by "
               f"relay node {RELAY_B_NODE}")
     lines = cp.stdout.splitlines()
-    at = next(i for i, line in enumerate(lines) if line.startswith(f" * {RELAY_B_NODE} ("))
-    assert lines[at + 1].strip().startswith(marked + "; published "), lines[at + 1]
-    at = next(i for i, line in enumerate(lines) if line.startswith(f" * {RELAY_B_NODE} -> {LISTENER_B}: TCPROS"))
-    assert marked in [line.strip() for line in lines[at + 1:at + 6]], lines[at:at + 6]
-    at = next(i for i, line in enumerate(lines) if line.startswith(f" * {LISTENER_B} ("))
+    _assert_marked(lines, f" * {RELAY_B_NODE} (", f" * {RELAY_B_NODE} -> {LISTENER_B}: TCPROS",
+                   marked + "; published ")
+    at = _at(lines, f" * {LISTENER_B} (")
     assert "relayed" not in lines[at + 1], lines[at + 1]
 
     # micros-rt graph --dot: relays as relays, their edges to and from the outside topic
