@@ -212,21 +212,28 @@ def check_dds_network(env: Mapping[str, str], interfaces: Optional[Mapping[str, 
         participant.cyclone_config(env)
         lease = participant.lease_duration(env)
     except DDSUnavailableError as exc:
+        if "MICROS_RT_SEND_BUFFER" in str(exc):
+            return Check(name, FAIL, str(exc), "unset MICROS_RT_SEND_BUFFER (Cyclone's own send buffer) or give it a "
+                                               "size such as 16kB, only in a process whose DDS topics are all below HIGH")
         return Check(name, FAIL, str(exc), "unset MICROS_RT_LEASE_DURATION or give it 0.5..3600 seconds")
+    sending = participant.send_buffer(env)
+    settings = f"lease {lease:g} s"
+    if sending is not None:
+        settings += f", UDP send buffer {sending} B (MICROS_RT_SEND_BUFFER)"
     user = env.get("CYCLONEDDS_URI", "").strip()
     if user:
         try:
             network = _user_network(user)
         except ValueError as exc:
             return Check(name, FAIL, str(exc), "point CYCLONEDDS_URI at a readable Cyclone XML file, or unset it")
-        return Check(name, OK, f"{network} (CYCLONEDDS_URI={user}, layered over micros_rt's defaults: lease "
-                     f"{lease:g} s)")
+        return Check(name, OK, f"{network} (CYCLONEDDS_URI={user}, layered over micros_rt's defaults: "
+                     f"{settings})")
     address = participant._ros_address(env)
     if participant._is_loopback(env):
         return Check(name, OK, f"interface lo ({address} is loopback): multicast off, unicast discovery on "
-                     f"127.0.0.1, 63 KB fragments, lease {lease:g} s")
+                     f"127.0.0.1, 63 KB fragments, {settings}")
     iface = ifaces.get(address, "no interface holds it")
-    return Check(name, OK, f"interface {iface} ({address}): multicast on (Cyclone's default), lease {lease:g} s")
+    return Check(name, OK, f"interface {iface} ({address}): multicast on (Cyclone's default), {settings}")
 
 
 def check_domain(env: Mapping[str, str]) -> Check:

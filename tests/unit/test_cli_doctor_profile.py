@@ -76,6 +76,10 @@ def test_dds_network_reports_what_micros_rt_picks(tmp_path: Path) -> None:
     assert missing.status == FAIL and "cannot be read" in missing.detail and missing.fix
     lease = check_dds_network({"ROS_IP": "127.0.0.1", "MICROS_RT_LEASE_DURATION": "0"}, IFACES)
     assert lease.status == FAIL and "MICROS_RT_LEASE_DURATION" in lease.fix
+    small = check_dds_network({"ROS_IP": "127.0.0.1", "MICROS_RT_SEND_BUFFER": "tiny"}, IFACES)
+    assert small.status == FAIL and "MICROS_RT_SEND_BUFFER" in small.detail and "16kB" in small.fix, small
+    sized = check_dds_network({"ROS_IP": "127.0.0.1", "MICROS_RT_SEND_BUFFER": "16kB"}, IFACES)
+    assert sized.status == OK and "UDP send buffer 16384 B" in sized.detail, sized
 
 
 def test_cyclone_starts_with_micros_rt_loopback_configuration() -> None:
