@@ -213,8 +213,9 @@ def check_dds_network(env: Mapping[str, str], interfaces: Optional[Mapping[str, 
         lease = participant.lease_duration(env)
     except DDSUnavailableError as exc:
         if "MICROS_RT_SEND_BUFFER" in str(exc):
-            return Check(name, FAIL, str(exc), "unset MICROS_RT_SEND_BUFFER (Cyclone's own send buffer) or give it a "
-                                               "size such as 16kB, only in a process whose DDS topics are all below HIGH")
+            return Check(name, FAIL, str(exc),
+                         "unset MICROS_RT_SEND_BUFFER (Cyclone's own send buffer) or give it a size such as 16kB, "
+                         "only in a process whose DDS topics are all below HIGH")
         return Check(name, FAIL, str(exc), "unset MICROS_RT_LEASE_DURATION or give it 0.5..3600 seconds")
     sending = participant.send_buffer(env)
     settings = f"lease {lease:g} s"
