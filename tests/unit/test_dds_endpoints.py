@@ -62,3 +62,44 @@ def test_matched_reader_guids_follow_readers_that_come_and_go_under_concurrent_c
         for r in readers:
             r.close()
         writer.close()
+
+
+def test_large_samples_are_taken_with_the_gil_released_and_arrive_the_same() -> None:
+    """A reader whose last sample was large takes the next through dds_takecdr (Cyclone's copy with the GIL
+    released); the bytes are the ones ddspy_take gives, and small samples go back to ddspy_take."""
+    from micros_rt.transports.dds import endpoints
+
+    participant = get_participant()
+    assert participant is not None
+    dds_type = dds_type_for(String)
+    topic = "rt/micros_rt_test_released_take"
+    writer = DDSWriter(participant, topic, dds_type, plain_writer_qos(queue_size=10, latch=False))
+    reader = DDSReader(participant, topic, dds_type, plain_reader_qos(queue_size=10))
+    try:
+        harness.wait_until(lambda: writer.matched_count == 1, 10, message="the reader matched")
+        big = String(data="x" * 200_000 + "end")
+
+        def one() -> bytes:
+            taken: List[bytes] = []
+
+            def took() -> bool:
+                taken.extend(d for d, i in reader.take_raw(8) if i.valid_data)
+                return bool(taken)
+            harness.wait_until(took, 10, interval=0.01, message="a sample taken")
+            assert len(taken) == 1, len(taken)
+            return taken[0]
+
+        writer.write_serialized(dds_type.encode(big))
+        first = one()                                  # ddspy_take (nothing large seen yet)
+        assert reader._large and isinstance(first, bytes)
+        writer.write_serialized(dds_type.encode(big))
+        second = one()                                 # dds_takecdr, copied without the GIL
+        assert isinstance(second, bytes) and second == first
+        assert dds_type.decode(second).data == big.data
+        writer.write_serialized(dds_type.encode(String(data="small")))
+        assert dds_type.decode(one()).data == "small"  # taken the released way (the last one was large)...
+        assert not reader._large                       # ...and the next by ddspy_take again
+        assert endpoints._takecdr is not None
+    finally:
+        reader.close()
+        writer.close()

@@ -33,6 +33,8 @@ _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
 
 #: Samples at least this large (bytes) are written with Python's GIL released (:func:`write_released`).
 RELEASED_WRITE_MIN = 16 * 1024
+#: A reader whose last sample was at least this large (bytes) takes the next ones with the GIL released.
+RELEASED_TAKE_MIN = 64 * 1024
 
 
 class _SampleContainer(ctypes.Structure):
@@ -238,6 +240,98 @@ class WriterInfo:
         self.participant_guid = participant_guid
 
 
+class _CSampleInfo(ctypes.Structure):
+    # Cyclone's dds_sample_info_t (ddsc/dds.h), in the order cyclonedds-python's get_sampleinfo_pyobject reads it
+    _fields_ = [("sample_state", ctypes.c_uint), ("view_state", ctypes.c_uint), ("instance_state", ctypes.c_uint),
+                ("valid_data", ctypes.c_bool), ("source_timestamp", ctypes.c_int64),
+                ("instance_handle", ctypes.c_uint64), ("publication_handle", ctypes.c_uint64),
+                ("disposed_generation_count", ctypes.c_uint32), ("no_writers_generation_count", ctypes.c_uint32),
+                ("sample_rank", ctypes.c_uint32), ("generation_rank", ctypes.c_uint32),
+                ("absolute_generation_rank", ctypes.c_uint32)]
+
+
+class TakenInfo:
+    """What a taken sample's ``dds_sample_info_t`` says that micros_rt reads (the fields of cyclonedds's
+    ``SampleInfo`` of the same names)."""
+
+    __slots__ = ("valid_data", "source_timestamp", "publication_handle", "instance_state")
+
+    def __init__(self, info: _CSampleInfo) -> None:
+        self.valid_data = bool(info.valid_data)
+        self.source_timestamp = int(info.source_timestamp)
+        self.publication_handle = int(info.publication_handle)
+        self.instance_state = int(info.instance_state)
+
+
+#: ``bytes`` objects keep their contents this far into the object (CPython's PyBytesObject.ob_sval)
+_BYTES_DATA_OFFSET = bytes.__basicsize__ - 1
+_new_bytes = ctypes.pythonapi.PyBytes_FromStringAndSize
+_new_bytes.argtypes = [ctypes.c_void_p, ctypes.c_ssize_t]
+_new_bytes.restype = ctypes.py_object
+
+
+class _ReleasedTake:
+    """``dds_takecdr`` and the copy of each sample's bytes with Python's GIL released (through ctypes).
+
+    cyclonedds-python's ``ddspy_take`` holds the GIL while Cyclone copies every sample twice (into its own
+    container, then into a ``bytes``): 2.5 ms per 6.2 MB 1920x1080 Image, measured with ``py-spy --gil`` in a
+    subscriber's delivery thread, during which no other thread of the node ran (a HIGH 1 kHz topic beside
+    such a camera: control p99 3.7-3.8 ms on loopback). Here Cyclone hands over its serialized samples
+    (``dds_takecdr``), each is copied once into a new ``bytes`` object while the GIL is released
+    (``ddsi_serdata_to_ser``), and released (``ddsi_serdata_unref``). The bytes are the same as
+    ``ddspy_take``'s: cyclonedds-python's serdata holds the serialized sample as received, and its
+    ``to_ser`` copies it out."""
+
+    @staticmethod
+    def take(ref: int, mask: int, n: int) -> List[Tuple[bytes, Any]]:
+        bufs, infos = (ctypes.c_void_p * n)(), (_CSampleInfo * n)()   # per call: any thread may take
+        count = _takecdr(ref, bufs, n, infos, mask)
+        if count < 0:
+            raise DDSException(count, "dds_takecdr")
+        out: List[Tuple[bytes, Any]] = []
+        for i in range(count):
+            serdata, info = bufs[i], TakenInfo(infos[i])
+            try:
+                if info.valid_data:
+                    size = int(_serdata_size(serdata))
+                    data = _new_bytes(None, size)  # uninitialised, ours alone until returned
+                    if size:
+                        _serdata_to_ser(serdata, 0, size, id(data) + _BYTES_DATA_OFFSET)
+                else:
+                    data = b""
+            finally:
+                _serdata_unref(serdata)
+            out.append((data, info))
+        return out
+
+
+_takecdr: Any = None
+_serdata_size: Any = None
+_serdata_to_ser: Any = None
+_serdata_unref: Any = None
+_take_unavailable: List[str] = []   # why the functions could not be loaded (once)
+
+
+def _released_take_functions() -> bool:
+    """Load the C functions of :class:`_ReleasedTake` once; False when this Cyclone lacks one of them."""
+    global _takecdr, _serdata_size, _serdata_to_ser, _serdata_unref
+    if _takecdr is not None or _take_unavailable:
+        return not _take_unavailable
+    try:
+        _serdata_size = c_function("ddsi_serdata_size", [ctypes.c_void_p], ctypes.c_uint32)
+        _serdata_to_ser = c_function("ddsi_serdata_to_ser", [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_size_t,
+                                                             ctypes.c_void_p], None)
+        _serdata_unref = c_function("ddsi_serdata_unref", [ctypes.c_void_p], None)
+        _takecdr = c_function("dds_takecdr", [ctypes.c_int32, ctypes.c_void_p, ctypes.c_uint32, ctypes.c_void_p,
+                                              ctypes.c_uint32], ctypes.c_int32)
+    except (AttributeError, OSError) as exc:
+        _take_unavailable.append(str(exc))
+        _log.warning("micros_rt: Cyclone's dds_takecdr is not available (%s); samples are taken with Python's "
+                     "interpreter lock held", exc)
+        return False
+    return True
+
+
 class DDSReader:
     """A DataReader for one subscription, taken from by the subscription's delivery thread."""
 
@@ -257,14 +351,24 @@ class DDSReader:
         self.guid = str(self._reader.guid)
         self._writers: Dict[int, WriterInfo] = {}
         self._lock = threading.Lock()
+        self._large = False   # the last sample taken was large (see take_raw)
         self.closed = False
 
     def take_raw(self, n: int = 256) -> List[Tuple[bytes, Any]]:
-        """Up to ``n`` (serialized sample, SampleInfo) pairs; invalid samples included."""
-        ret = ddspy_take(self._ref, _ANY, n)
-        if isinstance(ret, int):
-            raise DDSException(ret, f"taking from DDS topic {self.topic_name}")
-        return ret  # type: ignore[no-any-return]
+        """Up to ``n`` (serialized sample, SampleInfo) pairs; invalid samples included. When this reader's last
+        sample was large, Cyclone's copies run with Python's GIL released (:class:`_ReleasedTake`; invalid
+        samples' bytes are empty there); small ones through ``ddspy_take``, whose one C call per batch costs
+        less than ctypes' three calls per sample (LaserScan one way: 11,651 against 18,131 msgs/s)."""
+        if self._large and _released_take_functions():
+            taken = _ReleasedTake.take(self._ref, _ANY, n)
+        else:
+            ret = ddspy_take(self._ref, _ANY, n)
+            if isinstance(ret, int):
+                raise DDSException(ret, f"taking from DDS topic {self.topic_name}")
+            taken = ret
+        if taken:   # the next take by the size of this one's last sample (a topic's samples are alike)
+            self._large = len(taken[-1][0]) >= RELEASED_TAKE_MIN
+        return taken
 
     def writer_info(self, handle: int) -> Optional[WriterInfo]:
         """The writer behind a sample's publication_handle (cached)."""
