@@ -37,7 +37,8 @@ def check_main(argv: List[str]) -> int:
     except ProfileError as exc:
         raise CommandError(str(exc)) from None
     print(f"{args.file}: valid ({_plural(len(profile.publishers), 'publisher rule')}, "
-          f"{_plural(len(profile.subscribers), 'subscriber rule')})")
+          f"{_plural(len(profile.subscribers), 'subscriber rule')}"
+          + (f", {_plural(len(profile.links), 'link')})" if profile.links else ")"))
     live: Dict[str, Dict[str, List[str]]] = {}
     if not args.offline:
         master = Master(timeout=3.0)
@@ -62,6 +63,10 @@ def check_main(argv: List[str]) -> int:
                     print(f"    {'(overridden by ' + repr(shadow) + ')' if shadow else 'matches'} {topic}  [{who}]")
                 if not matched:
                     print(f"    matches no live {section[:-1]} topic")
+    if profile.links:
+        print("\nlinks (TCPROS connections of topics below HIGH to peers across them are paced):")
+        for link in profile.links:
+            print(f"  {link.describe()}: topics below HIGH share {link.paced_rate / 1e6:g} Mbit/s")
     return 0
 
 

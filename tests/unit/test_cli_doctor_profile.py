@@ -138,3 +138,9 @@ def test_profile_check_offline(tmp_path: Path, capsys: pytest.CaptureFixture[str
     with pytest.raises(CommandError) as info:
         profile_cmd.main(["check", "--offline", str(bad)])
     assert f"{bad}:3:" in str(info.value) and "deadline" in str(info.value)
+    linked = tmp_path / "linked.yaml"
+    linked.write_text("links:\n  radio: {interface: wlan0, bandwidth: 20Mbit, reserve: 0.25}\n")
+    assert profile_cmd.main(["check", "--offline", str(linked)]) == 0
+    text = capsys.readouterr().out
+    assert "valid (0 publisher rules, 0 subscriber rules, 1 link)" in text
+    assert "link radio (interface wlan0, 20 Mbit/s, 25% kept for HIGH): topics below HIGH share 15 Mbit/s" in text
