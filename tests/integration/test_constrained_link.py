@@ -125,7 +125,9 @@ def test_a_link_in_the_publishers_profile_paces_the_camera_and_control_keeps_mil
     print(f"\npackets from the publisher's host by (TOS, protocol), of {sum(marks.values())} captured: {dict(marks)}")
     # one process, two DSCP values: the HIGH control topic's DDS datagrams AF41 (0x88), the LOW camera's
     # TCPROS segments CS1+ (0x28); Cyclone alone would have marked both 0x88
-    assert marks[("0x88", "UDP")] >= 50 and marks[("0x28", "TCP")] >= 500, marks
+    # (tcpdump prints each packet and the kernel drops what it cannot keep up with: a sample, 1,283 of the first
+    # ~3 s here, 303 and 939 of them the two topics')
+    assert marks[("0x88", "UDP")] >= 20 and marks[("0x28", "TCP")] >= 100, marks
     assert marks[("0x28", "UDP")] == 0 and marks[("0x88", "TCP")] == 0, marks
     print(f"\n40 Mbit/s tbf link, camera over TCPROS paced by the publisher's profile: control published "
           f"{published['control']} of {published['intended_control']}, delivered {summary['control']} (p50 "
