@@ -36,6 +36,7 @@ __all__ = [
     "describe_publisher_qos",
     "describe_subscriber_qos",
     "master_uri",
+    "pacing_of",
     "probe_node",
     "relay_marking",
     "resolve_topic",
@@ -219,6 +220,9 @@ class GraphSnapshot:
         marking = relay_marking(report, topic, publisher=publisher)
         if marking is not None:
             out["relay"] = marking
+        paced = pacing_of(report, topic) if publisher else None
+        if paced is not None:
+            out["paced"] = paced
         return out
 
 
@@ -306,6 +310,24 @@ def describe_subscriber_qos(qos: Mapping[str, Any]) -> str:
 
 def _rate(value: Any) -> str:
     return "no max_rate" if value is None else f"max_rate {float(value):g} Hz"
+
+
+def pacing_of(report: NodeReport, topic: str) -> Optional[Dict[str, Any]]:
+    """The TCPROS connections of ``topic`` that ``report``'s node paces across its profile's links (its
+    ``microsRtInfo``'s ``links``), with a ``description`` in words; None when it paces none of them.
+
+    >>> r = NodeReport("/camera", None, MICROS_RT, info={"links": [{"link": "radio", "connections": [
+    ...     {"topic": "/image", "peer": "10.0.0.2", "rate_bps": 36e6, "used_bps": 35.1e6}]}]})
+    >>> pacing_of(r, "/image")["description"]
+    'paced on link radio: TCPROS to 10.0.0.2 at 36 Mbit/s (used 35.1)'
+    """
+    found = [(link.get("link", "?"), c) for link in (report.info or {}).get("links") or []
+             for c in link.get("connections") or [] if c.get("topic") == topic]
+    if not found:
+        return None
+    parts = [f"paced on link {name}: TCPROS to {c.get('peer')} at {float(c.get('rate_bps', 0)) / 1e6:.3g} Mbit/s "
+             f"(used {float(c.get('used_bps', 0)) / 1e6:.3g})" for name, c in found]
+    return {"connections": [dict(c, link=name) for name, c in found], "description": "; ".join(parts)}
 
 
 def relay_marking(report: NodeReport, topic: str, *, publisher: bool) -> Optional[Dict[str, Any]]:

@@ -68,6 +68,8 @@ def format_info(data: Dict[str, Any]) -> str:
             lines.append(f" * {ep['node']} ({ep['uri'] or 'unknown URI'})  [{ep['kind']}] {ep['description']}")
             if ep.get("relay"):
                 lines.append(f"     {ep['relay']['description']}")
+            if ep.get("paced"):
+                lines.append(f"     {ep['paced']['description']}")
         lines.append("")
     lines.append("Links:" if data["links"] else "Links: None")
     for link in data["links"]:

@@ -10,7 +10,8 @@ from typing import Any, Dict, List, Optional
 
 import pytest
 
-from micros_rt.cli._graphinfo import MICROS_RT, STOCK, GraphSnapshot, NodeReport, build_links, relay_marking
+from micros_rt.cli._graphinfo import (MICROS_RT, STOCK, GraphSnapshot, NodeReport, build_links, pacing_of,
+                                      relay_marking)
 from micros_rt.cli.graph import RELAY_COLOUR, to_dot
 from micros_rt.cli.topic import format_info
 from micros_rt.core import introspection
@@ -160,3 +161,29 @@ def test_register_section_adds_to_the_answer_and_guards_the_core(monkeypatch: py
     introspection.unregister_section("other")
     introspection.unregister_section("never_registered")
     assert list(introspection._extra_sections()) == ["relay"]
+
+
+def test_a_paced_publisher_says_so_under_its_endpoint_only() -> None:
+    """A micros_rt publisher whose profile's link paces its TCPROS connection of /image (its microsRtInfo
+    ``links``): topic info says so under that publisher; a topic it does not pace gets no such line."""
+    pub = {"topic": "/image", "type": "std_msgs/String", "latch": False, "queue_size": 2,
+           "qos": AdvertiseQoSOptions(transport_priority=TransportPriority.LOW).to_dict(), "dds_topic": "rt/image",
+           "links": [], "verdicts": {}}
+    camera = NodeReport("/camera", "http://10.0.0.1:1001/", MICROS_RT,
+                        bus=[[1, "/viewer", "o", "TCPROS", "/image", True, ""]],
+                        info={"publications": [pub], "subscriptions": [], "links": [
+                            {"link": "radio", "describe": "link radio (...)", "connections": [
+                                {"topic": "/image", "peer": "10.0.0.2", "rate_bps": 36e6, "used_bps": 35.99e6}]}]})
+    viewer = NodeReport("/viewer", "http://10.0.0.2:1002/", STOCK,
+                        bus=[[1, "http://10.0.0.1:1001/", "i", "TCPROS", "/image", True, ""]])
+    snap = snapshot_of({"/camera": camera, "/viewer": viewer}, "/image", ["/camera"], ["/viewer"])
+    ep = snap.endpoint("/camera", "/image", publisher=True)
+    assert ep["paced"]["connections"][0]["link"] == "radio"
+    data = {"topic": "/image", "type": "std_msgs/String", "publishers": [ep],
+            "subscribers": [snap.endpoint("/viewer", "/image", publisher=False)],
+            "links": [link.to_dict() for link in snap.links]}
+    json.dumps(data)
+    lines = format_info(data).splitlines()
+    at = next(i for i, line in enumerate(lines) if line.startswith(" * /camera ("))
+    assert lines[at + 1] == "     paced on link radio: TCPROS to 10.0.0.2 at 36 Mbit/s (used 36)", lines[at + 1]
+    assert pacing_of(camera, "/other") is None and "paced" not in snap.endpoint("/viewer", "/image", publisher=False)
