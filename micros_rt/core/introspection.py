@@ -128,7 +128,7 @@ def node_info() -> Dict[str, Any]:
         "publications": [_publication_info(p) for p in _node.publications.all()],
         "subscriptions": [_subscription_info(s) for s in _node.subscriptions.all()],
         # the profile's links of limited bandwidth and the TCPROS connections paced across each
-        "links": [] if getattr(_node, "pacer", None) is None else _node.pacer.snapshot(),
+        "links": [] if _node.pacer is None else _node.pacer.snapshot(),
         **_extra_sections(),
     }
 

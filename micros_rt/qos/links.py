@@ -15,7 +15,7 @@ A profile's ``links`` section tells micros_rt the link's rate, so that its topic
 
 What paces (:mod:`micros_rt.transports.pacing`): each TCPROS connection of a topic below HIGH to a peer on
 the link gets the kernel's TCP pacing (``SO_MAX_PACING_RATE``), the connections on one link sharing
-``bandwidth * (1 - reserve)`` equally. Cyclone's UDP has no such control, so a large LOW topic should cross
+``bandwidth * (1 - reserve)`` max-min fair by what each sent. Cyclone's UDP has no such control, so a large LOW topic should cross
 such a link over TCPROS (the subscriber's ``transport_hints: [TCPROS]``) and a HIGH one over DDS.
 """
 

@@ -67,7 +67,8 @@ class RemoteWriter:
 
 #: One received sample: (payload, info) where ``info`` has ``valid_data`` (bool), ``source_timestamp``
 #: (ns, 0 when unknown) and ``publication_handle`` (the writer, for :meth:`TransportReader.writer`).
-#: Cyclone's own SampleInfo has exactly these, so the DDS path builds no object per sample.
+#: Cyclone's own SampleInfo has exactly these, so the DDS path builds no object of its own per sample (but
+#: for large samples taken with the GIL released: a small ``TakenInfo`` each, see transports/dds/endpoints.py).
 Sample = Tuple[Any, Any]
 
 

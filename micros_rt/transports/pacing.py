@@ -20,8 +20,6 @@ the sending interface), so a large LOW topic crosses such a link over TCPROS.
 
 from __future__ import annotations
 
-import array
-import fcntl
 import logging
 import socket
 import struct
@@ -31,9 +29,10 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Sequence
 
 from ..qos.links import LinkSpec
+from .netif import interface_of
 from ..qos.options import TransportPriority
 
-__all__ = ["LinkPacer", "interface_of", "pacing_rate", "set_pacing_rate"]
+__all__ = ["LinkPacer", "pacing_rate", "set_pacing_rate", "share_out"]
 
 _log = logging.getLogger("rosout.micros_rt.pacing")
 
@@ -41,9 +40,7 @@ _log = logging.getLogger("rosout.micros_rt.pacing")
 SO_MAX_PACING_RATE = getattr(socket, "SO_MAX_PACING_RATE", 47)
 #: the largest rate a 32-bit SO_MAX_PACING_RATE takes (bytes per second); ~0U means "no limit"
 _NO_LIMIT = 0xFFFFFFFF
-_SIOCGIFADDR = 0x8915
-#: struct tcp_info offsets (linux/tcp.h): tcpi_max_pacing_rate and tcpi_bytes_acked (u64, Linux 4.1+)
-_TCPI_MAX_PACING_RATE = 112
+#: struct tcp_info's tcpi_bytes_acked (linux/tcp.h: u64, Linux 4.1+)
 _TCPI_BYTES_ACKED = 120
 #: a quiet connection's share never falls below this part of its equal share (so it can start again)
 _FLOOR = 0.1
@@ -71,32 +68,6 @@ def _bytes_acked(sock: socket.socket) -> Optional[int]:
     if len(info) < _TCPI_BYTES_ACKED + 8:
         return None
     return int(struct.unpack_from("=Q", info, _TCPI_BYTES_ACKED)[0])
-
-
-def interface_of(local_address: str) -> Optional[str]:
-    """The name of the local interface that has ``local_address`` (IPv4 or IPv6), or None."""
-    address = local_address.split("%", 1)[0]
-    if ":" in address:
-        packed = socket.inet_pton(socket.AF_INET6, address).hex()
-        try:
-            with open("/proc/net/if_inet6", encoding="ascii") as f:
-                for line in f:
-                    words = line.split()
-                    if len(words) >= 6 and words[0] == packed:
-                        return words[5]
-        except OSError:
-            return None
-        return None
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        for _, name in socket.if_nameindex():
-            request = array.array("B", struct.pack("256s", name.encode()[:15]))
-            try:
-                fcntl.ioctl(probe.fileno(), _SIOCGIFADDR, request, True)
-            except OSError:
-                continue  # no IPv4 address on it
-            if socket.inet_ntoa(request[20:24].tobytes()) == address:
-                return name
-    return None
 
 
 @dataclass

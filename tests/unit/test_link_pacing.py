@@ -11,7 +11,8 @@ import pytest
 from micros_rt.exceptions import ProfileError
 from micros_rt.qos import QoSProfile, TransportPriority
 from micros_rt.qos.links import LinkSpec, parse_bandwidth, parse_link
-from micros_rt.transports.pacing import LinkPacer, interface_of, pacing_rate, set_pacing_rate, share_out
+from micros_rt.transports.netif import interface_of
+from micros_rt.transports.pacing import LinkPacer, pacing_rate, set_pacing_rate, share_out
 
 
 @pytest.mark.parametrize("text, bits", [("40Mbit", 40e6), ("40 Mbit/s", 40e6), ("40mbps", 40e6),

@@ -251,16 +251,15 @@ class _CSampleInfo(ctypes.Structure):
 
 
 class TakenInfo:
-    """What a taken sample's ``dds_sample_info_t`` says that micros_rt reads (the fields of cyclonedds's
-    ``SampleInfo`` of the same names)."""
+    """What a taken sample's ``dds_sample_info_t`` says that micros_rt reads (:data:`~micros_rt.transports.base.Sample`:
+    the fields of cyclonedds's ``SampleInfo`` of the same names)."""
 
-    __slots__ = ("valid_data", "source_timestamp", "publication_handle", "instance_state")
+    __slots__ = ("valid_data", "source_timestamp", "publication_handle")
 
     def __init__(self, info: _CSampleInfo) -> None:
         self.valid_data = bool(info.valid_data)
         self.source_timestamp = int(info.source_timestamp)
         self.publication_handle = int(info.publication_handle)
-        self.instance_state = int(info.instance_state)
 
 
 #: ``bytes`` objects keep their contents this far into the object (CPython's PyBytesObject.ob_sval)
@@ -270,7 +269,7 @@ _new_bytes.argtypes = [ctypes.c_void_p, ctypes.c_ssize_t]
 _new_bytes.restype = ctypes.py_object
 
 
-class _ReleasedTake:
+def _take_released(ref: int, mask: int, n: int) -> List[Tuple[bytes, Any]]:
     """``dds_takecdr`` and the copy of each sample's bytes with Python's GIL released (through ctypes).
 
     cyclonedds-python's ``ddspy_take`` holds the GIL while Cyclone copies every sample twice (into its own
@@ -281,28 +280,25 @@ class _ReleasedTake:
     (``ddsi_serdata_to_ser``), and released (``ddsi_serdata_unref``). The bytes are the same as
     ``ddspy_take``'s: cyclonedds-python's serdata holds the serialized sample as received, and its
     ``to_ser`` copies it out."""
-
-    @staticmethod
-    def take(ref: int, mask: int, n: int) -> List[Tuple[bytes, Any]]:
-        bufs, infos = (ctypes.c_void_p * n)(), (_CSampleInfo * n)()   # per call: any thread may take
-        count = _takecdr(ref, bufs, n, infos, mask)
-        if count < 0:
-            raise DDSException(count, "dds_takecdr")
-        out: List[Tuple[bytes, Any]] = []
-        for i in range(count):
-            serdata, info = bufs[i], TakenInfo(infos[i])
-            try:
-                if info.valid_data:
-                    size = int(_serdata_size(serdata))
-                    data = _new_bytes(None, size)  # uninitialised, ours alone until returned
-                    if size:
-                        _serdata_to_ser(serdata, 0, size, id(data) + _BYTES_DATA_OFFSET)
-                else:
-                    data = b""
-            finally:
-                _serdata_unref(serdata)
-            out.append((data, info))
-        return out
+    bufs, infos = (ctypes.c_void_p * n)(), (_CSampleInfo * n)()   # per call: any thread may take
+    count = _takecdr(ref, bufs, n, infos, mask)
+    if count < 0:
+        raise DDSException(count, "dds_takecdr")
+    out: List[Tuple[bytes, Any]] = []
+    for i in range(count):
+        serdata, info = bufs[i], TakenInfo(infos[i])
+        try:
+            if info.valid_data:
+                size = int(_serdata_size(serdata))
+                data = _new_bytes(None, size)  # uninitialised, ours alone until returned
+                if size:
+                    _serdata_to_ser(serdata, 0, size, id(data) + _BYTES_DATA_OFFSET)
+            else:
+                data = b""
+        finally:
+            _serdata_unref(serdata)
+        out.append((data, info))
+    return out
 
 
 _takecdr: Any = None
@@ -313,7 +309,7 @@ _take_unavailable: List[str] = []   # why the functions could not be loaded (onc
 
 
 def _released_take_functions() -> bool:
-    """Load the C functions of :class:`_ReleasedTake` once; False when this Cyclone lacks one of them."""
+    """Load the C functions of :func:`_take_released` once; False when this Cyclone lacks one of them."""
     global _takecdr, _serdata_size, _serdata_to_ser, _serdata_unref
     if _takecdr is not None or _take_unavailable:
         return not _take_unavailable
@@ -356,11 +352,11 @@ class DDSReader:
 
     def take_raw(self, n: int = 256) -> List[Tuple[bytes, Any]]:
         """Up to ``n`` (serialized sample, SampleInfo) pairs; invalid samples included. When this reader's last
-        sample was large, Cyclone's copies run with Python's GIL released (:class:`_ReleasedTake`; invalid
+        sample was large, Cyclone's copies run with Python's GIL released (:func:`_take_released`; invalid
         samples' bytes are empty there); small ones through ``ddspy_take``, whose one C call per batch costs
         less than ctypes' three calls per sample (LaserScan one way: 11,651 against 18,131 msgs/s)."""
         if self._large and _released_take_functions():
-            taken = _ReleasedTake.take(self._ref, _ANY, n)
+            taken = _take_released(self._ref, _ANY, n)
         else:
             ret = ddspy_take(self._ref, _ANY, n)
             if isinstance(ret, int):

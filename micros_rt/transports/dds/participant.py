@@ -19,6 +19,7 @@ import threading
 from typing import Any, Dict, Mapping, Optional, Tuple
 
 from ...exceptions import DDSUnavailableError
+from ..netif import interface_mtu_of, interface_of
 from ...log import nonblocking_logger
 from .batching import close_flusher
 from .typecache import forget_type_data, load_type_data, save_type_data
@@ -195,24 +196,8 @@ def send_buffer(env: Mapping[str, str] = os.environ) -> Optional[int]:
 
 def interface_mtu(address: str) -> Optional[int]:
     """The MTU of the local interface holding IPv4 ``address``; None when no interface holds it."""
-    import fcntl
-    import struct
-
-    try:
-        packed = socket.inet_aton(address)
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-            for _, name in socket.if_nameindex():
-                req = struct.pack("256s", name.encode()[:15])
-                try:
-                    if fcntl.ioctl(s.fileno(), 0x8915, req)[20:24] != packed:  # SIOCGIFADDR
-                        continue
-                    mtu: int = struct.unpack_from("i", fcntl.ioctl(s.fileno(), 0x8921, req), 16)[0]  # SIOCGIFMTU
-                    return mtu
-                except OSError:  # an interface without an IPv4 address
-                    continue
-    except OSError:
-        return None
-    return None
+    name = interface_of(address)
+    return None if name is None else interface_mtu_of(name)
 
 
 def network_transport(mtu: Optional[int]) -> str:
