@@ -23,6 +23,7 @@ from .exceptions import (
     TypeMappingError,
     UnsupportedQoSError,
 )
+from .core.publication import ForeignWriters
 from .core.stats import PublisherStatistics, SubscriberStatistics
 from .negotiation.hints import TransportHints
 from .node import (
@@ -53,6 +54,7 @@ __all__ = [
     "DURATION_MAX",
     "DURATION_MIN",
     "DeadlineMissed",
+    "ForeignWriters",
     "MicrosRtError",
     "NodeHandle",
     "NodeInfo",

@@ -379,10 +379,13 @@ def relay_marking(report: NodeReport, topic: str, *, publisher: bool) -> Optiona
             ("deadline_missed", "deadline missed")) if counters.get(key)]
         summary = (f"relayed in from graph {im.get('origin')} (outside topic {im.get('outside')}, {seen}) by relay "
                    f"node {report.name}")
+        straight = int(im.get("straight") or 0)
         text = (f"{summary}; published {counters.get('published', 0)} of {counters.get('received', 0)} received"
-                + (f" ({', '.join(dropped)})" if dropped else ""))
+                + (f" ({', '.join(dropped)})" if dropped else "")
+                + (f"; {straight} micros_rt subscriber{'s' if straight != 1 else ''} read{'' if straight != 1 else 's'} "
+                   f"it straight from graph {im.get('origin')}'s relay" if straight else ""))
         return {"direction": "in", "relay_node": report.name, "relay": report.name, "graph": graph,
-                "origin": im.get("origin"), "outside": im.get("outside"), "exporters": exporters,
+                "origin": im.get("origin"), "outside": im.get("outside"), "exporters": exporters, "straight": straight,
                 "protocol": im.get("protocol", "DDS"), "counters": counters, "summary": summary, "description": text}
     return None
 

@@ -4,10 +4,11 @@ stock peers and TCPROS-preferring subscribers) and a back-end writer (DDS) for m
 from __future__ import annotations
 
 import collections
+import dataclasses
 import struct
 import threading
 import time
-from typing import TYPE_CHECKING, Any, Dict, Optional, Tuple, Type
+from typing import TYPE_CHECKING, Any, Callable, Dict, Optional, Set, Tuple, Type
 
 import genpy
 import rospy
@@ -42,10 +43,29 @@ if TYPE_CHECKING:
     from ..transports.pacing import LinkPacer
     from ..transports.dds.backend import DDSBackend, DDSTopicWriter
 
-__all__ = ["Publisher"]
+__all__ = ["Publisher", "ForeignWriters"]
 
 _log = nonblocking_logger("rosout.micros_rt")
 _housekeeping_log = RateLimitedLog(_log, interval=60.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class ForeignWriters:
+    """Writers of another ROS graph's relay that already reach this DDS domain's readers of a topic this
+    node republishes (an importing relay's): :meth:`Publisher.delegate_dds` serves micros_rt subscribers
+    with them, straight, instead of with this node's own writer."""
+
+    via: str                        # the other graph's relay name (its writers' tag ``relay=``)
+    writer: str                     # one of those writers now (GUID)
+    participant: str                # its participant (GUID)
+    dds_topic: str
+    options: AdvertiseQoSOptions    # the QoS those writers offer
+    latch: bool
+
+
+#: ``delegate_dds``'s arguments: the foreign writers now (None: none now), and whether a reader is alive
+ForeignSource = Callable[[], Optional[ForeignWriters]]
+ReaderAlive = Callable[[str], bool]
 
 
 class _Publication:
@@ -90,11 +110,32 @@ class _Publication:
         #: every writer of the topic, in sending order: TCPROS first (rospy serializes inside its send and
         #: raises before writing), then the senders
         self.writers: Tuple[TransportWriter, ...] = ()
+        # delegate_dds: where the foreign writers are, which reader GUIDs are alive, and the subscribers
+        # (caller ids) served by them, not by this publication's own DDS writer
+        self._foreign: Optional[Tuple[ForeignSource, ReaderAlive]] = None
+        self.delegated: Set[str] = set()
 
     def start(self) -> None:
         self.tcpros = compat.TcprosWriter(self.topic, self.data_class, self.queue_size, self.latch,
                                           pseudo_links=self.connections.__len__)
-        self.writers = (self.tcpros,) + self.senders
+        self._refresh_writers()
+
+    def _refresh_writers(self) -> None:
+        """The writers ``publish`` uses: the own DDS writer stays out while every DDS subscriber is served
+        by foreign writers (it would send each message a second time to readers that ignore it)."""
+        if self.tcpros is None:
+            return
+        senders = self.senders
+        with self.lock:
+            idle = (self._foreign is not None and not self.latch and self.dds is not None
+                    and all(sub in self.delegated for sub in self.connections))
+        if idle:
+            senders = tuple(s for s in senders if s is not self.senders[0])
+        self.writers = (self.tcpros,) + senders
+
+    def delegate_dds(self, source: ForeignSource, alive: ReaderAlive) -> None:
+        self._foreign = (source, alive)
+        self._refresh_writers()
 
     # -- negotiation (XML-RPC threads) -------------------------------------
     def facts(self) -> PublicationFacts:
@@ -112,7 +153,21 @@ class _Publication:
         return {DDS: dds_transport(lambda offer: self.judge(offer, subscriber))}
 
     def judge(self, offer: DDSOffer, subscriber: str) -> Tuple[Verdict, Optional[DDSAnswer]]:
-        verdict = decide(offer, self.facts(), subscriber=short(subscriber))
+        facts = self.facts()
+        foreign = self._foreign[0]() if self._foreign is not None and facts.domain is not None else None
+        if foreign is not None:
+            # the other graph's writers first: no hop through this process when the subscriber can take them
+            direct = decide(offer, dataclasses.replace(facts, dds_topic=foreign.dds_topic, options=foreign.options,
+                                                       latch=foreign.latch), subscriber=short(subscriber))
+            if direct.accepted:
+                return self._link(offer, subscriber, direct, foreign)
+            _log.debug("micros_rt: topic %s: %s's writers cannot serve %s (%s); serving it from this node",
+                       self.topic, foreign.via, short(subscriber), direct.reason)
+        return self._link(offer, subscriber, decide(offer, facts, subscriber=short(subscriber)), None)
+
+    def _link(self, offer: DDSOffer, subscriber: str, verdict: Verdict,
+              foreign: Optional[ForeignWriters]) -> Tuple[Verdict, Optional[DDSAnswer]]:
+        """Record ``verdict``; when it accepts, make the DDS link (served by ``foreign`` writers, or by ours)."""
         with self.lock:
             remember_verdict(self.verdicts, short(subscriber, 256), verdict)
         dds = self.dds
@@ -120,14 +175,24 @@ class _Publication:
             return verdict, None
         # rospy's publisher may still be registering (a subscriber can ask the moment the master knows
         # us): its topic impl already exists, which is all the pseudo-connection needs
-        info = (f"DDS connection on topic {dds.dds_topic} to reader {offer.reader} (writer {dds.guid}, "
-                f"{'best effort' if self.options.using_best_effort_protocol else 'reliable'}, "
-                f"priority {self.options.transport_priority.name})")
+        if foreign is None:
+            info = (f"DDS connection on topic {dds.dds_topic} to reader {offer.reader} (writer {dds.guid}, "
+                    f"{'best effort' if self.options.using_best_effort_protocol else 'reliable'}, "
+                    f"priority {self.options.transport_priority.name})")
+        else:
+            info = (f"DDS connection on topic {foreign.dds_topic} to reader {offer.reader}, served straight by "
+                    f"the writers of graph {foreign.via}'s relay (now {foreign.writer}, priority "
+                    f"{foreign.options.transport_priority.name}); none of it passes through this node")
         conn = compat.DDSConnection(self.topic, subscriber, "o", info, peer_guid=offer.reader,
                                     on_close=self._connection_closed)
         with self.lock:
             old = self.connections.get(subscriber)
             self.connections[subscriber] = conn
+            if foreign is None:
+                self.delegated.discard(subscriber)
+            else:
+                self.delegated.add(subscriber)
+        self._refresh_writers()
         if old is not None:
             compat.remove_pseudo_connection(self.topic, old, publisher=True)
             old.close()
@@ -136,6 +201,9 @@ class _Publication:
             return Verdict(False, "closing", f"topic {self.topic}: no rospy publisher to attach the DDS link of "
                                              f"{short(subscriber)} to (unregistered); using TCPROS"), None
         assert self._dds_backend is not None
+        if foreign is not None:
+            return verdict, DDSAnswer(writer=foreign.writer, participant=foreign.participant, latch=foreign.latch,
+                                      qos=foreign.options, node=compat.caller_id(), via=foreign.via)
         return verdict, DDSAnswer(writer=dds.guid, participant=self._dds_backend.participant.guid,
                                   latch=self.latch, qos=self.options, node=compat.caller_id())
 
@@ -155,6 +223,17 @@ class _Publication:
         with self.lock:
             if self.connections.get(conn.endpoint_id) is conn:
                 del self.connections[conn.endpoint_id]
+                self.delegated.discard(conn.endpoint_id)
+        self._refresh_writers()
+
+    def _reached(self, conns: Any, dds: "DDSTopicWriter") -> Set[str]:
+        """Reader GUIDs among ``conns`` that are there now: matched by our writer, or, for subscribers
+        served by foreign writers, alive in DDS discovery."""
+        matched = dds.matched_peers()
+        if self._foreign is not None and self.delegated:
+            alive = self._foreign[1]
+            matched |= {c.peer_guid for c in conns if c.endpoint_id in self.delegated and alive(c.peer_guid)}
+        return matched
 
     def housekeeping(self, now: float) -> None:
         """Drop DDS links whose reader went away, or that discovery never matched in time
@@ -164,7 +243,7 @@ class _Publication:
             conns = list(self.connections.values())
         if dds is None or (not conns and not self._expired):
             return
-        matched = dds.matched_peers()
+        matched = self._reached(conns, dds)
         for conn in conns:
             if conn.peer_guid in matched:
                 conn.seen = True
@@ -213,7 +292,7 @@ class _Publication:
         n_tcp = max(tcpros.links() - len(conns), 0)
         if not conns or self.dds is None:
             return n_tcp
-        matched = self.dds.matched_peers()
+        matched = self._reached(conns, self.dds)
         return n_tcp + sum(1 for c in conns if c.peer_guid in matched)
 
     # -- data ----------------------------------------------------------------
@@ -305,6 +384,27 @@ class Publisher:
 
     def get_dds_connections(self) -> int:
         return 0 if self._pub is None else len(self._pub.connections)
+
+    def get_delegated_dds_connections(self) -> int:
+        """DDS subscribers served by the foreign writers of :meth:`delegate_dds`, not by this node."""
+        pub = self._pub
+        if pub is None:
+            return 0
+        with pub.lock:
+            return len(pub.delegated)
+
+    def delegate_dds(self, source: ForeignSource, alive: ReaderAlive) -> None:
+        """Serve this topic's micros_rt subscribers with another graph's writers when they can take them.
+
+        For a program that republishes what arrives over DDS from another ROS graph's relay (an importing
+        relay): ``source()`` names those writers now (None: none), ``alive(guid)`` says whether a reader is
+        still in DDS discovery. A subscriber whose offer those writers can serve (same DDS topic and domain,
+        compatible QoS) is answered with them and reads them straight, and keeps reading their successors
+        (a restarted relay); any other is served by this node's own writer, which sends only while such a
+        subscriber exists. TCPROS subscribers are unaffected."""
+        if self._pub is None:
+            raise rospy.ROSException("publisher is unregistered")
+        self._pub.delegate_dds(source, alive)
 
     def statistics(self) -> PublisherStatistics:
         """Counters of this topic's publication (shared by the Publishers of the topic in this node)."""

@@ -181,9 +181,14 @@ class _Subscription:
                     except MicrosRtError as exc:
                         _log.warning("micros_rt: topic %s: no latched message over DDS: %s", self.topic, exc)
         dds_topic = self.reader.dds_topic if self.reader else self.topic
-        conn = compat.DDSConnection(self.topic, pub_uri, "i", f"DDS connection on topic {dds_topic} from writer "
-                                    f"{answer.writer}", peer_guid=answer.writer, on_close=self.writers.connection_closed)
-        self.writers.accept(answer.writer, Accepted(pub_uri, answer.node, answer.latch, conn), answer.qos)
+        source = (f"straight from the writers of graph {answer.via}'s relay (now {answer.writer}), no hop through "
+                  f"{answer.node or pub_uri}") if answer.via else f"from writer {answer.writer}"
+        conn = compat.DDSConnection(self.topic, pub_uri, "i", f"DDS connection on topic {dds_topic} {source}",
+                                    peer_guid=answer.writer, on_close=self.writers.connection_closed)
+        accepted = Accepted(pub_uri, answer.node, answer.latch, conn)
+        self.writers.accept(answer.writer, accepted, answer.qos)
+        if answer.via:
+            self.writers.delegate(answer.via, accepted, answer.qos)
         if answer.qos is not None and (self.priority is None or answer.qos.transport_priority > self.priority):
             # taken on by the delivery thread, woken below
             self.priority = TransportPriority(answer.qos.transport_priority)
@@ -441,6 +446,12 @@ class _Subscription:
             conn = acc.conn
             if state.guid in matched:
                 conn.seen = True
+                continue
+            if self.writers.is_delegated(conn):
+                # one of another graph's relay writers went (that relay restarted): its successor is taken
+                # as it comes; the link to the delegating publisher lasts as long as that publisher
+                if conn.seen or now - conn.created > 30.0:
+                    self.writers.forget_writer(state)
                 continue
             if not conn.seen and now - conn.created <= 30.0:
                 continue

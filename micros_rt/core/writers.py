@@ -6,6 +6,11 @@ samples of writers whose publisher accepted DDS in the negotiation with *this* n
 it over TCPROS, or not at all (another ROS graph on the same domain). Samples that arrive before the
 negotiation's answer are held, bounded, and delivered first when it arrives. Writers without a
 micros_rt tag (ROS 2 nodes) are delivered as they are.
+
+A publisher that republishes another graph's topic (an importing relay) may answer with a *delegation*
+instead (``DDSAnswer.via``): the writers of that graph's relay (tag ``relay=<via>``) already reach this
+reader, so they are delivered as if from the publisher, straight, and every writer of that relay that comes
+later (a restarted exporter) too; the publisher's own writer, idle for this subscriber, is ignored.
 """
 
 from __future__ import annotations
@@ -34,6 +39,14 @@ class Accepted:
     node: str
     latch: bool
     conn: DDSConnection
+
+
+@dataclass
+class Delegation:
+    """A publisher's answer that names another graph's relay writers (``via``) instead of its own."""
+
+    accepted: Accepted
+    qos: Optional[AdvertiseQoSOptions]
 
 
 @dataclass(eq=False)
@@ -69,6 +82,10 @@ class WriterTable:
         self._states: Dict[str, WriterState] = {}
         self._by_handle: Dict[Tuple[int, Any], WriterState] = {}
         self.holding: Set[WriterState] = set()
+        # relay graph name (``via``) -> the delegating publisher's link; its node names, whose own writers
+        # this subscription then ignores
+        self.delegations: Dict[str, Delegation] = {}
+        self._delegating_nodes: Set[str] = set()
 
     def for_handle(self, reader: Any, handle: Any) -> Optional[WriterState]:
         """The state of the writer behind a sample (created on its first sample)."""
@@ -83,6 +100,7 @@ class WriterTable:
             state = self._states.get(remote.guid)
             if state is None:
                 state = self._states[remote.guid] = WriterState(remote.guid, remote.tag)
+                self._apply_delegation(state)
             state.handles.add(key)
             self._by_handle[key] = state
         return state
@@ -92,7 +110,30 @@ class WriterTable:
             return DELIVER
         if state.tag.get("graph") != self.graph:
             return DROP  # another ROS graph on the same DDS domain
+        if state.tag.get("node") in self._delegating_nodes:
+            return DROP  # a publisher that delegated to another graph's relay: its own writer serves others
         return HOLD
+
+    def _apply_delegation(self, state: WriterState) -> None:
+        tag = state.tag
+        if tag is None or state.accepted is not None or tag.get("graph") == self.graph:
+            return
+        delegation = self.delegations.get(tag.get("relay", ""))
+        if delegation is not None:
+            state.accepted, state.qos = delegation.accepted, delegation.qos
+
+    def delegate(self, via: str, accepted: Accepted, qos: Optional[AdvertiseQoSOptions]) -> None:
+        """Deliver the writers of graph ``via``'s relay as from ``accepted``'s publisher, those known now
+        and those that come later."""
+        with self._lock:
+            self.delegations[via] = Delegation(accepted, qos)
+            self._delegating_nodes = {d.accepted.node for d in self.delegations.values()}
+            for state in self._states.values():
+                if state.tag is not None and state.tag.get("relay") == via and state.accepted is None:
+                    self._apply_delegation(state)
+
+    def is_delegated(self, conn: DDSConnection) -> bool:
+        return any(d.accepted.conn is conn for d in self.delegations.values())
 
     def hold(self, state: WriterState, now: float, data: bytes, info: Any) -> None:
         if len(state.held) >= self.hold_depth:
@@ -113,9 +154,17 @@ class WriterTable:
 
     def connection_closed(self, conn: DDSConnection) -> None:
         with self._lock:
-            state = self._states.get(conn.peer_guid)
-            if state is not None and state.accepted is not None and state.accepted.conn is conn:
-                state.accepted = None
+            for via in [v for v, d in self.delegations.items() if d.accepted.conn is conn]:
+                del self.delegations[via]
+                self._delegating_nodes = {d.accepted.node for d in self.delegations.values()}
+            for state in self._states.values():
+                if state.accepted is not None and state.accepted.conn is conn:
+                    state.accepted = None
+
+    def forget_writer(self, state: WriterState) -> None:
+        """A delegated writer went (its relay restarted): prune it; the link stays for its successor."""
+        with self._lock:
+            state.accepted = None
 
     def releasable(self, now: float) -> List[WriterState]:
         """Writers holding samples whose negotiation finished; expire holds older than HOLD_SECONDS."""

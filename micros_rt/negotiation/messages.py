@@ -133,13 +133,20 @@ class DDSAnswer:
     latch: bool
     qos: AdvertiseQoSOptions
     node: str = ""
+    #: Not empty: the publisher republishes another graph's topic that reaches this domain already, and
+    #: serves its DDS subscribers with the writers of that graph's relay (tag ``relay=<via>``), not its own
+    #: (``writer`` is one of them): no second hop through the publisher's process.
+    via: str = ""
 
     def to_xmlrpc(self) -> List[Any]:
         return [DDS, self.params()]
 
     def params(self) -> Dict[str, Any]:
-        return {"writer": self.writer, "participant": self.participant, "latch": self.latch,
-                "qos": self.qos.to_dict(), "node": self.node}
+        params = {"writer": self.writer, "participant": self.participant, "latch": self.latch,
+                  "qos": self.qos.to_dict(), "node": self.node}
+        if self.via:
+            params["via"] = self.via
+        return params
 
     @classmethod
     def from_xmlrpc(cls, params: object, *, source: str = "a publisher") -> "DDSAnswer":
@@ -149,4 +156,5 @@ class DDSAnswer:
         except (QoSValueError, QoSTypeError) as exc:
             raise MalformedNegotiationError("qos", str(exc)[:300]) from exc
         return cls(writer=_str(d, "writer", guid=True), participant=_str(d, "participant", guid=True),
-                   latch=_bool(d, "latch"), qos=qos, node=_str(d, "node", required=False))
+                   latch=_bool(d, "latch"), qos=qos, node=_str(d, "node", required=False),
+                   via=_str(d, "via", required=False))

@@ -15,7 +15,7 @@ from typing import Any, Dict, Iterator, List, Optional, Tuple
 import pytest
 
 import harness
-from helpers import stock_listener, stock_talker
+from helpers import mrt, stock_listener, stock_talker
 from netns import Hosts
 
 CLI = str(harness.REPO_ROOT / ".venv" / "bin" / "micros-rt")
@@ -363,3 +363,66 @@ def test_two_robots_importing_one_topic_get_it_by_multicast(three_robots: Robots
     for listener in listeners:
         seqs = [int(e["data"].split()[-1]) for e in listener.events("recv")]
         assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), seqs[:20]
+
+
+def _bus_info(master: harness.RosMaster, node: str) -> List[str]:
+    return [str(link[-1]) for link in harness.node_call(harness.lookup_node(master, node), "getBusInfo")]
+
+
+def test_micros_rt_subscribers_read_the_exporting_relay_straight_without_a_hop_through_the_importer(
+        robots: Tuple[harness.RosMaster, harness.RosMaster], spawn: harness.Spawner, tmp_path: Path) -> None:
+    """A micros_rt subscriber in B of an imported topic reads relay A's DDS writer itself (issue 21: "micros_rt
+    subscribers straight from DDS without a second hop"). Relay B stopped with SIGSTOP: that subscriber keeps
+    receiving, while a stock listener (TCPROS from relay B) and a micros_rt subscriber whose QoS A's writer
+    cannot serve (reliable, A sends best effort: served by relay B's own writer) stall. Relay A restarted:
+    the subscriber takes the new exporter's writer with nothing done. Exactly once throughout."""
+    a, b = robots
+    (tmp_path / "a.yaml").write_text("graph: robot_a\nexport:\n  /chatter: {transport_priority: HIGH}\n"
+                                     "  /fast: {using_best_effort_protocol: true}\n")
+    (tmp_path / "b.yaml").write_text("graph: robot_b\nimport:\n  /robot_a/chatter: {}\n  /robot_a/fast: {}\n")
+    spawn(stock_talker("--topic", "/chatter", "--rate", 20, "--count", 0, "--duration", 150), env=a.env)
+    spawn(stock_talker("--topic", "/fast", "--rate", 20, "--count", 0, "--duration", 150, "--prefix", "fast"),
+          env=a.env)
+    relay_a = spawn(relay(tmp_path / "a.yaml"), env=a.env, name="relay_a")
+    relay_b = spawn(relay(tmp_path / "b.yaml"), env=b.env, name="relay_b")
+    node_b = relay_b.wait_for("ready", 60)["node"]
+    for topic in ("/robot_a/chatter", "/robot_a/fast"):
+        _stats_with(relay_b, "imports", topic)
+    direct = spawn(mrt("listen", "--topic", "/robot_a/chatter", "--node-name", "direct",
+                       "--duration", 140), env=b.env, name="direct")
+    through = spawn(mrt("listen", "--topic", "/robot_a/fast", "--node-name", "through",
+                        "--duration", 140), env=b.env, name="through")
+    stock = spawn(stock_listener("--topic", "/robot_a/chatter", "--duration", 140), env=b.env)
+    for peer in (direct, through, stock):
+        peer.wait_for_count("recv", 5, timeout=60)
+    assert {e["transport"] for e in direct.events("recv")} == {"DDS"}
+    assert {e["transport"] for e in through.events("recv")} == {"DDS"}
+    assert {e["callerid"] for e in direct.events("recv")} == {node_b}  # still relay B's topic in B's graph
+    links = _bus_info(b, "/direct")
+    assert len(links) == 1 and f"straight from the writers of graph robot_a's relay" in links[0], links
+    assert "straight" not in _bus_info(b, "/through")[0]
+
+    # relay B frozen: only the straight path delivers
+    relay_b.proc.send_signal(signal.SIGSTOP)
+    try:
+        mark = len(direct.events("recv"))
+        direct.wait_for_count("recv", mark + 3, timeout=30)  # what relay B had sent already has arrived
+        frozen = (len(through.events("recv")), len(stock.events("recv")))
+        direct.wait_for_count("recv", mark + 23, timeout=30)
+        assert (len(through.events("recv")), len(stock.events("recv"))) == frozen
+    finally:
+        relay_b.proc.send_signal(signal.SIGCONT)
+    for peer in (through, stock):
+        peer.wait_for_count("recv", len(peer.events("recv")) + 5, timeout=60)
+
+    # relay A restarted: a new exporter writer, taken without a new negotiation
+    relay_a.stop()
+    mark = len(direct.events("recv"))
+    spawn(relay(tmp_path / "a.yaml"), env=a.env, name="relay_a2").wait_for("ready", 60)
+    direct.wait_for_count("recv", mark + 20, timeout=60)
+    assert len(_bus_info(b, "/direct")) == 1
+
+    seqs = [int(e["data"].split()[-1]) for e in direct.events("recv")]
+    assert seqs == sorted(set(seqs)), "a message delivered twice or out of order"
+    assert all(x + 1 == y for x, y in zip(seqs[:mark - 1], seqs[1:mark])), "lost while relay A was up"
+    print(f"\nstraight: {len(seqs)} received, {len(through.events('recv'))} through relay B")

@@ -103,6 +103,17 @@ def test_a_relay_import_is_marked_on_its_publication() -> None:
     assert [m["direction"] for m in link.to_dict()["relayed"]] == ["in"]
 
 
+def test_subscribers_reading_the_exporter_straight_are_counted_on_the_import() -> None:
+    relay_b = relay_node("/relay_robot_b", "http://127.0.0.1:2001/", [],
+                         {"graph": "robot_b", "imports": [{"outside": OUTSIDE, "local": OUTSIDE, "origin": "robot_a",
+                                                           "exporters": ["/relay_robot_a"], "straight": 2,
+                                                           "counters": {"received": 3, "published": 3}}]})
+    marking = relay_marking(relay_b, OUTSIDE, publisher=True)
+    assert marking is not None and marking["straight"] == 2
+    assert marking["description"].endswith("published 3 of 3 received; 2 micros_rt subscribers read it straight "
+                                           "from graph robot_a's relay")
+
+
 def test_links_between_ordinary_nodes_keep_their_json_and_text() -> None:
     snap = snapshot_of(graph_a(), T, ["/talker"], ["/plain", "/relay_robot_a_high"])
     links = {link.subscriber: link.to_dict() for link in snap.links}

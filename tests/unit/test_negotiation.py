@@ -95,6 +95,7 @@ ANSWERS = [
     make_answer(latch=True, node=""),
     make_answer(qos=AdvertiseQoSOptions(transport_priority=TransportPriority.HIGH, latency_budget=0.005,
                                         using_best_effort_protocol=True, msg_valid_period=0.5)),
+    make_answer(via="robot_a", node="/relay_robot_b"),
 ]
 
 
@@ -110,6 +111,13 @@ def test_answer_node_is_optional() -> None:
     params = answer_params()
     del params["node"]
     assert DDSAnswer.from_xmlrpc(params).node == ""
+
+
+def test_answer_via_is_optional_and_sent_only_when_set() -> None:
+    # a subscriber of an older micros_rt reads the answer of a delegating publisher as an ordinary one
+    assert "via" not in make_answer().params() and DDSAnswer.from_xmlrpc(answer_params()).via == ""
+    with pytest.raises(MalformedNegotiationError, match="via"):
+        DDSAnswer.from_xmlrpc({**answer_params(), "via": 7})
 
 
 def test_bool_fields_default_to_false_when_missing() -> None:

@@ -400,3 +400,45 @@ def test_prune_removes_from_holding() -> None:
     table.holding.add(s)       # holding set but its deque already empty
     assert table.prune(set()) == 1
     assert table.holding == set()
+
+
+# a delegation (DDSAnswer.via): an importing relay's publication names the exporting relay's writers
+
+OTHER = "run9@http://10.0.0.1:11311/"
+
+
+def test_a_delegation_delivers_that_relays_writers_known_now_and_later_and_ignores_the_delegators_own() -> None:
+    table, reader = table_with({
+        1: RemoteWriter("exporter", {"graph": OTHER, "relay": "robot_a"}),
+        2: RemoteWriter("restarted", {"graph": OTHER, "relay": "robot_a"}),
+        3: RemoteWriter("another-relay", {"graph": OTHER, "relay": "robot_c"}),
+        4: RemoteWriter("relay-b-own", {"graph": GRAPH, "node": "/relay_b"}),
+        5: RemoteWriter("other-local", {"graph": GRAPH, "node": "/talker"}),
+    })
+    before = table.for_handle(reader, 1)
+    assert before is not None and table.decide(before) == DROP  # another graph: not before the answer
+    acc = Accepted(pub_uri="http://127.0.0.1:2/", node="/relay_b", latch=False,
+                   conn=DDSConnection("/robot_a/chatter", "http://127.0.0.1:2/", "i", "x", peer_guid="exporter"))
+    qos = AdvertiseQoSOptions(latency_budget=0.02)
+    table.accept("exporter", acc, qos)
+    table.delegate("robot_a", acc, qos)
+    later = table.for_handle(reader, 2)
+    found = {g: table.for_handle(reader, h) for g, h in (("c", 3), ("own", 4), ("local", 5))}
+    states = {g: s for g, s in found.items() if s is not None}
+    assert later is not None and len(states) == 3
+    assert table.decide(before) == DELIVER and before.accepted is acc
+    assert table.decide(later) == DELIVER and later.accepted is acc and later.qos == qos
+    assert table.decide(states["c"]) == DROP          # only the named relay's writers
+    assert table.decide(states["own"]) == DROP        # the delegator's own writer: idle for us, ignored
+    assert table.decide(states["local"]) == HOLD      # other publishers of this graph still negotiate
+    assert table.is_delegated(acc.conn) and not table.is_delegated(accepted("w").conn)
+
+    table.forget_writer(before)                        # that exporter went: pruned, the link stays
+    assert table.prune({"restarted", "another-relay", "relay-b-own", "other-local"}) == 1
+    assert len(table) == 4 and table.is_delegated(acc.conn)
+
+    table.connection_closed(acc.conn)                  # the delegating publisher went: nothing of it stays
+    assert not table.delegations and later.accepted is None
+    new = table.for_handle(FakeReader({6: RemoteWriter("third", {"graph": OTHER, "relay": "robot_a"})}), 6)
+    assert new is not None and table.decide(new) == DROP
+    assert table.decide(states["own"]) == HOLD      

@@ -28,6 +28,7 @@ exporter's tag on import).
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import threading
 import time
@@ -82,6 +83,9 @@ class _Export:
         self._last_sent = -math.inf
         tag = {"graph": relay.graph_id, "node": relay.node, "relay": relay.config.graph, "type": data_class._type,
                "md5": data_class._md5sum, "best_effort": "1" if rule.options.using_best_effort_protocol else "0",
+               "latch": "1" if rule.latch else "0",
+               # an importing relay answers micros_rt subscribers with this writer, whose QoS it judges by this
+               "qos": json.dumps(rule.options.to_dict(), separators=(",", ":")),
                "def": definition_field(data_class)}  # importers without the type's package build it from this
         spec = EndpointSpec(self.outside, data_class, rule.queue_size, rule.latch, tag)
         writer = relay.backend.open_writer(spec, rule.options)
@@ -151,8 +155,32 @@ class _Import:
         if options is not None and options.deadline < DURATION_MAX:
             options = dataclasses.replace(options, deadline_cb=self._on_deadline)
         self.pub = relay.nh.advertise(rule.local, data_class, rule.queue_size, latch=rule.latch)
+        if rule.local == rule.outside:
+            # the exporter's writers reach this DDS domain's readers of the name already: micros_rt subscribers
+            # read them straight, not through this process (their own DDS topic when renamed: not possible)
+            self.pub.delegate_dds(self._exporter, relay._directory.reader_alive)
         self.sub = relay.nh.subscribe_reader(f"relay import {rule.outside}", data_class, open_reader,
                                              self._deliver, rule.queue_size, options)
+
+    def _exporter(self) -> Optional[micros_rt.ForeignWriters]:
+        """A writer of the origin graph's relay for this topic now, with the QoS it offers (its tag)."""
+        from micros_rt.transports.dds.types import dds_topic_name
+
+        dds_topic = dds_topic_name(self.rule.outside)
+        for writer in self._relay._directory.writers(dds_topic):
+            tag = writer.tag
+            if tag.get("relay") != self.rule.origin or tag.get("graph") == self._relay.graph_id or "qos" not in tag:
+                continue
+            try:
+                options = micros_rt.AdvertiseQoSOptions.from_dict(json.loads(tag["qos"]),
+                                                                 source=f"graph {self.rule.origin}'s relay")
+            except (ValueError, TypeError, micros_rt.MicrosRtError) as exc:
+                _log.debug("micros_rt: relay: writer %s of %s: unreadable QoS in its tag (%s)", writer.guid,
+                           dds_topic, exc)
+                continue
+            return micros_rt.ForeignWriters(via=self.rule.origin, writer=writer.guid, participant=writer.participant,
+                                  dds_topic=dds_topic, options=options, latch=tag.get("latch") == "1")
+        return None
 
     def _on_deadline(self, info: micros_rt.DeadlineMissed) -> None:
         if self._silent_since is None:
@@ -188,7 +216,8 @@ class _Import:
         return {"outside": self.rule.outside, "local": self.rule.local, "origin": self.rule.origin,
                 "exporters": exporters, "protocol": "DDS", "process": self._relay.node,
                 "qos": None if options is None else options.to_dict(), "queue_size": self.rule.queue_size,
-                "latch": self.rule.latch, "counters": self.stats()}
+                "latch": self.rule.latch, "counters": self.stats(),
+                "straight": self.pub.get_delegated_dds_connections()}
 
     def close(self) -> None:
         self.sub.unregister()

@@ -17,9 +17,10 @@ never seen (the exporter's tag names it).
 from __future__ import annotations
 
 import threading
-from typing import Any, Callable, Dict, List, Optional
+import time
+from typing import Any, Callable, Dict, FrozenSet, List, NamedTuple, Optional, Tuple
 
-from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
+from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription
 from cyclonedds.core import DDSException, InstanceState, Listener, ReadCondition, SampleState, ViewState
 from cyclonedds.qos import Policy, Qos
 
@@ -31,7 +32,7 @@ from .backend import DDSBackend
 from .endpoints import DDSReader, make_user_data, parse_user_data
 from .types import dds_topic_name, dds_type_for
 
-__all__ = ["DDSFeed", "WriterDirectory"]
+__all__ = ["DDSFeed", "DiscoveredWriter", "WriterDirectory"]
 
 _log = nonblocking_logger("rosout.micros_rt.dds")
 
@@ -123,25 +124,36 @@ class DDSFeed:
             self._reader.close()
 
 
+class DiscoveredWriter(NamedTuple):
+    guid: str
+    participant: str
+    tag: Dict[str, str]
+
+
 class WriterDirectory:
     """The DDS writers this participant has discovered, with their micros_rt tags (Cyclone's built-in
-    DCPSPublication topic, read, never taken: every call sees all writers alive)."""
+    DCPSPublication topic, read, never taken: every call sees all writers alive), and on demand whether a
+    reader is alive (DCPSSubscription)."""
 
     def __init__(self, backend: DDSBackend) -> None:
-        self._reader = BuiltinDataReader(backend.participant.dp, BuiltinTopicDcpsPublication)
+        self._dp = backend.participant.dp
+        self._reader = BuiltinDataReader(self._dp, BuiltinTopicDcpsPublication)
         # writers alive now: a deleted writer's sample stays in the reader, its instance disposed
         self._alive = ReadCondition(self._reader, SampleState.Any | ViewState.Any | InstanceState.Alive)
         self._lock = threading.Lock()
+        self._subscriptions: Optional[Tuple[BuiltinDataReader, ReadCondition]] = None
+        self._readers: FrozenSet[str] = frozenset()
+        self._readers_at = -1.0
 
-    def tags(self, dds_topic: str) -> List[Dict[str, str]]:
-        """Tags of the micros_rt writers of ``dds_topic`` known now (foreign writers have none)."""
+    def writers(self, dds_topic: str) -> List[DiscoveredWriter]:
+        """The micros_rt writers of ``dds_topic`` known now (foreign writers have no tag and are left out)."""
         with self._lock:
             try:
                 found = self._reader.read(N=1024, condition=self._alive)
             except DDSException as exc:
                 _log.debug("micros_rt: reading DCPSPublication: %s", exc)
                 return []
-        out: List[Dict[str, str]] = []
+        out: List[DiscoveredWriter] = []
         for endpoint in found:
             if getattr(endpoint, "topic_name", None) != dds_topic:
                 continue
@@ -151,5 +163,26 @@ class WriterDirectory:
                 continue
             tag = parse_user_data(user_data)
             if tag is not None:
-                out.append(tag)
+                out.append(DiscoveredWriter(str(endpoint.key), str(endpoint.participant_key), tag))
         return out
+
+    def tags(self, dds_topic: str) -> List[Dict[str, str]]:
+        """Tags of the micros_rt writers of ``dds_topic`` known now."""
+        return [w.tag for w in self.writers(dds_topic)]
+
+    def reader_alive(self, guid: str) -> bool:
+        """Whether the reader ``guid`` is in discovery now (looked up at most every 0.2 s)."""
+        now = time.monotonic()
+        with self._lock:
+            if now - self._readers_at > 0.2:
+                if self._subscriptions is None:
+                    reader = BuiltinDataReader(self._dp, BuiltinTopicDcpsSubscription)
+                    self._subscriptions = (reader, ReadCondition(
+                        reader, SampleState.Any | ViewState.Any | InstanceState.Alive))
+                reader, alive = self._subscriptions
+                try:
+                    self._readers = frozenset(str(e.key) for e in reader.read(N=4096, condition=alive))
+                except DDSException as exc:
+                    _log.debug("micros_rt: reading DCPSSubscription: %s", exc)
+                self._readers_at = now
+            return guid in self._readers
