@@ -9,9 +9,16 @@ Scenarios (tests/peers/mrt_link.py, one publisher process with two threads, one 
   small  /control geometry_msgs/PointStamped at 100 Hz (stamp = wall clock), /image 4x4 at 1 Hz
   1080p  /control at 100 Hz and /image sensor_msgs/Image 1920x1080 rgb8 at 30 Hz (186 MB/s)
 
-The relayed path has three links where the direct one has one: stock publisher -> relay A (TCPROS), relay A ->
-relay B (DDS), relay B -> stock subscriber (TCPROS). "Per hop" is the difference of the medians divided by the
-two links the relays add. Robot A's relay exports the camera with a history of 6 (RELAY_EXPORT says why).
+Stacks (``--stacks``):
+  direct          stock publisher -> stock subscriber, one master
+  relay           stock publisher -> relay A (TCPROS) -> relay B (DDS) -> stock subscriber (TCPROS)
+  mrt_through     the same with a micros_rt subscriber, the import renamed (``as: /control``): it reads relay B's
+                  own DDS writer, a hop through relay B's process
+  mrt_straight    a micros_rt subscriber of the import under its outside name (/robot_a/control): it reads relay
+                  A's DDS writer straight, relay B only answers its negotiation
+
+"Per hop" is the difference of the medians of direct and relay divided by the two links the relays add. Robot
+A's relay exports the camera with a history of 6 (RELAY_EXPORT says why).
 Results: benchmarks/results/relay_hop.json and .md.
 """
 
@@ -35,6 +42,7 @@ from run import child_env, eth0_tx, start_master  # noqa: E402
 
 ROOT = HERE.parent
 STOCK_PYTHON = "/usr/bin/python3"
+MRT_PYTHON = str(ROOT / ".venv" / "bin" / "python")
 CLI = str(ROOT / ".venv" / "bin" / "micros-rt")
 #: Robot A's relay. The camera's history is 6 frames: a reliable DDS writer's history is what a retransmission
 #: is served from, and on this host (net.core.rmem_max 4 MB, below one 6.2 MB frame) the receiving socket
@@ -42,6 +50,10 @@ CLI = str(ROOT / ".venv" / "bin" / "micros-rt")
 #: by the time the request came, and 1-2 of 240 frames never arrived (Cyclone reports no loss for that).
 RELAY_EXPORT = ("graph: robot_a\nexport:\n  /control: {transport_priority: HIGH, queue_size: 100}\n"
                 "  /image: {transport_priority: LOW, queue_size: 6}\n")
+#: Robot B's relay for a micros_rt subscriber of the outside names (mrt_straight)
+RELAY_IMPORT_OUTSIDE = ("graph: robot_b\nimport:\n  /robot_a/control: {queue_size: 100}\n"
+                        "  /robot_a/image: {queue_size: 2}\n")
+STACKS = ("direct", "relay", "mrt_through", "mrt_straight")
 SCENARIOS = {
     "small": ["--control-rate", "100", "--image-rate", "1", "--width", "4", "--height", "4"],
     "1080p": ["--control-rate", "100", "--image-rate", "30", "--width", "1920", "--height", "1080"],
@@ -55,21 +67,28 @@ def popen(argv: List[str], env: Dict[str, str], log: Path) -> "subprocess.Popen[
 
 def one_run(stack: str, scenario: str, seconds: float, logdir: Path, profile: bool = False) -> Dict[str, Any]:
     domain = random.randrange(100, 200)
-    masters = [start_master(logdir) for _ in range(2 if stack == "relay" else 1)]
+    relayed = stack != "direct"
+    masters = [start_master(logdir) for _ in range(2 if relayed else 1)]
     envs = [child_env("micros_rt", uri, domain) for _, uri in masters]
     relays: List["subprocess.Popen[str]"] = []
     procs: List["subprocess.Popen[str]"] = []
     try:
-        if stack == "relay":
-            for i, text in enumerate((RELAY_EXPORT, RELAY_IMPORT)):
+        if relayed:
+            imports = RELAY_IMPORT_OUTSIDE if stack == "mrt_straight" else RELAY_IMPORT
+            for i, text in enumerate((RELAY_EXPORT, imports)):
                 config = logdir / f"relay{i}.yaml"
                 config.write_text(text)
                 relays.append(popen([CLI, "relay", "--config", str(config), "--poll-period", "0.3", "--json",
                                      "--stats-period", "2"], envs[i], logdir / f"relay{i}.log"))
         peer = [STOCK_PYTHON, str(PEER)]
-        sub = popen([*peer, "sub", "--stock", "--seconds", str(seconds + 60), *SCENARIOS[scenario]], envs[-1],
-                    logdir / "sub.log")
-        delay = ["--start-delay", "6"] if stack == "relay" else ["--start-delay", "1"]
+        if stack.startswith("mrt_"):
+            names = (["--control-topic", "/robot_a/control", "--image-topic", "/robot_a/image"]
+                     if stack == "mrt_straight" else [])
+            sub_argv = [MRT_PYTHON, str(PEER), "sub", *names]
+        else:
+            sub_argv = [*peer, "sub", "--stock"]
+        sub = popen([*sub_argv, "--seconds", str(seconds + 60), *SCENARIOS[scenario]], envs[-1], logdir / "sub.log")
+        delay = ["--start-delay", "6"] if relayed else ["--start-delay", "1"]
         pub = popen([*peer, "pub", "--stock", "--seconds", str(seconds), *delay, *SCENARIOS[scenario]], envs[0],
                     logdir / "pub.log")
         procs = [sub, pub]
@@ -108,6 +127,7 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=8.0)
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--scenarios", default="small,1080p", help="small, 1080p; comma-separated")
+    ap.add_argument("--stacks", default=",".join(STACKS), help=f"{', '.join(STACKS)}; comma-separated")
     ap.add_argument("--out", default=str(HERE / "results"))
     ap.add_argument("--profile", action="store_true", help="py-spy the relays (raw stacks in the run's log dir)")
     args = ap.parse_args()
@@ -116,7 +136,8 @@ def main() -> int:
     logroot = Path(tempfile.mkdtemp(prefix="micros_rt_relay_hop_"))
     for r in range(args.rounds):
         for scenario in args.scenarios.split(","):
-            stacks = ["direct", "relay"] if r % 2 == 0 else ["relay", "direct"]
+            stacks = args.stacks.split(",")
+            stacks = stacks if r % 2 == 0 else stacks[::-1]
             for stack in stacks:
                 print(f"round {r + 1}/{args.rounds}: {scenario}, {stack} ...", flush=True)
                 logdir = logroot / f"{r}_{scenario}_{stack}"
@@ -134,17 +155,19 @@ def main() -> int:
     for scenario, stacks in results.items():
         medians = {stack: median([run.get("control_p50_ms") for run in runs]) for stack, runs in stacks.items()}
         image_medians = {stack: median([run.get("image_p50_ms") for run in runs]) for stack, runs in stacks.items()}
+        summary[scenario] = {"control_p50_ms": medians, "image_p50_ms": image_medians}
         if medians.get("direct") is not None and medians.get("relay") is not None:
-            summary[scenario] = {
-                "control_p50_ms": medians, "image_p50_ms": image_medians,
+            summary[scenario].update({
                 "added_per_hop_ms": round((medians["relay"] - medians["direct"]) / 2, 3),
                 "image_added_per_hop_ms": (None if None in (image_medians.get("relay"), image_medians.get("direct"))
-                                           else round((image_medians["relay"] - image_medians["direct"]) / 2, 3))}
+                                           else round((image_medians["relay"] - image_medians["direct"]) / 2, 3))})
     for scenario, s in summary.items():
-        lines.append(f"\n{scenario}: control p50 direct {s['control_p50_ms']['direct']:.2f} ms, relayed "
-                     f"{s['control_p50_ms']['relay']:.2f} ms: {s['added_per_hop_ms']:.2f} ms per added hop"
-                     + (f"; image p50 {s['image_added_per_hop_ms']:.1f} ms per added hop"
-                        if s["image_added_per_hop_ms"] is not None else ""))
+        medians = s["control_p50_ms"]
+        lines.append(f"\n{scenario}: control p50 " + ", ".join(
+            f"{stack} {v:.2f} ms" for stack, v in medians.items() if v is not None)
+            + (f"; {s['added_per_hop_ms']:.2f} ms per added hop" if "added_per_hop_ms" in s else "")
+            + (f"; image p50 {s['image_added_per_hop_ms']:.1f} ms per added hop"
+               if s.get("image_added_per_hop_ms") is not None else ""))
     report = {"seconds": args.seconds, "rounds": args.rounds,
               "command": " ".join([".venv/bin/python", "benchmarks/relay_hop.py", *sys.argv[1:]]),
               "eth0_tx_packets_during_run": None if None in (tx_before, tx_after) else tx_after - tx_before,

@@ -72,6 +72,7 @@ def main() -> int:
     ap.add_argument("--image-lifespan", type=float, default=float("inf"),
                     help="pub: the camera's msg_valid_period (s): frames older than this are not sent")
     ap.add_argument("--image-topic", default="/image", help="the camera's topic name")
+    ap.add_argument("--control-topic", default="/control", help="the control topic's name")
     ap.add_argument("--progress-period", type=float, default=0.0,
                     help="sub: every this many seconds after the first message, a 'progress' event: messages "
                          "and control latency p50/p99 of that period")
@@ -101,11 +102,11 @@ def main() -> int:
 
     if args.mode == "pub":
         if args.stock:
-            control_pub = rospy.Publisher("/control", PointStamped, queue_size=100)
+            control_pub = rospy.Publisher(args.control_topic, PointStamped, queue_size=100)
             image_pub = rospy.Publisher(args.image_topic, Image, queue_size=2)
         else:
             control_pub = nh.advertise_with_qos(
-                "/control", PointStamped, 100,
+                args.control_topic, PointStamped, 100,
                 micros_rt.AdvertiseQoSOptions(transport_priority=micros_rt.TransportPriority[args.control_priority]))
             image_pub = nh.advertise_with_qos(
                 args.image_topic, Image, 2,
@@ -186,10 +187,10 @@ def main() -> int:
             got["image_latency"].append(now - msg.header.stamp.to_sec())
 
     if args.stock:
-        subs = [rospy.Subscriber("/control", PointStamped, on_control, queue_size=1000, tcp_nodelay=True),
+        subs = [rospy.Subscriber(args.control_topic, PointStamped, on_control, queue_size=1000, tcp_nodelay=True),
                 rospy.Subscriber(args.image_topic, Image, on_image, queue_size=2, tcp_nodelay=True)]
     else:
-        subs = [nh.subscribe("/control", PointStamped, on_control, 1000),
+        subs = [nh.subscribe(args.control_topic, PointStamped, on_control, 1000),
                 nh.subscribe(args.image_topic, Image, on_image, 2)]
     emit("ready")
     end = time.monotonic() + args.seconds
