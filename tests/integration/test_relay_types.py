@@ -64,3 +64,38 @@ def test_a_type_without_its_package_crosses_between_graphs(
     assert header["type"] == TYPE and header["md5sum"] != "*", header  # B's relay publishes the real type
     chatter_b = _stats_with(relay_b, "imports", "/robot_a/reading")
     assert chatter_b["bad_input"] == 0 and chatter_b["refused"] == 0, chatter_b
+
+
+def test_a_service_type_without_its_package_is_carried_as_bytes(
+        robots: Tuple[harness.RosMaster, harness.RosMaster], spawn: harness.Spawner, tmp_path: Path) -> None:
+    """``mrt_runtime/AddTwo`` exists in no package: a stock server in A and a stock client in B build it at run
+    time; the relays, which cannot, forward the calls as bytes under the server's type and md5. A client with
+    another definition of the type is refused by the server's md5 check, in words."""
+    a, b = robots
+    peer = str(harness.PEERS_DIR / "dyn_service.py")
+    (tmp_path / "a.yaml").write_text("graph: robot_a\nexport_services: [/add_two]\n")
+    (tmp_path / "b.yaml").write_text("graph: robot_b\nimport_services:\n  /robot_a/add_two: {timeout: 10}\n")
+    server = spawn([harness.STOCK_PYTHON, peer, "server", "--seconds", "120"], env=a.env, name="add_two_server")
+    server.wait_for("ready", 30)
+    relay_a = spawn(relay(tmp_path / "a.yaml"), env=a.env, name="relay_a")
+    relay_b = spawn(relay(tmp_path / "b.yaml"), env=b.env, name="relay_b")
+    relay_a.wait_for(lambda e: e.get("event") == "stats" and bool(e.get("services")), 60)
+    relay_b.wait_for(lambda e: e.get("event") == "stats" and bool(e.get("services")), 60)
+
+    for x, y in ((2, 40), (-7, 1_000_000_000_000)):
+        client = spawn([harness.STOCK_PYTHON, peer, "call", "--name", "/robot_a/add_two", "--a", str(x), "--b", str(y)],
+                       env=b.env, name="add_two_client")
+        assert client.wait(60) == 0, client.stderr_tail()
+        answer = client.wait_for("response", 10)
+        assert (answer["sum"], answer["note"]) == (x + y, f"robot A added {x} and {y}"), answer
+    other = spawn([harness.STOCK_PYTHON, peer, "call", "--name", "/robot_a/add_two", "--other-definition"],
+                  env=b.env, name="other_client")
+    assert other.wait(60) == 1
+    assert "md5sums do not match" in other.wait_for("error", 10)["text"]
+    assert [(e["a"], e["b"]) for e in server.events("served")] == [(2, 40), (-7, 1_000_000_000_000)]
+    # what B's rosservice sees: the real type and md5 (the relay announces what it forwards)
+    info = subprocess.run(["/usr/bin/python3", "/usr/bin/rosservice", "type", "/robot_a/add_two"], env=b.env,
+                          capture_output=True, text=True, timeout=60)
+    assert info.stdout.strip() == "mrt_runtime/AddTwo", info
+    last = relay_b.events("stats")[-1]["services"][0]
+    assert (last["calls"], last["failed"]) == (2, 0), last

@@ -62,3 +62,26 @@ def test_a_bad_definition_is_refused_in_words(md5: str, field: "str | None", wor
 def test_a_definition_that_does_not_parse_says_which_type() -> None:
     with pytest.raises(TypeLearningError, match="mrt_unit/Broken"):
         class_from_definition("mrt_unit/Broken", "", "flaot64 x y z\n")
+
+
+def test_a_raw_service_class_keeps_requests_and_responses_as_the_bytes_on_the_wire() -> None:
+    import io
+
+    from rospy.impl.tcpros_service import convert_return_to_response
+
+    from micros_rt.bridges.relay.msgtypes import raw_service_class
+
+    srv = raw_service_class("mrt_unit/AddTwo", "89e34646fc8b65917a3b40a500d657d8")
+    assert (srv._type, srv._md5sum) == ("mrt_unit/AddTwo", "89e34646fc8b65917a3b40a500d657d8")
+    assert (srv._request_class._type, srv._response_class._type) == ("mrt_unit/AddTwoRequest",
+                                                                     "mrt_unit/AddTwoResponse")
+    wire = bytes(range(17))
+    request = srv._request_class().deserialize(wire)
+    out = io.BytesIO()
+    request.serialize(out)
+    assert out.getvalue() == wire
+    response = srv._response_class().deserialize(b"\x2a" + bytes(8))
+    assert convert_return_to_response(response, srv._response_class) is response  # rospy's server takes it
+    for type_name, md5 in (("mrt_unit/AddTwo", ""), ("mrt_unit/AddTwo", "*"), ("AddTwo", "89e3")):
+        with pytest.raises(TypeLearningError, match="cannot be carried as bytes"):
+            raw_service_class(type_name, md5)

@@ -12,6 +12,10 @@ builds classes from that text (``genpy.dynamic``), and the DDS mapping takes the
   (:func:`class_from_definition`). The md5 the classes get must be the one the exporter announced.
 
 Installed classes win: a type whose package is installed is never built at run time.
+
+Services carry no definition in their headers (a server's says only ``type`` and ``md5sum``), and a relay
+need not read a call to forward it: for a service type whose package is missing, :func:`raw_service_class`
+gives classes that keep requests and responses as the bytes on the wire, under the announced type and md5.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ from typing import Any, Dict, List, Optional, Tuple, Type
 
 import genpy
 import roslib.message
+import rospy.msg
 
 from micros_rt.core.rospy_compat import TimeoutTransport
 from micros_rt.exceptions import MicrosRtError
@@ -34,7 +39,7 @@ from micros_rt.transports.dds.types import register_message_classes
 from .services import ServiceCallError, encode_header, read_header
 
 __all__ = ["TypeLearningError", "class_from_definition", "definition_field", "installed_class",
-           "learn_from_publisher"]
+           "learn_from_publisher", "raw_service_class"]
 
 _lock = threading.Lock()
 _built: Dict[Tuple[str, str], Type[genpy.Message]] = {}   # (type, md5) -> class built at run time
@@ -42,6 +47,25 @@ _built: Dict[Tuple[str, str], Type[genpy.Message]] = {}   # (type, md5) -> class
 
 class TypeLearningError(MicrosRtError):
     """A type that could not be learnt at run time; the message says why."""
+
+
+class _RawPart(rospy.msg.AnyMsg):  # type: ignore[misc]
+    """A service request or response kept as its serialized bytes (``_type`` set per service)."""
+
+    __slots__ = ()
+
+
+def raw_service_class(type_name: str, md5: str) -> Any:
+    """A service class for ``type_name`` (``pkg/Name``) with server md5 ``md5`` whose request and response are
+    the bytes on the wire: what a relay forwards without the type's package (nothing is decoded)."""
+    if not md5 or md5 == "*" or "/" not in type_name:
+        raise TypeLearningError(f"service type {type_name!r} with md5 {md5!r} cannot be carried as bytes (the "
+                                f"server did not announce both)")
+    parts = {suffix: type(f"Raw{suffix}", (_RawPart,), {"__slots__": (), "_type": type_name + suffix,
+                                                        "_md5sum": md5})
+             for suffix in ("Request", "Response")}
+    return type("RawService", (), {"_type": type_name, "_md5sum": md5, "_request_class": parts["Request"],
+                                   "_response_class": parts["Response"]})
 
 
 def installed_class(type_name: str) -> Optional[Type[genpy.Message]]:

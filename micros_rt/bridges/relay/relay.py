@@ -48,7 +48,8 @@ from micros_rt.qos.topic_rules import best_match
 from micros_rt.transports.base import BackPressuredWriter, EndpointSpec, PushReader, TransportWriter
 
 from .config import ExportRule, ImportRule, RelayConfig, ServiceImport
-from .msgtypes import TypeLearningError, class_from_definition, definition_field, installed_class, learn_from_publisher
+from .msgtypes import (TypeLearningError, class_from_definition, definition_field, installed_class, learn_from_publisher,
+                       raw_service_class)
 from .services import ANNOUNCE_TOPIC, ServiceCallError, call_service, probe_service
 
 __all__ = ["Relay", "Share"]
@@ -457,8 +458,12 @@ class Relay:
         except (ValueError, ImportError):
             service_class = None
         if service_class is None:
-            return (f"cannot import service {rule.outside}: its type {tag.get('type')} is not installed on this "
-                    f"host (install the package that defines it)")
+            try:  # not installed here: forward the calls as bytes, under the type and md5 the server announced
+                service_class = raw_service_class(tag.get("type", ""), tag.get("md5", ""))
+            except TypeLearningError as exc:
+                return f"cannot import service {rule.outside}: its type is not installed on this host, and {exc}"
+            _log.info("micros_rt: relay %s: service %s: %s is not installed here; its calls are forwarded as bytes",
+                      self.config.graph, rule.outside, tag.get("type"))
         if tag.get("md5") and tag["md5"] != service_class._md5sum:
             return (f"cannot import service {rule.outside}: graph {rule.origin} has another definition of "
                     f"{tag.get('type')} (md5 {tag['md5']}, here {service_class._md5sum})")
