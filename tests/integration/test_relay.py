@@ -95,7 +95,12 @@ def test_stock_cpp_and_python_topics_cross_to_another_graph(robots: Tuple[harnes
     chatter = spawn(stock_listener("--topic", "/robot_a/chatter", "--count", 30, "--duration", 90), env=b.env)
     fast = spawn(stock_listener("--topic", "/robot_a/fast", "--duration", 90), env=b.env)
     late_map = spawn(stock_listener("--topic", "/a_map", "--count", 1, "--duration", 90), env=b.env)
-    got = chatter.wait_for_count("recv", 30, timeout=90)
+    try:
+        got = chatter.wait_for_count("recv", 30, timeout=90)
+    except AssertionError as exc:  # say where the chain stopped: each relay's last counters
+        raise AssertionError(f"{exc}\nrelay A's last stats: {relay_a.events('stats')[-1:]}\nrelay B's last stats: "
+                             f"{relay_b.events('stats')[-1:]}\nrelay A stderr: {relay_a.stderr_tail(20)}\n"
+                             f"relay B stderr: {relay_b.stderr_tail(20)}") from None
     seqs = [int(e["data"].split()[-1]) for e in got]
     assert all(e["data"].startswith("hello ") for e in got), got[:3]
     assert seqs == list(range(seqs[0], seqs[0] + 30)), seqs  # in order, none lost, none twice
