@@ -8,7 +8,7 @@ import socket
 import subprocess
 import sys
 import time
-from typing import Iterator, List
+from typing import Iterator, List, Tuple
 
 import pytest
 
@@ -55,7 +55,12 @@ def established(port: int) -> int:
 @pytest.fixture
 def reregistered(monkeypatch: pytest.MonkeyPatch) -> Iterator[List[int]]:
     calls: List[int] = []
-    monkeypatch.setattr(rospy_compat, "reregister_all", lambda: calls.append(1) or (0, 0, 0))
+
+    def reregister_all() -> Tuple[int, int, int]:
+        calls.append(1)
+        return 0, 0, 0
+
+    monkeypatch.setattr(rospy_compat, "reregister_all", reregister_all)
     monkeypatch.setattr(rospy_compat, "caller_id", lambda: "/watch_test")
     yield calls
 
