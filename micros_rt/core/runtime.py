@@ -101,6 +101,7 @@ def wait_dds_started(timeout: float = 10.0) -> None:
 
 def dds_backend() -> "Optional[DDSBackend]":
     """The DDS back end of this process (created with the participant), or None without DDS."""
+    wait_dds_started()  # a program calling this before any topic (the relay) must not import cyclonedds beside it
     participant = get_participant()
     if participant is None:
         return None

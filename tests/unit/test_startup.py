@@ -48,3 +48,19 @@ def test_the_first_topic_waits_for_the_dds_import_started_by_init_node(monkeypat
     _runtime._require_node()
     assert not importing.is_alive()
     assert _runtime._node.dds_start is None  # later topics do not join again
+
+
+def test_dds_backend_waits_for_the_dds_import_started_by_init_node(monkeypatch: pytest.MonkeyPatch) -> None:
+    # the relay asks for the back end before any topic: it imported micros_rt's DDS modules beside the
+    # early-import thread and met a half-initialised cyclonedds module (1 of 24 relay starts in relay_hop)
+    import threading
+
+    from micros_rt.core import runtime as _runtime
+
+    importing = threading.Thread(target=time.sleep, args=(0.3,), name="slow import stand-in", daemon=True)
+    seen: List[bool] = []
+    monkeypatch.setattr(_runtime._node, "dds_start", importing)
+    monkeypatch.setattr(_runtime, "get_participant", lambda: seen.append(importing.is_alive()))
+    importing.start()
+    assert _runtime.dds_backend() is None
+    assert seen == [False]  # the participant was asked for only after the import thread had finished
