@@ -12,8 +12,10 @@ Scenarios (tests/peers/mrt_link.py, one publisher process with two threads, one 
 Stacks (``--stacks``):
   direct          stock publisher -> stock subscriber, one master
   relay           stock publisher -> relay A (TCPROS) -> relay B (DDS) -> stock subscriber (TCPROS)
-  mrt_through     the same with a micros_rt subscriber, the import renamed (``as: /control``): it reads relay B's
-                  own DDS writer, a hop through relay B's process
+  mrt_renamed     the same with a micros_rt subscriber, the import renamed (``as: /control``): it opens a reader
+                  on the outside topic and reads relay A's DDS writer straight (until renamed imports were
+                  served straight it read relay B's own writer, a hop through relay B's process: the
+                  ``mrt_through`` rows of results/relay_hop.md)
   mrt_straight    a micros_rt subscriber of the import under its outside name (/robot_a/control): it reads relay
                   A's DDS writer straight, relay B only answers its negotiation
 
@@ -53,7 +55,7 @@ RELAY_EXPORT = ("graph: robot_a\nexport:\n  /control: {transport_priority: HIGH,
 #: Robot B's relay for a micros_rt subscriber of the outside names (mrt_straight)
 RELAY_IMPORT_OUTSIDE = ("graph: robot_b\nimport:\n  /robot_a/control: {queue_size: 100}\n"
                         "  /robot_a/image: {queue_size: 2}\n")
-STACKS = ("direct", "relay", "mrt_through", "mrt_straight")
+STACKS = ("direct", "relay", "mrt_renamed", "mrt_straight")
 SCENARIOS = {
     "small": ["--control-rate", "100", "--image-rate", "1", "--width", "4", "--height", "4"],
     "1080p": ["--control-rate", "100", "--image-rate", "30", "--width", "1920", "--height", "1080"],

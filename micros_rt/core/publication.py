@@ -58,7 +58,7 @@ class ForeignWriters:
     via: str                        # the other graph's relay name (its writers' tag ``relay=``)
     writer: str                     # one of those writers now (GUID)
     participant: str                # its participant (GUID)
-    dds_topic: str
+    topic: str                      # the ROS name of the topic they write (this one's, or another: a renamed import)
     options: AdvertiseQoSOptions    # the QoS those writers offer
     latch: bool
 
@@ -155,10 +155,11 @@ class _Publication:
     def judge(self, offer: DDSOffer, subscriber: str) -> Tuple[Verdict, Optional[DDSAnswer]]:
         facts = self.facts()
         foreign = self._foreign[0]() if self._foreign is not None and facts.domain is not None else None
-        if foreign is not None:
+        if foreign is not None and (foreign.topic == self.topic or offer.follow):
             # the other graph's writers first: no hop through this process when the subscriber can take them
-            direct = decide(offer, dataclasses.replace(facts, dds_topic=foreign.dds_topic, options=foreign.options,
-                                                       latch=foreign.latch), subscriber=short(subscriber))
+            # (on another topic: a subscriber that opens a reader there)
+            direct = decide(offer, dataclasses.replace(facts, options=foreign.options, latch=foreign.latch),
+                            subscriber=short(subscriber))
             if direct.accepted:
                 return self._link(offer, subscriber, direct, foreign)
             _log.debug("micros_rt: topic %s: %s's writers cannot serve %s (%s); serving it from this node",
@@ -180,7 +181,7 @@ class _Publication:
                     f"{'best effort' if self.options.using_best_effort_protocol else 'reliable'}, "
                     f"priority {self.options.transport_priority.name})")
         else:
-            info = (f"DDS connection on topic {foreign.dds_topic} to reader {offer.reader}, served straight by "
+            info = (f"DDS connection on topic {foreign.topic} to reader {offer.reader}, served straight by "
                     f"the writers of graph {foreign.via}'s relay (now {foreign.writer}, priority "
                     f"{foreign.options.transport_priority.name}); none of it passes through this node")
         conn = compat.DDSConnection(self.topic, subscriber, "o", info, peer_guid=offer.reader,
@@ -203,7 +204,8 @@ class _Publication:
         assert self._dds_backend is not None
         if foreign is not None:
             return verdict, DDSAnswer(writer=foreign.writer, participant=foreign.participant, latch=foreign.latch,
-                                      qos=foreign.options, node=compat.caller_id(), via=foreign.via)
+                                      qos=foreign.options, node=compat.caller_id(), via=foreign.via,
+                                      topic="" if foreign.topic == self.topic else foreign.topic)
         return verdict, DDSAnswer(writer=dds.guid, participant=self._dds_backend.participant.guid,
                                   latch=self.latch, qos=self.options, node=compat.caller_id())
 
@@ -401,7 +403,8 @@ class Publisher:
         still in DDS discovery. A subscriber whose offer those writers can serve (same DDS topic and domain,
         compatible QoS) is answered with them and reads them straight, and keeps reading their successors
         (a restarted relay); any other is served by this node's own writer, which sends only while such a
-        subscriber exists. TCPROS subscribers are unaffected."""
+        subscriber exists. Writers of another topic (``ForeignWriters.topic``, a renamed import) serve the
+        subscribers that open a reader there (micros_rt's do). TCPROS subscribers are unaffected."""
         if self._pub is None:
             raise rospy.ROSException("publisher is unregistered")
         self._pub.delegate_dds(source, alive)

@@ -94,6 +94,7 @@ class _Subscription:
         self.readers: Tuple[DDSTopicReader, ...] = ()
         self.reader: Optional[DDSTopicReader] = None
         self.tl_reader: Optional[DDSTopicReader] = None
+        self._followed: Dict[Tuple[str, bool], DDSTopicReader] = {}  # (topic, latched) -> reader (_follow)
         if self._dds is not None:
             try:
                 self.reader = self._open_reader(latched=False)
@@ -165,7 +166,8 @@ class _Subscription:
             if proto == DDS and reader is not None and dds is not None:
                 out.append(DDSOffer(domain=dds.domain_id, topic=reader.dds_topic, type_name=reader.dds_type.type_name,
                                     md5=self.data_class._md5sum, qos=self.effective, reader=reader.guid,
-                                    participant=dds.participant.guid, graph=self.writers.graph).to_xmlrpc())
+                                    participant=dds.participant.guid, graph=self.writers.graph,
+                                    follow=True).to_xmlrpc())
             elif proto == TCPROS:
                 out.append([TCPROS])
         return out
@@ -181,6 +183,11 @@ class _Subscription:
                     except MicrosRtError as exc:
                         _log.warning("micros_rt: topic %s: no latched message over DDS: %s", self.topic, exc)
         dds_topic = self.reader.dds_topic if self.reader else self.topic
+        if answer.via and answer.topic and answer.topic != self.topic:
+            # the relay's writers write the topic under its outside name: read it there too
+            dds_topic = self._follow(answer.topic, answer.latch)
+            if not dds_topic:
+                return 0, f"cannot read {answer.topic} over DDS", 0
         source = (f"straight from the writers of graph {answer.via}'s relay (now {answer.writer}), no hop through "
                   f"{answer.node or pub_uri}") if answer.via else f"from writer {answer.writer}"
         conn = compat.DDSConnection(self.topic, pub_uri, "i", f"DDS connection on topic {dds_topic} {source}",
@@ -198,6 +205,24 @@ class _Subscription:
         _log.debug("micros_rt: topic %s: receiving from %s over DDS", self.topic, pub_uri)
         self.inbox.wake()
         return 1, f"Connected topic[{self.topic}] over DDS", 0
+
+    def _follow(self, topic: str, latched: bool) -> str:
+        """A reader of ``topic`` (another ROS name of this subscription's data, a relay's outside name) for
+        delegated writers that write there; opened once, closed with the subscription. Its DDS topic name,
+        or "" when DDS refuses it (the publisher then serves this subscriber over TCPROS)."""
+        with self.lock:
+            reader = self._followed.get((topic, latched))
+            if reader is None and self._dds is not None and not self.closed:
+                spec = EndpointSpec(topic, self.data_class, self.queue_size, latched, self.tag)
+                try:
+                    reader = self._dds.open_reader(spec, self.options, self._matches_changed, self._incompatible)
+                except MicrosRtError as exc:
+                    _log.warning("micros_rt: topic %s: cannot read %s over DDS: %s", self.topic, topic, exc)
+                    return ""
+                self.inbox.attach(reader)
+                self.readers = self.readers + (reader,)
+                self._followed[(topic, latched)] = reader
+        return reader.dds_topic if reader is not None else ""
 
     # -- delivery thread ---------------------------------------------------
     def _run(self) -> None:

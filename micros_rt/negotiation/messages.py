@@ -99,13 +99,15 @@ class DDSOffer:
     graph: str
     #: The subscriber wants the latched message (a transient-local reader).
     transient_local: bool = False
+    #: The subscriber opens a reader on another DDS topic when an answer names one (``DDSAnswer.topic``).
+    follow: bool = False
 
     def to_xmlrpc(self) -> List[Any]:
         """The protocol entry, ``['DDS', {...}]`` (roscpp needs every entry to be a list)."""
         return [DDS, {
             "domain": self.domain, "topic": self.topic, "type": self.type_name, "md5": self.md5,
             "qos": self.qos.to_dict(), "reader": self.reader, "participant": self.participant,
-            "graph": self.graph, "transient_local": self.transient_local,
+            "graph": self.graph, "transient_local": self.transient_local, "follow": self.follow,
         }]
 
     @classmethod
@@ -121,7 +123,7 @@ class DDSOffer:
         return cls(domain=domain, topic=_str(d, "topic"), type_name=_str(d, "type"), md5=_str(d, "md5"),
                    qos=qos, reader=_str(d, "reader", guid=True),
                    participant=_str(d, "participant", guid=True), graph=_str(d, "graph"),
-                   transient_local=_bool(d, "transient_local"))
+                   transient_local=_bool(d, "transient_local"), follow=_bool(d, "follow"))
 
 
 @dataclass(frozen=True)
@@ -137,6 +139,9 @@ class DDSAnswer:
     #: serves its DDS subscribers with the writers of that graph's relay (tag ``relay=<via>``), not its own
     #: (``writer`` is one of them): no second hop through the publisher's process.
     via: str = ""
+    #: With ``via``: the ROS name of the topic those writers write when it is not the subscriber's own (an
+    #: import renamed by the relay); the subscriber reads it with a reader of its own (``DDSOffer.follow``).
+    topic: str = ""
 
     def to_xmlrpc(self) -> List[Any]:
         return [DDS, self.params()]
@@ -146,6 +151,8 @@ class DDSAnswer:
                   "qos": self.qos.to_dict(), "node": self.node}
         if self.via:
             params["via"] = self.via
+        if self.topic:
+            params["topic"] = self.topic
         return params
 
     @classmethod
@@ -157,4 +164,4 @@ class DDSAnswer:
             raise MalformedNegotiationError("qos", str(exc)[:300]) from exc
         return cls(writer=_str(d, "writer", guid=True), participant=_str(d, "participant", guid=True),
                    latch=_bool(d, "latch"), qos=qos, node=_str(d, "node", required=False),
-                   via=_str(d, "via", required=False))
+                   via=_str(d, "via", required=False), topic=_str(d, "topic", required=False))

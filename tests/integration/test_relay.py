@@ -383,37 +383,46 @@ def test_micros_rt_subscribers_read_the_exporting_relay_straight_without_a_hop_t
     the subscriber takes the new exporter's writer with nothing done. Exactly once throughout."""
     a, b = robots
     (tmp_path / "a.yaml").write_text("graph: robot_a\nexport:\n  /chatter: {transport_priority: HIGH}\n"
-                                     "  /fast: {using_best_effort_protocol: true}\n")
-    (tmp_path / "b.yaml").write_text("graph: robot_b\nimport:\n  /robot_a/chatter: {}\n  /robot_a/fast: {}\n")
+                                     "  /fast: {using_best_effort_protocol: true}\n  /other: {}\n")
+    (tmp_path / "b.yaml").write_text("graph: robot_b\nimport:\n  /robot_a/chatter: {}\n  /robot_a/fast: {}\n"
+                                     "  /robot_a/other: {as: /other_here}\n")
     spawn(stock_talker("--topic", "/chatter", "--rate", 20, "--count", 0, "--duration", 150), env=a.env)
     spawn(stock_talker("--topic", "/fast", "--rate", 20, "--count", 0, "--duration", 150, "--prefix", "fast"),
+          env=a.env)
+    spawn(stock_talker("--topic", "/other", "--rate", 20, "--count", 0, "--duration", 150, "--prefix", "other"),
           env=a.env)
     relay_a = spawn(relay(tmp_path / "a.yaml"), env=a.env, name="relay_a")
     relay_b = spawn(relay(tmp_path / "b.yaml"), env=b.env, name="relay_b")
     node_b = relay_b.wait_for("ready", 60)["node"]
-    for topic in ("/robot_a/chatter", "/robot_a/fast"):
+    for topic in ("/robot_a/chatter", "/robot_a/fast", "/robot_a/other"):
         _stats_with(relay_b, "imports", topic)
     direct = spawn(mrt("listen", "--topic", "/robot_a/chatter", "--node-name", "direct",
                        "--duration", 140), env=b.env, name="direct")
+    # an import renamed with as: another DDS topic than the export's; the subscriber opens a reader there
+    renamed = spawn(mrt("listen", "--topic", "/other_here", "--node-name", "renamed", "--duration", 140),
+                    env=b.env, name="renamed")
     through = spawn(mrt("listen", "--topic", "/robot_a/fast", "--node-name", "through",
                         "--duration", 140), env=b.env, name="through")
     stock = spawn(stock_listener("--topic", "/robot_a/chatter", "--duration", 140), env=b.env)
-    for peer in (direct, through, stock):
+    for peer in (direct, renamed, through, stock):
         peer.wait_for_count("recv", 5, timeout=60)
-    assert {e["transport"] for e in direct.events("recv")} == {"DDS"}
-    assert {e["transport"] for e in through.events("recv")} == {"DDS"}
+    for peer in (direct, renamed, through):
+        assert {e["transport"] for e in peer.events("recv")} == {"DDS"}
     assert {e["callerid"] for e in direct.events("recv")} == {node_b}  # still relay B's topic in B's graph
-    links = _bus_info(b, "/direct")
-    assert len(links) == 1 and f"straight from the writers of graph robot_a's relay" in links[0], links
+    for node in ("/direct", "/renamed"):
+        links = _bus_info(b, node)
+        assert len(links) == 1 and "straight from the writers of graph robot_a's relay" in links[0], links
+    assert "rt/robot_a/other" in _bus_info(b, "/renamed")[0]
     assert "straight" not in _bus_info(b, "/through")[0]
 
     # relay B frozen: only the straight path delivers
     relay_b.proc.send_signal(signal.SIGSTOP)
     try:
-        mark = len(direct.events("recv"))
+        mark, mark_renamed = len(direct.events("recv")), len(renamed.events("recv"))
         direct.wait_for_count("recv", mark + 3, timeout=30)  # what relay B had sent already has arrived
         frozen = (len(through.events("recv")), len(stock.events("recv")))
         direct.wait_for_count("recv", mark + 23, timeout=30)
+        renamed.wait_for_count("recv", mark_renamed + 20, timeout=30)
         assert (len(through.events("recv")), len(stock.events("recv"))) == frozen
     finally:
         relay_b.proc.send_signal(signal.SIGCONT)
@@ -427,6 +436,8 @@ def test_micros_rt_subscribers_read_the_exporting_relay_straight_without_a_hop_t
     direct.wait_for_count("recv", mark + 20, timeout=60)
     assert len(_bus_info(b, "/direct")) == 1
 
+    other = [int(e["data"].split()[-1]) for e in renamed.events("recv")]
+    assert other == sorted(set(other)) and all(e["data"].startswith("other ") for e in renamed.events("recv"))
     seqs = [int(e["data"].split()[-1]) for e in direct.events("recv")]
     assert seqs == sorted(set(seqs)), "a message delivered twice or out of order"
     assert all(x + 1 == y for x, y in zip(seqs[:mark - 1], seqs[1:mark])), "lost while relay A was up"

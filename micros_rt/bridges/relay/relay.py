@@ -156,10 +156,9 @@ class _Import:
         if options is not None and options.deadline < DURATION_MAX:
             options = dataclasses.replace(options, deadline_cb=self._on_deadline)
         self.pub = relay.nh.advertise(rule.local, data_class, rule.queue_size, latch=rule.latch)
-        if rule.local == rule.outside:
-            # the exporter's writers reach this DDS domain's readers of the name already: micros_rt subscribers
-            # read them straight, not through this process (their own DDS topic when renamed: not possible)
-            self.pub.delegate_dds(self._exporter, relay._directory.reader_alive)
+        # the exporter's writers reach this DDS domain already: micros_rt subscribers read them straight, not
+        # through this process (on the outside name's DDS topic, with a reader of their own when renamed)
+        self.pub.delegate_dds(self._exporter, relay._directory.reader_alive)
         self.sub = relay.nh.subscribe_reader(f"relay import {rule.outside}", data_class, open_reader,
                                              self._deliver, rule.queue_size, options)
 
@@ -180,7 +179,7 @@ class _Import:
                            dds_topic, exc)
                 continue
             return micros_rt.ForeignWriters(via=self.rule.origin, writer=writer.guid, participant=writer.participant,
-                                  dds_topic=dds_topic, options=options, latch=tag.get("latch") == "1")
+                                            topic=self.rule.outside, options=options, latch=tag.get("latch") == "1")
         return None
 
     def _on_deadline(self, info: micros_rt.DeadlineMissed) -> None:
