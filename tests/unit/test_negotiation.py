@@ -65,6 +65,7 @@ def wire(value: Any) -> Any:
 OFFERS = [
     make_offer(),
     make_offer(transient_local=True),
+    make_offer(follow=True),
     make_offer(domain=232, md5="*"),
     make_offer(domain=-(2 ** 31)),
     make_offer(domain=2 ** 31 - 1),
@@ -96,6 +97,7 @@ ANSWERS = [
     make_answer(qos=AdvertiseQoSOptions(transport_priority=TransportPriority.HIGH, latency_budget=0.005,
                                         using_best_effort_protocol=True, msg_valid_period=0.5)),
     make_answer(via="robot_a", node="/relay_robot_b"),
+    make_answer(via="robot_a", node="/relay_robot_b", topic="/robot_a/other"),
 ]
 
 
@@ -116,6 +118,8 @@ def test_answer_node_is_optional() -> None:
 def test_answer_via_is_optional_and_sent_only_when_set() -> None:
     # a subscriber of an older micros_rt reads the answer of a delegating publisher as an ordinary one
     assert "via" not in make_answer().params() and DDSAnswer.from_xmlrpc(answer_params()).via == ""
+    assert "topic" not in make_answer(via="robot_a").params() and DDSAnswer.from_xmlrpc(answer_params()).topic == ""
+    assert DDSOffer.from_xmlrpc({k: v for k, v in offer_params().items() if k != "follow"}).follow is False
     with pytest.raises(MalformedNegotiationError, match="via"):
         DDSAnswer.from_xmlrpc({**answer_params(), "via": 7})
 
