@@ -67,6 +67,18 @@ def _str(d: Mapping[str, Any], key: str, *, required: bool = True, guid: bool = 
     return value
 
 
+#: a resolved (global) ROS name as rosgraph.names.is_legal_name accepts them, without a trailing slash
+_ROS_NAME = re.compile(r"^(/[A-Za-z0-9_]+)+$")
+
+
+def _topic_name(d: Mapping[str, Any], key: str) -> str:
+    """An optional resolved ROS topic name (``/robot_a/chatter``): what a subscriber may open a reader on."""
+    value = _str(d, key, required=False)
+    if value and not _ROS_NAME.fullmatch(value):
+        raise MalformedNegotiationError(key, f"{_short(value)} is not a resolved ROS topic name")
+    return value
+
+
 def _bool(d: Mapping[str, Any], key: str) -> bool:
     value = d.get(key, False)
     if not isinstance(value, bool):
@@ -164,4 +176,4 @@ class DDSAnswer:
             raise MalformedNegotiationError("qos", str(exc)[:300]) from exc
         return cls(writer=_str(d, "writer", guid=True), participant=_str(d, "participant", guid=True),
                    latch=_bool(d, "latch"), qos=qos, node=_str(d, "node", required=False),
-                   via=_str(d, "via", required=False), topic=_str(d, "topic", required=False))
+                   via=_str(d, "via", required=False), topic=_topic_name(d, "topic"))

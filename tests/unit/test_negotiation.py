@@ -120,6 +120,11 @@ def test_answer_via_is_optional_and_sent_only_when_set() -> None:
     assert "via" not in make_answer().params() and DDSAnswer.from_xmlrpc(answer_params()).via == ""
     assert "topic" not in make_answer(via="robot_a").params() and DDSAnswer.from_xmlrpc(answer_params()).topic == ""
     assert DDSOffer.from_xmlrpc({k: v for k, v in offer_params().items() if k != "follow"}).follow is False
+    for bad in ("robot_a/chatter", "/robot a", "/a//b", "/a/~b", "/a/", 5):
+        with pytest.raises(MalformedNegotiationError, match="topic"):
+            DDSAnswer.from_xmlrpc({**answer_params(), "via": "robot_a", "topic": bad})
+    for good in ("/robot_a/chatter", "/_micros_rt_relay/x", "/robot_1/2d_map"):
+        assert DDSAnswer.from_xmlrpc({**answer_params(), "via": "robot_a", "topic": good}).topic == good
     with pytest.raises(MalformedNegotiationError, match="via"):
         DDSAnswer.from_xmlrpc({**answer_params(), "via": 7})
 
