@@ -6,9 +6,9 @@ A thin program on micros_rt's public API and the DDS transport:
   from micros_rt ones) whose callback sends each message on a DDS writer of ``/<graph><topic>`` with the
   rule's QoS, behind the core's lane (:class:`~micros_rt.core.lanes.Lane`: a KEEP_LAST sample superseded
   before it left is not sent, back-pressure never holds the callback). ``max_rate`` is applied before the
-  lane. The writer's micros_rt tag says ``relay=<graph>``, the ROS type and the QoS: ordinary micros_rt readers
-  of other graphs ignore it (they deliver only negotiated writers, or those an importing relay names), ROS 2 nodes read it as any topic, and
-  importing relays learn the type from it.
+  lane. The writer's micros_rt tag says ``relay=<graph>``, the ROS type and the QoS: ordinary micros_rt
+  readers of other graphs ignore it (they deliver only negotiated writers, or those an importing relay
+  names), ROS 2 nodes read it as any topic, and importing relays learn the type from it.
 - **import**: a :class:`~micros_rt.transports.dds.feed.DDSFeed` that keeps only samples of the exporting
   graph's relay feeds ``NodeHandle.subscribe_reader`` (the core's deadline, time filter, queue rule and
   statistics), whose callback publishes on a micros_rt publication of the local name: TCPROS to stock
