@@ -125,13 +125,11 @@ class _Publication:
         by foreign writers (it would send each message a second time to readers that ignore it)."""
         if self.tcpros is None:
             return
-        senders = self.senders
         with self.lock:
             idle = (self._foreign is not None and not self.latch and self.dds is not None
                     and all(sub in self.delegated for sub in self.connections))
-        if idle:
-            senders = tuple(s for s in senders if s is not self.senders[0])
-        self.writers = (self.tcpros,) + senders
+        # the DDS writer's sender is the first when there is one (__init__)
+        self.writers = (self.tcpros,) + (self.senders[1:] if idle else self.senders)
 
     def delegate_dds(self, source: ForeignSource, alive: ReaderAlive) -> None:
         self._foreign = (source, alive)

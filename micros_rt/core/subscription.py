@@ -137,9 +137,11 @@ class _Subscription:
         tcpros = self.tcpros
         return {} if tcpros is None else tcpros.transports()
 
-    def _open_reader(self, *, latched: bool) -> DDSTopicReader:
+    def _open_reader(self, *, latched: bool, topic: Optional[str] = None) -> DDSTopicReader:
+        """A DDS reader of this subscription's topic (or of ``topic``, another name of its data) feeding
+        the delivery thread."""
         assert self._dds is not None
-        spec = EndpointSpec(self.topic, self.data_class, self.queue_size, latched, self.tag)
+        spec = EndpointSpec(topic or self.topic, self.data_class, self.queue_size, latched, self.tag)
         reader = self._dds.open_reader(spec, self.options, self._matches_changed, self._incompatible)
         self.inbox.attach(reader)
         self.readers = self.readers + (reader,)
@@ -213,14 +215,11 @@ class _Subscription:
         with self.lock:
             reader = self._followed.get((topic, latched))
             if reader is None and self._dds is not None and not self.closed:
-                spec = EndpointSpec(topic, self.data_class, self.queue_size, latched, self.tag)
                 try:
-                    reader = self._dds.open_reader(spec, self.options, self._matches_changed, self._incompatible)
+                    reader = self._open_reader(latched=latched, topic=topic)
                 except MicrosRtError as exc:
                     _log.warning("micros_rt: topic %s: cannot read %s over DDS: %s", self.topic, topic, exc)
                     return ""
-                self.inbox.attach(reader)
-                self.readers = self.readers + (reader,)
                 self._followed[(topic, latched)] = reader
         return reader.dds_topic if reader is not None else ""
 

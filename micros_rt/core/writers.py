@@ -127,10 +127,13 @@ class WriterTable:
         and those that come later."""
         with self._lock:
             self.delegations[via] = Delegation(accepted, qos)
-            self._delegating_nodes = {d.accepted.node for d in self.delegations.values()}
+            self._delegations_changed()
             for state in self._states.values():
-                if state.tag is not None and state.tag.get("relay") == via and state.accepted is None:
+                if state.tag is not None and state.tag.get("relay") == via:
                     self._apply_delegation(state)
+
+    def _delegations_changed(self) -> None:
+        self._delegating_nodes = {d.accepted.node for d in self.delegations.values()}
 
     def is_delegated(self, conn: DDSConnection) -> bool:
         return any(d.accepted.conn is conn for d in self.delegations.values())
@@ -156,7 +159,7 @@ class WriterTable:
         with self._lock:
             for via in [v for v, d in self.delegations.items() if d.accepted.conn is conn]:
                 del self.delegations[via]
-                self._delegating_nodes = {d.accepted.node for d in self.delegations.values()}
+                self._delegations_changed()
             for state in self._states.values():
                 if state.accepted is not None and state.accepted.conn is conn:
                     state.accepted = None
