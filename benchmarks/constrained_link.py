@@ -16,8 +16,10 @@ own rosmaster; the stock rospy publisher and subscriber of the rospy stack, with
 host carrying /control (HIGH, history 100) and /image (LOW, history 2) between the graphs over DDS;
 relay_capped: the same with the camera exported at ``max_rate: 2`` (15 Mbit/s of the 40; 5 Hz would be 37);
 micros_rt_tcp: micros_rt with the camera over TCPROS (the subscriber's profile: ``/image: {transport_hints:
-[TCPROS]}``); micros_rt_paced: that, and the publisher's profile naming the link (``links: {radio: {peers:
-[<far host>], bandwidth: 40Mbit}}``), so the camera's TCP connection is paced at 36 Mbit/s.
+[TCPROS]}``); micros_rt_paced: the sending robot's profile alone, serving the camera over TCPROS only
+(``publishers: {/image: {transport_hints: [TCPROS]}}``) and naming the link (``links: {radio: {peers:
+[<far host>], bandwidth: 40Mbit}}``), so the camera's TCP connection is paced at 36 Mbit/s; the subscriber has
+no profile.
 relay_link: robot A's relay told the link's rate (``link_bandwidth: 40Mbit``: its LOW process asks for a
 16.5 kB UDP send buffer, so it never queues more than ~33 kB in the link);
 relay_one_process: robot A's relay with ``--one-process`` (both exports in one process, so both carry the DSCP of
@@ -172,14 +174,16 @@ RELAY_IMPORT = ("graph: robot_b\nimport:\n  /robot_a/control: {as: /control, que
 
 def profiles(stack: str, directory: Path, far_host: str) -> Tuple[Dict[str, str], Dict[str, str]]:
     """The publisher's and the subscriber's environment for a micros_rt stack: micros_rt_tcp, the camera over
-    TCPROS (the subscriber's profile); micros_rt_paced, that and the link in the publisher's profile."""
+    TCPROS (the subscriber's profile); micros_rt_paced, the camera over TCPROS and the link, both in the
+    publisher's profile."""
     pub: Dict[str, str] = {}
     sub: Dict[str, str] = {}
-    if stack in ("micros_rt_tcp", "micros_rt_paced"):
+    if stack == "micros_rt_tcp":
         (directory / "sub.yaml").write_text("subscribers:\n  /image: {transport_hints: [TCPROS]}\n")
         sub["MICROS_RT_QOS_PROFILE"] = str(directory / "sub.yaml")
     if stack == "micros_rt_paced":
-        (directory / "pub.yaml").write_text(f"links:\n  radio: {{peers: [{far_host}], bandwidth: 40Mbit}}\n")
+        (directory / "pub.yaml").write_text("publishers:\n  /image: {transport_hints: [TCPROS]}\n"
+                                            f"links:\n  radio: {{peers: [{far_host}], bandwidth: 40Mbit}}\n")
         pub["MICROS_RT_QOS_PROFILE"] = str(directory / "pub.yaml")
     return pub, sub
 
@@ -274,9 +278,9 @@ def main() -> int:
     ap.add_argument("--mtu", type=int, default=1500, help="the link's MTU (9000: jumbo frames)")
     ap.add_argument("--rounds", type=int, default=1)
     ap.add_argument("--stacks", default="rospy,micros_rt,micros_rt_tcp,micros_rt_paced",
-                    help="rospy, micros_rt, micros_rt_tcp (camera over TCPROS), micros_rt_paced (and the link in "
-                         "the publisher's profile), relay, relay_link (relay A told the link's rate), relay_capped (the "
-                         "camera exported at 2 Hz), "
+                    help="rospy, micros_rt, micros_rt_tcp (camera over TCPROS), micros_rt_paced (the camera on "
+                         "TCPROS and the link, both in the publisher's profile), relay, relay_link (relay A told "
+                         "the link's rate), relay_capped (the camera exported at 2 Hz), "
                          "relay_one_process; comma-separated")
     ap.add_argument("--out", default=str(RESULTS))
     args = ap.parse_args()

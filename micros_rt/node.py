@@ -34,6 +34,7 @@ from .transports.pacing import LinkPacer
 from .transports.dds.participant import close_participant
 from .exceptions import NodeNotInitializedError, QoSTypeError
 from .negotiation.hints import TransportHints
+from .negotiation.protocol import DDS, TCPROS
 from .qos import (
     AdvertiseQoSOptions,
     QoSProfile,
@@ -259,9 +260,19 @@ class NodeHandle:
                 _log.warning("micros_rt: topic %s is already advertised in this node with %s (latch=%s); "
                              "the new Publisher shares it", resolved, pub.options, pub.latch)
 
-        pub = _node.publications.acquire(
-            resolved, lambda: _Publication(resolved, data_class, queue_size, latch, effective, dds=dds_backend(),
-                                           tag=_tag(), extra=_profile_backends(), pacer=_node.pacer), reuse)
+        node_profile = _node.profile
+        served = node_profile.advertise_transports(resolved) if node_profile else None
+        off_dds = None
+        if node_profile is not None and served is not None and DDS not in served:
+            off_dds = (f"topic {resolved}: the publisher's profile ({node_profile.source}) keeps it off DDS "
+                       f"(transport_hints: [{TCPROS}]); using TCPROS")
+
+        def create() -> _Publication:
+            return _Publication(resolved, data_class, queue_size, latch, effective,
+                                dds=None if off_dds else dds_backend(), tag=_tag(), extra=_profile_backends(),
+                                pacer=_node.pacer, off_dds=off_dds)
+
+        pub = _node.publications.acquire(resolved, create, reuse)
         return Publisher(pub, _node.publications)
 
     # subscribers ----------------------------------------------------------

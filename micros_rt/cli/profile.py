@@ -53,8 +53,12 @@ def check_main(argv: List[str]) -> int:
             continue
         print(f"\n{section}:")
         for key, options in rules.items():
-            order = profile.subscribe_transports(key) if section == "subscribers" else None
-            transports = f"; transports offered in order: {', '.join(order)}" if order else ""
+            if section == "subscribers":
+                order = profile.subscribe_transports(key)
+                transports = f"; transports offered in order: {', '.join(order)}" if order else ""
+            else:
+                order = profile.advertise_transports(key)
+                transports = f"; transports served: {', '.join(order)}" if order else ""
             print(f"  {key}: {describe(options.to_dict())}{transports}")
             if section in live:
                 matched = rule_matches(profile, section, key, live[section])

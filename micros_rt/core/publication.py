@@ -73,8 +73,11 @@ class _Publication:
 
     def __init__(self, topic: str, data_class: Type[genpy.Message], queue_size: Optional[int], latch: bool,
                  options: AdvertiseQoSOptions, *, dds: "Optional[DDSBackend]", tag: Dict[str, str],
-                 extra: Tuple[ProfileBackend, ...] = (), pacer: "Optional[LinkPacer]" = None) -> None:
+                 extra: Tuple[ProfileBackend, ...] = (), pacer: "Optional[LinkPacer]" = None,
+                 off_dds: Optional[str] = None) -> None:
         self.topic = topic
+        #: why this topic has no DDS writer by choice (the node's profile), in words; None: it has one if it can
+        self.off_dds = off_dds
         self._pacer = pacer
         self.data_class = data_class
         self.latch = latch
@@ -147,7 +150,13 @@ class _Publication:
             options=self.options, latch=self.latch, pending=pending)
 
     def negotiated_transports(self, subscriber: str) -> Dict[str, NegotiatedTransport]:
-        """What ``requestTopic`` may negotiate for this topic with ``subscriber``: DDS, judged here."""
+        """What ``requestTopic`` may negotiate for this topic with ``subscriber``: DDS, judged here (none when
+        the profile keeps the topic off DDS: the subscriber's DDS entry is skipped as a stock publisher would,
+        with no warning, and ``micros-rt topic info`` shows why)."""
+        if self.off_dds is not None:
+            with self.lock:
+                remember_verdict(self.verdicts, short(subscriber, 256), Verdict(False, "profile", self.off_dds))
+            return {}
         return {DDS: dds_transport(lambda offer: self.judge(offer, subscriber))}
 
     def judge(self, offer: DDSOffer, subscriber: str) -> Tuple[Verdict, Optional[DDSAnswer]]:

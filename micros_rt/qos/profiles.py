@@ -5,6 +5,7 @@ Format::
     publishers:
       /chatter: {transport_priority: HIGH, latency_budget: 0.005}
       "/camera/*": {using_best_effort_protocol: true, msg_valid_period: 0.1}
+      /debug/cloud: {transport_hints: [TCPROS]}
     subscribers:
       /chatter: {time_filter_duration: 1.0, deadline: 0.5}
       "/camera/*": {transport_hints: [TCPROS]}
@@ -14,8 +15,11 @@ Format::
 ``links`` names links of limited bandwidth (:mod:`micros_rt.qos.links`): this node's TCPROS connections of
 topics below HIGH to peers across one are paced below its rate, leaving room for HIGH topics.
 
-``transport_hints`` (subscribers only) lists the transports the subscriber offers, in order, as
-``TransportHints`` in code (which wins when it gives any). Across a constrained link a large LOW topic over
+``transport_hints`` of a subscriber lists the transports it offers, in order, as ``TransportHints`` in code
+(which wins when it gives any). A publisher's lists the transports it serves: ``[TCPROS]`` keeps the topic off
+DDS altogether (no DDS writer: every subscriber, micros_rt's too, gets TCPROS; ROS 2 nodes do not see it), so
+the sending robot alone can put its camera on TCPROS across its radio (with ``links``, paced); TCPROS cannot be
+left out (stock subscribers connect with nothing else). Across a constrained link a large LOW topic over
 TCPROS leaves the link's queue to TCP's congestion window where DDS keeps it full, and a HIGH topic on DDS
 stops waiting behind it (README, constrained link). ``[TCPROS]`` alone: with ``[TCPROS, DDS]`` the
 subscriber's DDS reader exists for the fallback, Cyclone matches it with a micros_rt publisher's writer
@@ -88,8 +92,8 @@ class QoSProfile:
         self.source = source
         self._publishers: dict[str, AdvertiseQoSOptions] = dict(publishers or {})
         self._subscribers: dict[str, SubscribeQoSOptions] = dict(subscribers or {})
-        # subscribers' transport_hints: key -> protocol names in the order offered
-        self._transports: dict[str, tuple[str, ...]] = {}
+        # transport_hints by section: key -> protocol names (a subscriber's in the order offered)
+        self._transports: dict[str, dict[str, tuple[str, ...]]] = {section: {} for section in _SECTIONS}
         # the raw ``mqtt`` section (broker and per-topic MQTT rules), validated by micros_rt.transports.mqtt.backend
         self.mqtt: Any = None
         #: the ``links`` section: links of limited bandwidth, in file order
@@ -131,7 +135,7 @@ class QoSProfile:
             raise ProfileError(f"{source}: not valid YAML: {exc}") from exc
         publishers: dict[str, AdvertiseQoSOptions] = {}
         subscribers: dict[str, SubscribeQoSOptions] = {}
-        transports: dict[str, tuple[str, ...]] = {}
+        transports: dict[str, dict[str, tuple[str, ...]]] = {section: {} for section in _SECTIONS}
         if root is None:  # empty file: an empty profile
             return cls(publishers, subscribers, source=source)
         _expect_mapping(root, source, "the top level", "a mapping with 'publishers'/'subscribers'")
@@ -163,14 +167,14 @@ class QoSProfile:
                 except re.error as exc:
                     raise ProfileError(f"{_where(source, topic_node)}: {section}: key {topic!r} is not a valid "
                                        f"regular expression: {exc}") from None
+                hints = _take_transport_hints(options_node, source, path, publisher=section == "publishers")
+                if hints is not None:
+                    transports[section][topic] = hints
                 if section == "publishers":
                     publishers[topic] = _parse_options(
                         AdvertiseQoSOptions, options_node, source, path
                     )
                 else:
-                    hints = _take_transport_hints(options_node, source, path)
-                    if hints is not None:
-                        transports[topic] = hints
                     subscribers[topic] = _parse_options(
                         SubscribeQoSOptions, options_node, source, path
                     )
@@ -192,7 +196,12 @@ class QoSProfile:
     def subscribe_transports(self, topic: str) -> tuple[str, ...] | None:
         """The transports (``"DDS"``, ``"TCPROS"``) in the order the profile has a subscriber of the resolved
         ``topic`` offer them, or None (the code's TransportHints or the default order)."""
-        return _lookup(self._transports, topic)
+        return _lookup(self._transports["subscribers"], topic)
+
+    def advertise_transports(self, topic: str) -> tuple[str, ...] | None:
+        """The transports the profile has a publisher of the resolved ``topic`` serve (``("TCPROS",)``: no
+        DDS writer), or None (every transport this process has)."""
+        return _lookup(self._transports["publishers"], topic)
 
 
 _Value = TypeVar("_Value")
@@ -279,8 +288,9 @@ def _parse_links(node: yaml.Node, source: str) -> tuple[LinkSpec, ...]:
     return tuple(found)
 
 
-def _take_transport_hints(node: yaml.Node, source: str, path: str) -> tuple[str, ...] | None:
-    """Remove a ``transport_hints`` entry from a subscriber's options mapping and return its protocols."""
+def _take_transport_hints(node: yaml.Node, source: str, path: str, *, publisher: bool) -> tuple[str, ...] | None:
+    """Remove a ``transport_hints`` entry from an options mapping and return its protocols (a publisher's
+    must include TCPROS)."""
     if not isinstance(node, yaml.MappingNode):
         return None  # _parse_options says what is wrong with it
     for i, (key_node, value_node) in enumerate(node.value):
@@ -302,6 +312,10 @@ def _take_transport_hints(node: yaml.Node, source: str, path: str) -> tuple[str,
         if name in names:
             raise ProfileError(f"{_where(source, item)}: {key}: {name} is given twice")
         names.append(name)
+    if publisher and TCPROS not in names:
+        raise ProfileError(f"{where}: {key}: a publisher always serves {TCPROS} (stock ROS subscribers connect "
+                           f"with nothing else); [{TCPROS}] keeps the topic off {DDS}, [{DDS}, {TCPROS}] is the "
+                           f"default")
     return tuple(names)
 
 

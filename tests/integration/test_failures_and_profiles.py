@@ -196,3 +196,32 @@ def test_malformed_dds_samples_are_reported_once_and_good_ones_still_arrive(ros_
     assert len(warnings) == 1, logs(listener)  # once per writer, not once per sample
     assert "std_msgs/String" in warnings[0]
     assert listener.alive()
+
+
+def test_a_publishers_profile_keeps_its_topic_off_dds_without_a_warning(ros_master: harness.RosMaster,
+                                                                       spawn: harness.Spawner,
+                                                                       tmp_path: Path) -> None:
+    # The sending robot's own file: /tcp_only is served over TCPROS only (no DDS writer), so a micros_rt
+    # subscriber that offers DDS first still gets TCPROS, and the tools say why; a topic the file does not name
+    # stays on DDS.
+    profile = tmp_path / "robot.yaml"
+    profile.write_text("publishers:\n  /tcp_only: {transport_hints: [TCPROS], transport_priority: LOW}\n")
+    env = dict(ros_master.env, MICROS_RT_QOS_PROFILE=str(profile))
+    off = spawn(mrt("listen", "--topic", "/tcp_only", "--duration", "40", "--node-name", "off_l"))
+    on = spawn(mrt("listen", "--topic", "/dds_still", "--duration", "40", "--node-name", "on_l"))
+    off.wait_for("ready", 30)
+    on.wait_for("ready", 30)
+    talkers = [spawn(mrt("talk", "--topic", topic, "--count", "1200", "--rate", "30", "--wait-subscribers", "1",
+                         "--node-name", name), env=env)
+               for topic, name in (("/tcp_only", "off_t"), ("/dds_still", "on_t"))]
+    off.wait_for_count("recv", 10, timeout=30)
+    on.wait_for_count("recv", 10, timeout=30)
+    assert set(transports(off)) == {"TCPROS"} and set(transports(on)) == {"DDS"}
+    cp = subprocess.run([str(harness.REPO_ROOT / ".venv" / "bin" / "micros-rt"), "topic", "info", "--json",
+                         "/tcp_only"], env=dict(ros_master.env), capture_output=True, text=True, timeout=90)
+    assert cp.returncode == 0, cp.stderr
+    (link,) = [x for x in json.loads(cp.stdout)["links"] if x["subscriber"] == "/off_l"]
+    assert link["protocol"] == "TCPROS" and link["verdict"] == "profile", link
+    assert "robot.yaml" in link["reason"] and "keeps it off DDS" in link["reason"], link
+    for peer in (off, *talkers):
+        assert not [w for w in logs(peer) if "DDS" in w], logs(peer)

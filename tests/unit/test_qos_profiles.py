@@ -346,7 +346,7 @@ def test_merge_with_a_loaded_profile() -> None:
     assert merged == AdvertiseQoSOptions(P.HIGH, 0.001)
 
 
-# -- transport_hints (subscribers) -------------------------------------------------------------------------
+# -- transport_hints (subscribers and publishers) -------------------------------------------------------------
 
 def test_subscriber_transport_hints_are_read_in_order_and_looked_up_like_options() -> None:
     from micros_rt.negotiation import TransportHints
@@ -380,9 +380,21 @@ def test_bad_transport_hints_are_refused_with_file_line_and_key(value: str, says
     assert str(err.value).startswith("robot.yaml:4: subscribers['/a'].transport_hints: ") and says in str(err.value)
 
 
-def test_transport_hints_are_a_subscriber_option_only() -> None:
-    with pytest.raises(ProfileError, match=r"publishers\['/a'\]\.transport_hints: unknown option"):
-        QoSProfile.from_string("publishers: {/a: {transport_hints: [DDS]}}")
+def test_a_publishers_transport_hints_say_what_it_serves_and_must_keep_tcpros() -> None:
+    p = QoSProfile.from_string(
+        "publishers:\n"
+        "  /camera/*: {transport_hints: [tcpros], transport_priority: LOW}\n"
+        "  /scan: {transport_hints: [DDS, TCPROS]}\n"
+        "  /odom: {transport_priority: HIGH}\n", source="robot.yaml")
+    assert p.advertise_transports("/camera/image") == ("TCPROS",)
+    assert p.advertise_transports("/scan") == ("DDS", "TCPROS")
+    assert p.advertise_transports("/odom") is None and p.subscribe_transports("/camera/image") is None
+    camera = p.advertise_options("/camera/image")
+    assert camera is not None and camera.transport_priority == P.LOW  # the entry's other options still apply
+    with pytest.raises(ProfileError) as err:
+        QoSProfile.from_string("publishers:\n  /a:\n    transport_hints: [DDS]\n", source="robot.yaml")
+    assert str(err.value).startswith("robot.yaml:3: publishers['/a'].transport_hints: a publisher always serves "
+                                     "TCPROS")
     with pytest.raises(ValueError, match="unknown transport 'UDP'"):
         from micros_rt.negotiation import TransportHints
         TransportHints.from_names(["UDP"])
