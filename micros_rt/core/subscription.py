@@ -370,7 +370,7 @@ class _Subscription:
         if not self._admit_enforced(self.readers[0], info.source_timestamp, qos):
             return
         if not state.skew.done:
-            self._check_clock_skew(state, time.time_ns() - info.source_timestamp)
+            self._check_clock_skew(state, time.time_ns() - info.source_timestamp, time.monotonic())
         try:
             msg = self.readers[0].decode(data)
         except ValueError as exc:
@@ -427,19 +427,27 @@ class _Subscription:
             except Exception:
                 _log.exception("micros_rt: topic %s: callback raised (continuing)", self.topic)
 
-    def _check_clock_skew(self, state: WriterState, age_ns: int) -> None:
-        skew = state.skew.observe(age_ns)
+    def _check_clock_skew(self, state: WriterState, age_ns: int, now: float) -> None:
+        skew = state.skew.observe(age_ns, now)
         if skew is None:
             return
         acc = state.accepted
         who = acc.pub_uri if acc else state.guid
         node = (state.tag or {}).get("node") or (acc.node if acc else "") or "a non-micros_rt node"
-        direction = "behind" if skew > 0 else "ahead of"
-        _log.warning("micros_rt: topic %s: the clock of publisher %s (%s, writer %s) runs %.1f s %s this "
-                     "node's clock (its samples arrive stamped %.1f s %s). Subscribers ordered by sending "
-                     "timestamp drop its samples in favour of other publishers', and msg_valid_period expires "
-                     "them; synchronise the clocks (NTP/chrony)", self.topic, who, node, state.guid, abs(skew),
-                     direction, abs(skew), "in the past" if skew > 0 else "in the future")
+        effects = ("Subscribers ordered by sending timestamp drop its samples in favour of other publishers', "
+                   "and msg_valid_period expires them")
+        if skew < 0:
+            _log.warning("micros_rt: topic %s: the clock of publisher %s (%s, writer %s) runs %.1f s ahead of "
+                         "this node's clock (its samples arrive stamped %.1f s in the future). %s; synchronise "
+                         "the clocks (NTP/chrony)", self.topic, who, node, state.guid, -skew, -skew, effects)
+            return
+        # a sample stamped in the past is a clock behind or a sample that waited: a whole window of them
+        # (ClockSkewCheck) is more likely the clock, but a node starved of CPU for that long looks the same
+        _log.warning("micros_rt: topic %s: every sample of publisher %s (%s, writer %s) in its first %.1f s "
+                     "arrived stamped at least %.1f s in the past: its clock runs %.1f s behind this node's "
+                     "clock, or its samples waited that long on the way (this node or the network "
+                     "overloaded). %s; if the clocks differ, synchronise them (NTP/chrony)", self.topic, who,
+                     node, state.guid, state.skew.window, skew, skew, effects)
 
     def _check_deadline(self, now: float) -> None:
         silent = self.deadline.poll(now)

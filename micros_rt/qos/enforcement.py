@@ -106,22 +106,41 @@ class ClockSkewCheck:
 
     A sample's age is the clock offset plus its latency, which queueing only makes longer. So a sample
     stamped in the future means a clock ahead at once; a clock behind is the *smallest* age among the
-    first ``samples`` ones. ``observe`` returns the skew in seconds (positive: the writer is behind)
-    once, when it is beyond ``limit``; ``done`` turns True when the writer is judged either way.
+    first ``samples`` ones *and* the first ``window`` seconds of arrivals: a backlog (a node starved of CPU
+    while many start, a link that held its queue) arrives in a burst of old samples, and only after it has
+    drained do the ages show the offset. ``observe`` returns the skew in seconds (positive: the writer is
+    behind, or every sample in the window waited that long) once, when it is beyond ``limit``; ``done``
+    turns True when the writer is judged either way.
     """
 
-    __slots__ = ("limit", "samples", "_n", "_lowest", "done")
+    __slots__ = ("limit", "samples", "window", "_n", "_lowest", "_first", "done")
 
-    def __init__(self, limit: float = CLOCK_SKEW_WARN_SECONDS, samples: int = 10) -> None:
+    def __init__(self, limit: float = CLOCK_SKEW_WARN_SECONDS, samples: int = 10, window: float = 1.5) -> None:
         self.limit = limit
         self.samples = samples
+        self.window = window
         self._n = 0
         self._lowest = math.inf
+        self._first: Optional[float] = None
         self.done = False
 
-    def observe(self, age_ns: int) -> Optional[float]:
+    def observe(self, age_ns: int, now: float) -> Optional[float]:
+        """One sample's age (ns) on arrival at ``now`` (any monotonic clock, in seconds)."""
         if self.done:
             return None
+        self._n += 1
+        self._lowest = min(self._lowest, age_ns)
+        if self._first is None:
+            self._first = now
+        limit_ns = self.limit * 1e9
+        if age_ns < -limit_ns:
+            self.done = True
+            return age_ns / 1e9
+        if self._n >= self.samples and now - self._first >= self.window:
+            self.done = True
+            if self._lowest > limit_ns:
+                return self._lowest / 1e9
+        return None
         self._n += 1
         self._lowest = min(self._lowest, age_ns)
         limit_ns = self.limit * 1e9

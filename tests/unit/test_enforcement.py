@@ -142,49 +142,63 @@ def test_is_expired() -> None:
 
 def test_clock_skew_ahead_reported_at_once() -> None:
     c = ClockSkewCheck(limit=1.0, samples=10)
-    assert c.observe(-2 * S) == pytest.approx(-2.0)
+    assert c.observe(-2 * S, 0.0) == pytest.approx(-2.0)
     assert c.done
-    assert c.observe(-5 * S) is None   # once only
+    assert c.observe(-5 * S, 0.1) is None   # once only
 
 
 def test_clock_skew_ahead_within_limit_not_reported() -> None:
     c = ClockSkewCheck(limit=1.0, samples=3)
-    assert c.observe(-S // 2) is None
+    assert c.observe(-S // 2, 0.0) is None
     assert not c.done
 
 
-def test_clock_skew_behind_after_n_samples_using_the_smallest_age() -> None:
-    c = ClockSkewCheck(limit=1.0, samples=5)
+def test_clock_skew_behind_after_n_samples_and_the_window_using_the_smallest_age() -> None:
+    c = ClockSkewCheck(limit=1.0, samples=5, window=1.0)
     ages = [5 * S, 3 * S, 2 * S, 9 * S]
-    for age in ages:
-        assert c.observe(age) is None
+    for i, age in enumerate(ages):
+        assert c.observe(age, 0.1 * i) is None
         assert not c.done
-    assert c.observe(4 * S) == pytest.approx(2.0)
+    assert c.observe(4 * S, 0.5) is None     # five samples, but only 0.5 s of arrivals
+    assert not c.done
+    assert c.observe(6 * S, 1.0) == pytest.approx(2.0)
     assert c.done
-    assert c.observe(100 * S) is None
+    assert c.observe(100 * S, 1.1) is None
+
+
+def test_clock_skew_a_backlog_that_drains_within_the_window_is_not_a_clock() -> None:
+    # a node starved of CPU while a graph starts takes 20 s of samples at once, oldest first: ten samples
+    # stamped 20 s in the past; once the backlog is gone, they arrive in milliseconds
+    c = ClockSkewCheck(limit=1.0, samples=10, window=1.5)
+    for i in range(200):
+        assert c.observe((20 * S) - i * 100_000_000, 30.0 + i * 0.001) is None   # 0.2 s to drain
+    for k in range(1, 20):
+        assert c.observe(5_000_000, 30.2 + k * 0.1) is None
+    assert c.done
 
 
 def test_clock_skew_one_fast_sample_clears_a_slow_writer() -> None:
-    c = ClockSkewCheck(limit=1.0, samples=4)
-    for age in (5 * S, 5 * S, S // 100):
-        assert c.observe(age) is None
-    assert c.observe(5 * S) is None      # smallest age 10 ms: queueing, not skew
+    c = ClockSkewCheck(limit=1.0, samples=4, window=0.0)
+    for i, age in enumerate((5 * S, 5 * S, S // 100)):
+        assert c.observe(age, i * 0.1) is None
+    assert c.observe(5 * S, 0.3) is None      # smallest age 10 ms: queueing, not skew
     assert c.done
 
 
 def test_clock_skew_in_sync_is_done_without_report() -> None:
     c = ClockSkewCheck()
     assert c.limit == CLOCK_SKEW_WARN_SECONDS
-    results: List[Optional[float]] = [c.observe(1_000_000) for _ in range(c.samples)]
-    assert results == [None] * c.samples
+    n = c.samples + int(c.window * 10) + 1   # 10 Hz for longer than the window
+    results: List[Optional[float]] = [c.observe(1_000_000, i * 0.1) for i in range(n)]
+    assert results == [None] * n
     assert c.done
-    assert c.observe(50 * S) is None     # judged: nothing later is reported
+    assert c.observe(50 * S, n * 0.1) is None     # judged: nothing later is reported
 
 
 def test_clock_skew_ahead_after_some_samples() -> None:
     c = ClockSkewCheck(limit=1.0, samples=10)
-    assert c.observe(5 * S) is None
-    assert c.observe(-3 * S) == pytest.approx(-3.0)
+    assert c.observe(5 * S, 0.0) is None
+    assert c.observe(-3 * S, 0.1) == pytest.approx(-3.0)
     assert c.done
 
 
