@@ -126,6 +126,35 @@ def test_stock_cpp_and_python_topics_cross_to_another_graph(robots: Tuple[harnes
     assert chatter_b["refused"] == 0 and chatter_b["bad_input"] == 0, chatter_b
 
 
+def test_an_import_whose_type_differs_in_the_local_graph_is_refused_in_words(
+        robots: Tuple[harness.RosMaster, harness.RosMaster], spawn: harness.Spawner, tmp_path: Path) -> None:
+    # Robot B already has a subscriber of /robot_a/chatter that expects std_msgs/Int32; A sends String. The relay
+    # must not publish String where B's graph says Int32 (every stock subscriber would refuse it on its md5, one
+    # by one): it refuses the import, says why naming both types, and keeps carrying the import that fits.
+    a, b = robots
+    (tmp_path / "a.yaml").write_text(RELAY_A)
+    (tmp_path / "b.yaml").write_text(RELAY_B)
+    spawn(stock_talker("--topic", "/chatter", "--rate", 20, "--count", 0, "--duration", 120), env=a.env)
+    spawn(stock_talker("--topic", "/fast", "--rate", 20, "--count", 0, "--duration", 120, "--prefix", "fast"),
+          env=a.env)
+    wrong = spawn(stock_listener("--topic", "/robot_a/chatter", "--type", "std_msgs/Int32", "--duration", 120),
+                  env=b.env, name="int32_listener")
+    fast = spawn(stock_listener("--topic", "/robot_a/fast", "--count", 5, "--duration", 120), env=b.env)
+    wrong.wait_for("ready", 60)
+    relay_a = spawn(relay(tmp_path / "a.yaml"), env=a.env, name="relay_a")
+    relay_b = spawn(relay(tmp_path / "b.yaml"), env=b.env, name="relay_b")
+    relay_a.wait_for("ready", 60)
+    ev = relay_b.wait_for(lambda e: e.get("event") == "stats" and "/robot_a/chatter" in e.get("not_carried", {}), 90)
+    why = ev["not_carried"]["/robot_a/chatter"]
+    assert "std_msgs/String" in why and "std_msgs/Int32" in why and "robot_a" in why, why
+    assert fast.wait_for_count("recv", 5, timeout=90)          # the import that fits is carried
+    assert not wrong.events("recv")
+    assert "/robot_a/chatter" not in [e["topic"] for e in ev["imports"]], ev["imports"]
+    publishers = dict((t, ps) for t, ps in harness.master_call(b, "getSystemState")[0])
+    assert not publishers.get("/robot_a/chatter"), publishers   # nothing published under the wrong type
+    assert relay_b.alive()
+
+
 def test_a_restarted_relay_and_a_restarted_master_are_back_without_help(
         robots: Tuple[harness.RosMaster, harness.RosMaster], spawn: harness.Spawner, tmp_path: Path) -> None:
     """B's relay is stopped and started again, then A's master is restarted: B's stock listener gets new

@@ -346,9 +346,10 @@ class Relay:
                 self._try(topic, lambda: self._export(export, topic, type_name))
         if not self.share.imports:
             return
-        for incoming in self.config.imports:
-            if incoming.outside not in self.imports:
-                self._try(incoming.outside, lambda: self._import(incoming, local_types.get(incoming.local)))
+        pending = [incoming for incoming in self.config.imports if incoming.outside not in self.imports]
+        in_use = _types_in_use() if pending else {}
+        for incoming in pending:
+            self._try(incoming.outside, lambda: self._import(incoming, in_use.get(incoming.local)))
         for name in self.config.export_services:
             self._try(name, lambda: self._export_service(name))
         if self.config.import_services:
@@ -389,7 +390,8 @@ class Relay:
         type_name = tags[0]["type"]
         if local_type is not None and local_type != type_name:
             return (f"cannot import {rule.outside} as {rule.local}: graph {rule.origin} sends {type_name}, and "
-                    f"{rule.local} is {local_type} in this graph")
+                    f"{rule.local} is {local_type} in this graph (its publishers or subscribers use that type); "
+                    f"give the import another name with 'as:', or fix the type on one side")
         data_class = installed_class(type_name)
         if data_class is None:
             try:  # not installed here: the definition in the exporter's tag
@@ -518,3 +520,12 @@ class Relay:
                 _log.debug("micros_rt: relay: closing: %s", exc)
 
 
+def _types_in_use() -> Dict[str, str]:
+    """This graph's topics that have a publisher or a subscriber now, with the type the master has for them
+    (a subscriber's too: an import must not be published under another type than the graph's subscribers
+    expect, each of whom would refuse it on its md5)."""
+    master = rospy.get_master()
+    _code, _msg, (publishers, subscribers, _services) = master.getSystemState()
+    _code, _msg, types = master.getTopicTypes()
+    present = {topic for topic, nodes in (*publishers, *subscribers) if nodes}
+    return {topic: type_name for topic, type_name in types if topic in present and type_name != "*"}
