@@ -9,7 +9,9 @@ sides:
   tried); for everything else they are removed and rospy decides as usual.
 * subscriber side: ``ROSHandler._connect_topic`` is wrapped; for a micros_rt
   subscription the protocol list follows the subscription's TransportHints and
-  a DDS answer creates a DDS pseudo-connection instead of a socket.
+  a DDS answer creates a DDS pseudo-connection instead of a socket; and
+  ``RegManager.publisher_update`` no longer lets a stale publisher list erase a
+  newer one (:func:`_merging_publisher_update`).
 
 Pseudo-connections live in rospy's own connection lists, so ``getBusInfo``
 (``rosnode info``), ``get_num_connections`` and ``has_connection`` stay true.
@@ -34,6 +36,7 @@ import rospy
 import rospy.core
 import rospy.impl.init
 import rospy.impl.masterslave as masterslave
+import rospy.impl.registration
 import rospy.names
 import rospy.topics
 import rosgraph
@@ -567,6 +570,23 @@ def prompt_registration_poll() -> Iterator[None]:
         module.time = original
 
 
+def _merging_publisher_update(self: Any, resolved_name: str, uris: List[str]) -> None:
+    """rospy's ``RegManager.publisher_update``, except that an update does not erase one still queued for the
+    same topic.
+
+    rospy's registration thread takes the newest queued update of a topic and discards the older ones. Under
+    load the publisher list that ``registerSubscriber`` returned (read before a publisher registered) can be
+    queued *after* the master's ``publisherUpdate`` that names the new publisher; the stale list then erases it
+    and the subscriber never connects to that publisher (measured: a 60-node graph starting on 2 cores, in 1
+    run of 3-5; the master's log shows the update delivered, the node's log no connection attempt). rospy only
+    ever connects on an update (a publisher that goes away closes its connection), so the union of the queued
+    lists loses nothing: a URI that is no longer a publisher answers ``requestTopic`` with an error."""
+    with self.cond:
+        queued = [uri for topic, pending in self.updates if topic == resolved_name for uri in pending or ()]
+        self.updates.append((resolved_name, list(dict.fromkeys([*(uris or ()), *queued]))))
+        self.cond.notify_all()
+
+
 def install(find_publication: Callable[[str], Optional[PublicationHook]],
             find_subscription: Callable[[str], Optional[SubscriptionHook]]) -> None:
     """Wrap rospy's negotiation once per process (idempotent); hooks are looked up by resolved topic
@@ -581,6 +601,7 @@ def install(find_publication: Callable[[str], Optional[PublicationHook]],
         handler_cls.requestTopic = _wrapped_request_topic(handler_cls.requestTopic)
         pub_cls = rospy.topics._PublisherImpl
         pub_cls.add_connection = _wrapped_publisher_add_connection(pub_cls.add_connection)
+        rospy.impl.registration.RegManager.publisher_update = _merging_publisher_update
         _installed = True
 
 
