@@ -307,8 +307,46 @@ def _request_topic(pub_uri: str, topic: str, protocols: List[List[Any]]) -> Tupl
     return -1, "node is shutting down", None
 
 
+class _OneAtATime:
+    """A lock per (topic, publisher URI) while a connection is being made, and only then.
+
+    rospy's registration thread starts a thread per publisher URI for *every* publisher list it takes, so two
+    lists that both name a new publisher (``[B]`` then ``[A, B]``, as two publishers start together) connect to
+    it twice at once. Both find no connection yet; both make one; rospy keeps the second and closes the first,
+    with whatever the publisher had already written into it: the publisher counted one subscriber and sent its
+    first message on the connection that is then dropped (seen: 199 of 200 in
+    ``test_mixed_publishers_exactly_once``; the node's log has "adding connection" twice for one URI).
+    Taking turns, the second finds the first's connection and leaves it."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._held: Dict[Tuple[str, str], List[Any]] = {}  # key -> [lock, users]
+
+    @contextlib.contextmanager
+    def turn(self, topic: str, pub_uri: str) -> Iterator[None]:
+        key = (topic, pub_uri)
+        with self._lock:
+            entry = self._held.setdefault(key, [threading.Lock(), 0])
+            entry[1] += 1
+        try:
+            with entry[0]:
+                yield
+        finally:
+            with self._lock:
+                entry[1] -= 1
+                if not entry[1]:
+                    del self._held[key]
+
+
+_connecting = _OneAtATime()
+
+
 def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
     def _connect_topic(self: Any, topic: str, pub_uri: str) -> Any:
+        with _connecting.turn(topic, pub_uri):
+            return _connect_topic_now(self, topic, pub_uri)
+
+    def _connect_topic_now(self: Any, topic: str, pub_uri: str) -> Any:
         hook = _find_subscription(topic)
         if hook is None:
             return original(self, topic, pub_uri)

@@ -68,13 +68,19 @@ def test_mixed_publishers_exactly_once(ros_master: harness.RosMaster, spawn: har
                    "--wait-subscribers", "1", "--linger", "3"))
     t2 = spawn(stock_talker("--topic", "/mixed", "--count", n, "--rate", "50", "--prefix", "stock",
                             "--wait-subscribers", "1", "--linger", "3"))
-    listener.wait_for_count("recv", 2 * n, timeout=40)
+    expected = {f"mrt {i}" for i in range(n)} | {f"stock {i}" for i in range(n)}
+    try:
+        listener.wait_for_count("recv", 2 * n, timeout=40)
+    except AssertionError as exc:  # say which messages are missing, and how each talker saw its subscriber
+        missing = sorted(expected - set(received(listener)), key=lambda d: (d.split()[0], int(d.split()[1])))
+        raise AssertionError(f"{exc}\nmissing: {missing[:20]}\nmrt talker: {t1.events('connections')[:5]}\n"
+                             f"stock talker: {t2.events('connections')[:5]}") from None
     t1.wait(30)
     t2.wait(30)
     got = received(listener)
     counts = collections.Counter(got)
     assert all(c == 1 for c in counts.values()), [k for k, c in counts.items() if c > 1][:5]
-    assert set(got) == {f"mrt {i}" for i in range(n)} | {f"stock {i}" for i in range(n)}
+    assert set(got) == expected
     by_prefix = {(e["data"].split()[0], e["transport"]) for e in listener.events("recv")}
     assert by_prefix == {("mrt", "DDS"), ("stock", "TCPROS")}
 

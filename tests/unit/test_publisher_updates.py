@@ -1,4 +1,4 @@
-"""rospy's registration race, and micros_rt's fix (core/rospy_compat._merging_publisher_update).
+"""rospy's registration races, and micros_rt's fixes (core/rospy_compat: _merging_publisher_update, _OneAtATime).
 
 rospy's RegManager queues publisher lists (from ``registerSubscriber``'s answer and from the master's
 ``publisherUpdate`` calls) and its thread connects to the newest list of a topic, discarding the older ones. When
@@ -10,7 +10,8 @@ take updates the way its thread does (``RegManager.run``: pop the last, drop the
 from __future__ import annotations
 
 import threading
-from typing import Any, List, Optional, Tuple
+import time
+from typing import Any, Dict, List, Optional, Tuple
 
 import rospy.impl.registration as registration
 
@@ -72,3 +73,40 @@ def test_install_puts_the_merging_update_in_rospys_registration_manager() -> Non
         assert registration.RegManager.publisher_update is rospy_compat._merging_publisher_update
     finally:
         rospy_compat.install(*finders)  # whatever this process had (another test's node): as it was
+
+
+def test_connections_to_one_publisher_are_made_one_at_a_time() -> None:
+    # rospy's thread connects to every URI of every list it takes: [B] then [A, B] connects to B twice at once,
+    # and rospy keeps the second connection, closing the first with what B had written into it
+    active: Dict[str, int] = {}
+    most: Dict[str, int] = {}
+    lock = threading.Lock()
+    entered = threading.Barrier(3, timeout=10)
+
+    def original(handler: Any, topic: str, uri: str) -> Tuple[int, str, int]:
+        with lock:
+            active[uri] = active.get(uri, 0) + 1
+            most[uri] = max(most.get(uri, 0), active[uri])
+        time.sleep(0.05)
+        with lock:
+            active[uri] -= 1
+        return 1, "connected", 0
+
+    finders = rospy_compat._find_publication, rospy_compat._find_subscription
+    rospy_compat.install(finders[0], lambda topic: None)   # a plain rospy subscription: rospy's own connect
+    try:
+        connect = rospy_compat._wrapped_connect_topic(original)
+
+        def run(uri: str) -> None:
+            entered.wait()
+            connect(None, "/t", uri)
+
+        threads = [threading.Thread(target=run, args=(uri,)) for uri in ("http://b:1/", "http://b:1/", "http://a:1/")]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(10)
+    finally:
+        rospy_compat.install(*finders)
+    assert most == {"http://b:1/": 1, "http://a:1/": 1}, most
+    assert not rospy_compat._connecting._held   # nothing kept once the connections are made
