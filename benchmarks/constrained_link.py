@@ -10,7 +10,8 @@ Links (the publisher host's egress; the subscriber host's is unshaped):
   htb   40 Mbit/s, DSCP honoured: htb with two classes, AF4x/EF/CS5-7 first (as Wi-Fi WMM or a DiffServ
         router), each class with a 50 ms pfifo
 
-micros_rt: /control at TransportPriority.HIGH (DSCP AF41), /image at LOW; rospy: tcp_nodelay subscribers.
+micros_rt: /control at TransportPriority.HIGH (DSCP AF41), /image at LOW (CS1: its writer is on a participant of
+its own, with its own sockets); rospy: tcp_nodelay subscribers.
 Both in their default configuration otherwise. relay (with --stacks rospy,micros_rt,relay): two robots, each its
 own rosmaster; the stock rospy publisher and subscriber of the rospy stack, with ``micros-rt relay`` on each
 host carrying /control (HIGH, history 100) and /image (LOW, history 2) between the graphs over DDS;
@@ -19,7 +20,8 @@ micros_rt_tcp: micros_rt with the camera over TCPROS (the subscriber's profile: 
 [TCPROS]}``); micros_rt_paced: the sending robot's profile alone, serving the camera over TCPROS only
 (``publishers: {/image: {transport_hints: [TCPROS]}}``) and naming the link (``links: {radio: {peers:
 [<far host>], bandwidth: 40Mbit}}``), so the camera's TCP connection is paced at 36 Mbit/s; the subscriber has
-no profile.
+no profile. micros_rt_link: both topics on DDS, the publisher's profile naming the link alone (``links:``): the
+camera's writer, below HIGH, is on a participant of its own whose UDP send buffer is 16.5 kB.
 relay_link: robot A's relay told the link's rate (``link_bandwidth: 40Mbit``: its LOW process asks for a
 16.5 kB UDP send buffer, so it never queues more than ~33 kB in the link);
 relay_one_process: robot A's relay with ``--one-process`` (both exports in one process, so both carry the DSCP of
@@ -185,6 +187,9 @@ def profiles(stack: str, directory: Path, far_host: str) -> Tuple[Dict[str, str]
         (directory / "pub.yaml").write_text("publishers:\n  /image: {transport_hints: [TCPROS]}\n"
                                             f"links:\n  radio: {{peers: [{far_host}], bandwidth: 40Mbit}}\n")
         pub["MICROS_RT_QOS_PROFILE"] = str(directory / "pub.yaml")
+    if stack == "micros_rt_link":
+        (directory / "pub.yaml").write_text(f"links:\n  radio: {{peers: [{far_host}], bandwidth: 40Mbit}}\n")
+        pub["MICROS_RT_QOS_PROFILE"] = str(directory / "pub.yaml")
     return pub, sub
 
 
@@ -277,8 +282,9 @@ def main() -> int:
     ap.add_argument("--image-size", default="640x480", help="the camera's WIDTHxHEIGHT")
     ap.add_argument("--mtu", type=int, default=1500, help="the link's MTU (9000: jumbo frames)")
     ap.add_argument("--rounds", type=int, default=1)
-    ap.add_argument("--stacks", default="rospy,micros_rt,micros_rt_tcp,micros_rt_paced",
-                    help="rospy, micros_rt, micros_rt_tcp (camera over TCPROS), micros_rt_paced (the camera on "
+    ap.add_argument("--stacks", default="rospy,micros_rt,micros_rt_link,micros_rt_tcp,micros_rt_paced",
+                    help="rospy, micros_rt, micros_rt_link (both topics on DDS, the link in the publisher's "
+                         "profile), micros_rt_tcp (camera over TCPROS), micros_rt_paced (the camera on "
                          "TCPROS and the link, both in the publisher's profile), relay, relay_link (relay A told "
                          "the link's rate), relay_capped (the camera exported at 2 Hz), "
                          "relay_one_process; comma-separated")

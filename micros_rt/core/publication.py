@@ -213,7 +213,7 @@ class _Publication:
             return verdict, DDSAnswer(writer=foreign.writer, participant=foreign.participant, latch=foreign.latch,
                                       qos=foreign.options, node=compat.caller_id(), via=foreign.via,
                                       topic="" if foreign.topic == self.topic else foreign.topic)
-        return verdict, DDSAnswer(writer=dds.guid, participant=self._dds_backend.participant.guid,
+        return verdict, DDSAnswer(writer=dds.guid, participant=dds.participant.guid,
                                   latch=self.latch, qos=self.options, node=compat.caller_id())
 
     def on_tcpros_connection(self, conn: Any, sock: Any) -> None:

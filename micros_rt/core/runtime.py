@@ -110,4 +110,9 @@ def dds_backend() -> "Optional[DDSBackend]":
             from ..transports.dds.backend import DDSBackend
 
             _node.dds = DDSBackend(participant, str(rospy.get_caller_id()))
+            profile = _node.profile
+            if profile is not None and profile.links:
+                from ..qos.links import send_buffer_for
+
+                _node.dds.send_buffer_below_high = min(send_buffer_for(link.bandwidth) for link in profile.links)
         return _node.dds

@@ -289,3 +289,23 @@ def test_ros2_graph_names_micros_rt_nodes(ros_master: harness.RosMaster, spawn: 
     assert [p["node_namespace"] for p in ev["publishers"]] == ["/"], ev
     assert "mrt_named_listener" in [s["node_name"] for s in ev["subscriptions"]], ev
     assert ["/", "mrt_named_talker"] in ev["nodes"] and ["/", "mrt_named_listener"] in ev["nodes"], ev
+
+
+def test_a_topic_on_a_priority_participant_reaches_rclpy_and_ros2_names_its_node(
+        ros_master: harness.RosMaster, spawn: harness.Spawner) -> None:
+    """A LOW topic of a process whose first DDS topic is HIGH is written by a participant of its own (its own
+    sockets, marked for LOW): Fast DDS discovers it on the ROS 2 domain, receives it, and ROS 2 names the node."""
+    topic = "/interop/low_beside_high"
+    listener = spawn(ros2("listen", "--topic", topic, "--count", 3, "--duration", 25), name="rclpy_listener")
+    listener.wait_for("ready", T)
+    talker = spawn(mrt("talk", "--topic", topic, "--count", 1000, "--rate", 10, "--node-name", "mrt_two_priorities",
+                       "--first", "/interop/high_first=HIGH", "--qos", '{"transport_priority": "LOW"}',
+                       "--wait-dds-readers", 1, "--linger", 0.2), name="mrt_talker")
+    matched = talker.wait_for("dds_matched", T)
+    assert matched["n"] == 1 and matched["participant"] != matched["process_participant"], matched
+    got = listener.wait_for_count("recv", 3, T)
+    assert all(ev["data"].startswith("hello ") for ev in got), got
+    info = spawn(ros2("info", "--topic", topic, "--wait", 10, "--min-publishers", 1,
+                      "--wait-node", "mrt_two_priorities", "--duration", 20), name="rclpy_info")
+    ev = info.wait_for("info", T)
+    assert [p["node_name"] for p in ev["publishers"]] == ["mrt_two_priorities"], ev

@@ -179,6 +179,9 @@ def main() -> int:
                     help="listen: also subscribe to this topic (queue_size 1) with a callback that sleeps "
                          "--slow-sleep seconds per message; 'slow_recv' events, its statistics at 'done'")
     ap.add_argument("--slow-sleep", type=float, default=0.5)
+    ap.add_argument("--first", default=None, metavar="TOPIC=PRIORITY",
+                    help="talk: advertise this std_msgs/String topic at this transport priority first (it sends "
+                         "nothing; it gives the process participant its priority)")
     ap.add_argument("--wait-dds-readers", type=int, default=0,
                     help="talk: wait (max 30 s) until the DDS writer matches this many readers (e.g. rclpy)")
     args = ap.parse_args()
@@ -208,6 +211,10 @@ def main() -> int:
     qos: Dict[str, Any] = json.loads(args.qos) if args.qos else {}
 
     if args.mode == "talk":
+        if args.first:
+            first_topic, _, first_priority = args.first.partition("=")
+            nh.advertise_with_qos(first_topic, roslib.message.get_message_class("std_msgs/String"), 10,
+                                  micros_rt.TransportPriority.parse(first_priority))
         if qos or args.with_qos:
             pub = nh.advertise_with_qos(args.topic, data_class, args.queue_size,
                                         micros_rt.AdvertiseQoSOptions.from_dict(qos), latch=args.latch)
@@ -227,7 +234,12 @@ def main() -> int:
         while dds_readers() < args.wait_dds_readers and time.monotonic() < deadline:
             time.sleep(0.02)
         if args.wait_dds_readers:
-            emit("dds_matched", n=dds_readers())
+            from micros_rt.core.runtime import dds_backend
+
+            writer, backend = getattr(getattr(pub, "_pub", None), "dds", None), dds_backend()
+            # the participant the topic's writer is on, and the process's (another one: a priority participant)
+            emit("dds_matched", n=dds_readers(), participant=writer.participant.guid if writer is not None else None,
+                 process_participant=backend.participant.guid if backend is not None else None)
         values = json.loads(args.data_json) if args.data_json else None
         period = 1.0 / args.rate if args.rate > 0 else 0.0
         start = time.monotonic()

@@ -157,3 +157,67 @@ def test_send_buffer_from_environment(raw: str, size: object) -> None:
 def test_a_bad_send_buffer_says_what_is_expected(raw: str) -> None:
     with pytest.raises(DDSUnavailableError, match="MICROS_RT_SEND_BUFFER"):
         send_buffer({"MICROS_RT_SEND_BUFFER": raw})
+
+
+def test_a_priority_participant_is_on_the_process_domain_on_the_network() -> None:
+    # A HIGH and a LOW topic of one process leave with their own DSCP only from sockets of their own: a second
+    # participant. Cyclone allows one domain per id in a process, so it has another id inside the process and
+    # Cyclone's ExternalDomainId puts it on the process's domain outside: peers match its writers as any other.
+    import time
+
+    from cyclonedds.idl import make_idl_struct, types
+    from cyclonedds.pub import DataWriter
+    from cyclonedds.sub import DataReader
+    from cyclonedds.topic import Topic
+
+    from micros_rt.transports.dds.participant import PRIORITY_DOMAIN_BASE, DDSParticipant, priority_config
+
+    Probe = make_idl_struct("Probe", "micros_rt_test::Probe", {"n": types.int32})
+    env = {"ROS_IP": "127.0.0.1"}
+    main = DDSParticipant(227, cyclone_config(env))
+    lane = DDSParticipant(227, priority_config(227, env), local_id=PRIORITY_DOMAIN_BASE + 2270 + 2)
+    try:
+        assert lane.domain_id == 227 and lane.local_id != 227 and lane.guid != main.guid
+        assert lane._sockets and not lane._sockets & main._sockets  # its own sockets, to mark on their own
+        reader = DataReader(main.dp, Topic(main.dp, "probe", Probe))
+        writer = DataWriter(lane.dp, Topic(lane.dp, "probe", Probe))
+        got: list = []
+        deadline = time.monotonic() + 30
+        while not got and time.monotonic() < deadline:
+            writer.write(Probe(n=7))
+            time.sleep(0.05)
+            got += reader.take(N=10)
+        assert got and got[0].n == 7
+    finally:
+        lane.close()
+        main.close()
+
+
+def test_a_users_sections_for_the_domain_apply_to_the_priority_participant(tmp_path: Path) -> None:
+    from micros_rt.transports.dds.participant import priority_config
+
+    user = tmp_path / "cyclone.xml"
+    text = ('<CycloneDDS><Domain id="5"><General><Interfaces><NetworkInterface name="lo"/></Interfaces></General>'
+            '</Domain><Domain id="6"><Tracing/></Domain></CycloneDDS>')
+    user.write_text(text)
+    scratch: list = []
+    config = priority_config(5, {"ROS_IP": "127.0.0.1",
+                                 "CYCLONEDDS_URI": f"file://{user},<CycloneDDS><Domain id='5'/></CycloneDDS>"},
+                             scratch=scratch)
+    try:
+        (copy,) = scratch
+        rewritten = Path(copy).read_text()
+        # Cyclone picks sections by the id inside the process, which is another one for this participant
+        assert '<Domain id="any"><General><Interfaces>' in rewritten and '<Domain id="6">' in rewritten
+        assert user.read_text() == text  # the user's file is left as it was
+        assert f"file://{copy}" in config and "<Domain id='any'/>" in config and str(user) not in config
+        assert config.index(f"file://{copy}") < config.index("<ExternalDomainId>5</ExternalDomainId>")
+    finally:
+        for path in scratch:
+            Path(path).unlink()
+    # a file without a section for the domain is used as it is; an unreadable one is an error
+    user.write_text('<CycloneDDS><Domain id="any"/></CycloneDDS>')
+    scratch = []
+    assert f"file://{user}" in priority_config(5, {"CYCLONEDDS_URI": str(user)}, scratch=scratch) and not scratch
+    with pytest.raises(OSError):
+        priority_config(5, {"CYCLONEDDS_URI": f"file://{tmp_path}/missing.xml"})

@@ -246,8 +246,9 @@ def test_superseded_while_in_flight_is_counted_once(depth: int) -> None:
 def test_a_large_write_that_waits_marks_the_socket_congested_then_small_writes_release_the_gil(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """The heuristic behind HIGH-beside-LOW on one socket: a large write that waited on the network makes
-    every write release the GIL (and KEEP_LAST lanes send from their threads) until it has been quiet."""
-    from micros_rt.transports.dds import endpoints
+    every write of that participant release the GIL (and KEEP_LAST lanes send from their threads) until it
+    has been quiet; another participant's socket (another transport priority) is not congested by it."""
+    from micros_rt.transports.dds import congestion
 
     calls: List[Tuple[str, int]] = []
 
@@ -260,18 +261,20 @@ def test_a_large_write_that_waits_marks_the_socket_congested_then_small_writes_r
         calls.append(("binding", ref))
         return 0
 
-    monkeypatch.setattr(endpoints, "_c_dds_write", c_write)
-    monkeypatch.setattr(endpoints, "_congested_until", [0.0])
-    monkeypatch.setattr(endpoints, "_last_slow", [0.0])
-    small, large = bytes(64), bytearray(endpoints.RELEASED_WRITE_MIN)
-    assert endpoints.sample_write(1, small, _small=binding_write, _until=endpoints._congested_until) == 0
-    assert not endpoints.socket_congested()
-    assert endpoints.sample_write(2, large, _small=binding_write, _until=endpoints._congested_until) == 0
-    assert endpoints.socket_congested()
-    endpoints.sample_write(3, small, _small=binding_write, _until=endpoints._congested_until)
-    harness.wait_until(lambda: not endpoints.socket_congested(), 10, message="quiet again")
-    endpoints.sample_write(4, small, _small=binding_write, _until=endpoints._congested_until)
-    assert calls == [("binding", 1), ("released", 2), ("released", 3), ("binding", 4)]
+    monkeypatch.setattr(congestion, "_c_dds_write", c_write)
+    socket, other = congestion.SocketCongestion(), congestion.SocketCongestion()
+    write, other_write = socket.sample_write(binding_write), other.sample_write(binding_write)
+    small, large = bytes(64), bytearray(congestion.RELEASED_WRITE_MIN)
+    assert write(1, small) == 0
+    assert not socket.active()
+    assert write(2, large) == 0
+    assert socket.active() and socket.network_bound(2) and not socket.network_bound(1)
+    write(3, small)
+    other_write(5, small)                              # another participant's writer: its own socket
+    assert not other.active()
+    harness.wait_until(lambda: not socket.active(), 10, message="quiet again")
+    write(4, small)
+    assert calls == [("binding", 1), ("released", 2), ("released", 3), ("binding", 5), ("binding", 4)]
 
 
 def test_samples_older_than_max_age_are_not_sent_and_are_counted() -> None:

@@ -42,7 +42,7 @@ import yaml
 
 from ...exceptions import MicrosRtError
 from ...qos import AdvertiseQoSOptions, SubscribeQoSOptions
-from ...qos.links import parse_bandwidth
+from ...qos.links import parse_bandwidth, send_buffer_for
 from ...qos.profiles import _construct, _expect_mapping, _is_null, _pairs, _parse_options, _where
 from ...qos.topic_rules import TopicPattern
 
@@ -99,22 +99,6 @@ class RelayConfig:
     def outside_name(self, topic: str) -> str:
         """The name an exported ``topic`` has outside this graph: ``/<graph><topic>``."""
         return f"/{self.graph}{topic}"
-
-
-#: the queue a LOW relay process may keep in the link, in seconds of the link's rate (the kernel doubles
-#: what is asked: 2 x 3.3 ms at 40 Mbit/s is 16.5 kB asked, 33 kB held)
-_QUEUE_SECONDS = 0.0033
-#: below this the camera starved (measured on 40 Mbit/s tbf: 16 kB asked, 33 frames in 6 s; 8 kB, 21; 4 kB, 2)
-_MIN_SEND_BUFFER = 16 * 1024
-
-
-def send_buffer_for(bandwidth: float) -> int:
-    """The UDP send buffer (bytes) a relay process of LOW exports asks for on a link of ``bandwidth`` bit/s.
-
-    >>> send_buffer_for(40e6), send_buffer_for(1e9), send_buffer_for(5e6)
-    (16500, 412500, 16384)
-    """
-    return max(_MIN_SEND_BUFFER, int(bandwidth / 8 * _QUEUE_SECONDS))
 
 
 def load_config(path: str) -> RelayConfig:

@@ -1,11 +1,13 @@
 """One relay process per transport priority of the exports: each priority's DDS traffic leaves through
 sockets of its own, marked with its own DSCP.
 
-Cyclone sends all DDS data of a process through one transmit socket, so micros_rt marks a process's DDS packets
-with the DSCP of its highest writer (:mod:`micros_rt.transports.dds.marking`): a relay exporting a HIGH control
-topic and a LOW camera in one process would mark the camera's packets HIGH too, and a network that honours DSCP
-(Wi-Fi WMM, a DiffServ router, an ``htb`` qdisc) could not put the control topic first. ``micros-rt relay``
-therefore starts a child process per transport priority its exports use (``--exports-of``), each a relay
+Cyclone sends all DDS data of a participant through one transmit socket. When this was written a process had one
+participant, marked with the DSCP of its highest writer, so a relay exporting a HIGH control topic and a LOW
+camera in one process marked the camera's packets HIGH too, and a network that honours DSCP (Wi-Fi WMM, a
+DiffServ router, an ``htb`` qdisc) could not put the control topic first. A process now has a participant per
+transport priority of its writers (:meth:`micros_rt.transports.dds.backend.DDSBackend.participant_for`); the
+relay keeps its processes, which also keep a LOW camera's decoding and encoding off the interpreter lock of the
+HIGH exports. ``micros-rt relay`` starts a child process per transport priority its exports use (``--exports-of``), each a relay
 node of its own (``<name>_<priority>``, e.g. ``relay_robot_a_high``) carrying only that priority's exports; the
 first process keeps the imports and services. Measured on a 40 Mbit/s link that honours DSCP (htb), 1 kHz HIGH
 control beside a 30 Hz LOW 640x480 camera: control p50 0.6 ms / p99 6.0 ms with a process per priority against

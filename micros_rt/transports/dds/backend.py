@@ -6,7 +6,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import Any, Callable, List, Optional, Sequence, Set, Tuple, TypeVar
+from typing import Any, Callable, Dict, List, Optional, Sequence, Set, Tuple, TypeVar
 
 from cyclonedds.core import DDSException, Listener
 
@@ -17,6 +17,7 @@ from ...qos import (
     RELIABLE_MAX_BLOCKING_TIME,
     AdvertiseQoSOptions,
     SubscribeQoSOptions,
+    TransportPriority,
     is_lossless,
     plain_reader_qos,
     priority_socket_priority,
@@ -24,9 +25,9 @@ from ...qos import (
     reader_qos,
     writer_qos,
 )
-from .endpoints import (RELEASED_WRITE_MIN, DDSReader, DDSWriter, make_user_data, network_bound, socket_congested,
-                        wait_for_acks)
-from .participant import DDSParticipant
+from .congestion import RELEASED_WRITE_MIN
+from .endpoints import DDSReader, DDSWriter, make_user_data, wait_for_acks
+from .participant import DDSParticipant, priority_participant, priority_participants
 from .types import DDSType, dds_topic_name, dds_type_for
 from ...log import nonblocking_logger
 
@@ -53,17 +54,18 @@ class DDSTopicWriter:
         self.dds_topic = dds_topic_name(spec.topic)
         self.lossless = is_lossless(spec.queue_size) and not options.using_best_effort_protocol
         qos = writer_qos(options, queue_size=spec.queue_size, latch=spec.latch, user_data=make_user_data(**spec.tag))
-        self._writer = DDSWriter(backend.participant, self.dds_topic, self.dds_type, qos,
+        #: the participant whose sockets carry this writer's transport priority (:meth:`DDSBackend.participant_for`)
+        self.participant = backend.participant_for(options.transport_priority)
+        self._writer = DDSWriter(self.participant, self.dds_topic, self.dds_type, qos,
                                  latency_budget=options.latency_budget)
         self._ref = self._writer._ref
         self._write = self._writer.write_serialized
+        self._congestion = self.participant.congestion
         self.guid = self._writer.guid
         self._encode = self.dds_type.encode  # raises genpy.SerializationError on a bad field value
         self._latch = spec.latch
         self._closed = False
-        backend.announce(add_writer=self.guid)
-        prio = options.transport_priority
-        backend.participant.mark_priority(int(prio), priority_tos(prio), priority_socket_priority(prio))
+        backend.announce(self.participant, add_writer=self.guid)
 
     @property
     def matched_count(self) -> int:
@@ -95,11 +97,12 @@ class DDSTopicWriter:
 
     def may_wait(self, prepared: bytes) -> bool:
         """A large sample while the network is what limits this writer (its last large write waited for
-        socket room behind a slow link: :func:`~micros_rt.transports.dds.endpoints.network_bound`), or any sample while
-        the process's transmit socket is congested (another topic's large write just waited): a small
-        sample's ``sendmsg`` would wait behind those fragments. On loopback a 900 KB write takes ~0.5 ms
-        and stays on the caller's thread, with no hop to the lane's."""
-        return (len(prepared) >= RELEASED_WRITE_MIN and network_bound(self._ref)) or socket_congested()
+        socket room behind a slow link), or any sample while its participant's transmit socket is congested
+        (another topic of the same transport priority just waited: :mod:`~micros_rt.transports.dds.congestion`):
+        a small sample's ``sendmsg`` would wait behind those fragments. On loopback a 900 KB write takes
+        ~0.5 ms and stays on the caller's thread, with no hop to the lane's."""
+        congestion = self._congestion
+        return (len(prepared) >= RELEASED_WRITE_MIN and congestion.network_bound(self._ref)) or congestion.active()
 
     def send(self, prepared: bytes) -> None:
         """Write, waiting (in Python, other threads running) while a reliable subscriber is behind; raise
@@ -116,7 +119,7 @@ class DDSTopicWriter:
 
     def close(self) -> None:
         self._closed = True
-        self._backend.announce(remove=self.guid)
+        self._backend.announce(self.participant, remove=self.guid)
         self._writer.close()
 
 
@@ -144,7 +147,7 @@ class DDSTopicReader:
         self._backend = backend
         self.condition = self._reader.condition
         self.guid = self._reader.guid
-        backend.announce(add_reader=self.guid)
+        backend.announce(backend.participant, add_reader=self.guid)
         self.take: Callable[[int], Sequence[Sample]] = self._reader.take_raw
         self.decode: Callable[[bytes], Any] = self.dds_type.decode
 
@@ -156,25 +159,52 @@ class DDSTopicReader:
         return set(self._reader.matched_writer_guids())
 
     def close(self) -> None:
-        self._backend.announce(remove=self.guid)
+        self._backend.announce(self._backend.participant, remove=self.guid)
         self._reader.close()
 
 
 class DDSBackend:
-    """The process's DDS back end: one participant, writers and readers on it."""
+    """The process's DDS back end: its participant with the readers and the writers of one transport priority,
+    and a participant per other priority of its writers (:meth:`participant_for`)."""
 
     protocol = "DDS"
 
     def __init__(self, participant: DDSParticipant, node_name: str) -> None:
         self.participant = participant
         self.node_name = node_name
-        self._announcer: Any = None  # None: not started, True: starting, False: failed
-        self._pending: List[Tuple[str, str, str]] = []
+        self._announcements: Dict[str, _Announcement] = {}  # participant GUID -> its ROS 2 graph announcement
         self._lock = threading.Lock()
+        #: the UDP send buffer of participants whose writers are all below HIGH, when the node's profile names a
+        #: link of limited bandwidth (:func:`~micros_rt.qos.links.send_buffer_for` of the slowest); None: Cyclone's
+        self.send_buffer_below_high: Optional[int] = None
 
     @property
     def domain_id(self) -> int:
         return self.participant.domain_id
+
+    def participant_for(self, priority: TransportPriority) -> DDSParticipant:
+        """The participant a writer of transport ``priority`` writes through: the process participant when its
+        sockets carry that priority (the first writer's marks them), else the priority's own participant,
+        whose sockets carry it (:func:`~micros_rt.transports.dds.participant.priority_participant`). So each
+        DDS topic leaves with its own priority's DSCP, and a LOW camera's fragments never fill the socket a
+        HIGH topic is sent through. When a priority participant cannot start, the process participant carries
+        every priority, marked with the highest (said once in the log).
+
+        With :attr:`send_buffer_below_high` (the node's profile names a slow link), a participant for writers
+        below HIGH gets that small send buffer: they keep little queued in the link, and a FIFO link (one that
+        does not honour DSCP) serves HIGH topics after milliseconds, not after its whole queue."""
+        level, tos, so_priority = int(priority), priority_tos(priority), priority_socket_priority(priority)
+        main = self.participant
+        if main.claim_priority(level, tos, so_priority):
+            chosen: Optional[DDSParticipant] = main
+        else:
+            chosen = priority_participant(main.domain_id, level, tos, so_priority)
+        if chosen is None:
+            main.mark_priority(level, tos, so_priority)
+            return main
+        if self.send_buffer_below_high is not None and level < TransportPriority.HIGH:
+            chosen.limit_send_buffer(self.send_buffer_below_high)
+        return chosen
 
     def open_writer(self, spec: EndpointSpec, options: AdvertiseQoSOptions) -> DDSTopicWriter:
         return _translated(lambda: DDSTopicWriter(self, spec, options), spec.topic, "writer")
@@ -184,19 +214,42 @@ class DDSBackend:
         return _translated(lambda: DDSTopicReader(self, spec, options, wake, on_incompatible), spec.topic, "reader")
 
     def describe(self) -> List[str]:
-        return [f"DDS domain {self.participant.domain_id}, participant {self.participant.guid}"]
+        lines = [f"DDS domain {self.participant.domain_id}, participant {self.participant.guid}"]
+        lines += [f"DDS domain {p.domain_id}, participant {p.guid} (writers of transport priority "
+                  f"{TransportPriority(p.priority).name})" for p in priority_participants()
+                  if p.priority is not None and p.domain_id == self.participant.domain_id]
+        return lines
 
-    def announce(self, *, add_reader: str = "", add_writer: str = "", remove: str = "") -> None:
-        """Keep ROS 2's graph (``ros_discovery_info``) told which endpoints this node has.
+    def announce(self, participant: DDSParticipant, *, add_reader: str = "", add_writer: str = "",
+                 remove: str = "") -> None:
+        """Keep ROS 2's graph (``ros_discovery_info``) told which endpoints this node has on ``participant``
+        (ROS 2 names a node per participant: a priority participant announces its writers itself)."""
+        with self._lock:
+            announcement = self._announcements.get(participant.guid)
+            if announcement is None:
+                announcement = self._announcements[participant.guid] = _Announcement(participant, self.node_name)
+        announcement.update(add_reader, add_writer, remove)
 
-        A courtesy to ROS 2 tools, kept off the caller's path: the announcer (its Topic costs ~25 ms of
-        Cyclone type-object building) starts on a background thread with the first endpoint, and updates
-        queue up until it runs. A failure is logged once as a warning and changes nothing else."""
+
+class _Announcement:
+    """One participant's ``ros_discovery_info``: a courtesy to ROS 2 tools, kept off the caller's path. The
+    announcer (its Topic costs ~25 ms of Cyclone type-object building) starts on a background thread with
+    the first endpoint, and updates queue up until it runs. A failure is logged once as a warning and
+    changes nothing else."""
+
+    def __init__(self, participant: DDSParticipant, node_name: str) -> None:
+        self.participant = participant
+        self.node_name = node_name
+        self._announcer: Any = None  # None: not started, True: starting, False: failed
+        self._pending: List[Tuple[str, str, str]] = []
+        self._lock = threading.Lock()
+
+    def update(self, add_reader: str, add_writer: str, remove: str) -> None:
         with self._lock:
             self._pending.append((add_reader, add_writer, remove))
             if self._announcer is None:
                 self._announcer = True  # starting
-                threading.Thread(target=self._start_announcer, name="micros_rt ROS 2 graph", daemon=True).start()
+                threading.Thread(target=self._start, name="micros_rt ROS 2 graph", daemon=True).start()
                 return
             if self._announcer is True or self._announcer is False:
                 return
@@ -204,7 +257,7 @@ class DDSBackend:
         for r, w, gone in pending:
             announcer.update(add_reader=r, add_writer=w, remove=gone)
 
-    def _start_announcer(self) -> None:
+    def _start(self) -> None:
         from .ros2_graph import Ros2GraphAnnouncer
 
         announcer: Any = False

@@ -31,70 +31,8 @@ USER_DATA_PREFIX = b"micros_rt;"
 _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
 
 
-#: Samples at least this large (bytes) are written with Python's GIL released (:func:`write_released`).
-RELEASED_WRITE_MIN = 16 * 1024
 #: A reader whose last sample was at least this large (bytes) takes the next ones with the GIL released.
 RELEASED_TAKE_MIN = 64 * 1024
-
-
-class _SampleContainer(ctypes.Structure):
-    # cyclonedds-python's sample as its sertype reads it (clayer/pysertype.c, ddspy_sample_container_t):
-    # the serialized bytes, copied into a serdata in C (serdata_from_sample is a memcpy, no Python)
-    _fields_ = [("usample", ctypes.c_void_p), ("usample_size", ctypes.c_size_t)]
-
-
-_c_dds_write: Any = None
-
-#: A write through :func:`write_released` that took longer than this (s) waited for room in a socket that a
-#: slow link drains: the process's transmit socket is congested for :data:`CONGESTION_HOLD` seconds, and
-#: meanwhile every write releases the GIL and KEEP_LAST lanes send from their own threads.
-CONGESTED_WRITE = 0.005
-CONGESTION_HOLD = 0.1
-_congested_until = [0.0]
-_last_slow = [0.0]  # how long the last large write that waited took (0.0: it did not wait)
-_slow_writers: Set[int] = set()  # writers whose last large write waited on the network
-
-
-def socket_congested() -> bool:
-    """True while a recent large write waited on the network (see :data:`CONGESTED_WRITE`)."""
-    return time.monotonic() < _congested_until[0]
-
-
-def network_bound(ref: int) -> bool:
-    """True when writer ``ref``'s last large write waited on the network (a slow link drains its socket)."""
-    return ref in _slow_writers
-
-
-def write_released(ref: int, data: Any) -> int:
-    """``ddspy_write(ref, data)`` without holding Python's GIL: the binding's own call holds it for the whole
-    of ``dds_write``, which for a large sample includes sending every fragment, and a ``sendmsg`` that
-    waits for room in a socket buffer behind a slow link (measured: a 1 kHz topic of the same process
-    published 117 of 6,000 messages beside a 30 Hz camera on a 40 Mbit/s link). ctypes releases the GIL
-    during the call. ~1 us more per call than the binding's, so only for large samples."""
-    global _c_dds_write
-    fn = _c_dds_write
-    if fn is None:
-        fn = _c_dds_write = c_function("dds_write", [ctypes.c_int32, ctypes.c_void_p], ctypes.c_int32)
-    if isinstance(data, bytes):
-        address = ctypes.cast(ctypes.c_char_p(data), ctypes.c_void_p).value
-    else:  # the codec's bytearray (writable: ctypes views it without a copy)
-        address = ctypes.addressof((ctypes.c_char * len(data)).from_buffer(data))
-    container = _SampleContainer(address, len(data))
-    t0 = time.monotonic()
-    if _last_slow[0]:  # it will likely wait as long again: congested from now on, not from its end
-        _congested_until[0] = max(_congested_until[0], t0 + _last_slow[0] + CONGESTION_HOLD)
-    ret = int(fn(ref, ctypes.byref(container)))
-    done = time.monotonic()
-    if len(data) >= RELEASED_WRITE_MIN:
-        took = done - t0
-        if took > CONGESTED_WRITE:
-            _last_slow[0] = took
-            _slow_writers.add(ref)
-            _congested_until[0] = max(_congested_until[0], done + CONGESTION_HOLD)
-        else:
-            _last_slow[0] = 0.0
-            _slow_writers.discard(ref)
-    return ret
 
 
 _c_wait_for_acks: Any = None
@@ -109,16 +47,6 @@ def wait_for_acks(ref: int, timeout: float) -> int:
     if fn is None:
         fn = _c_wait_for_acks = c_function("dds_wait_for_acks", [ctypes.c_int32, ctypes.c_int64], ctypes.c_int32)
     return int(fn(ref, int(timeout * 1e9)))
-
-
-def sample_write(ref: int, data: Any, _small: Callable[[int, Any], int] = ddspy_write,
-                 _limit: int = RELEASED_WRITE_MIN, _until: List[float] = _congested_until,
-                 _now: Callable[[], float] = time.monotonic) -> int:
-    """Write one serialized sample: the binding's fast call for small ones, :func:`write_released` for
-    large ones and for every one while the socket is congested (they can wait on the network)."""
-    if len(data) < _limit and _now() >= _until[0]:
-        return _small(ref, data)
-    return write_released(ref, data)
 
 
 def make_user_data(**fields: str) -> bytes:
@@ -184,6 +112,8 @@ class DDSWriter:
         self._ref = self._writer._ref
         self.guid = str(self._writer.guid)
         self.closed = False
+        self.congestion = participant.congestion
+        sample_write = self.congestion.sample_write(ddspy_write)
         self.write_serialized = (budget_write(self._ref, sample_write, self.batch_window) if self.batch_window > 0
                                  else adaptive_write(self._ref, sample_write))
 
@@ -224,7 +154,7 @@ class DDSWriter:
             return
         self.closed = True
         flusher().forget(self._ref)  # what waits in the datagram leaves before the writer goes
-        _slow_writers.discard(self._ref)
+        self.congestion.forget(self._ref)
         delete_entity(self._writer)
         self._participant.release_topic(self.topic_name)
 

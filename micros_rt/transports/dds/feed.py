@@ -69,7 +69,7 @@ class DDSFeed:
         self._reader = DDSReader(backend.participant, self.dds_topic, self.dds_type, qos, listener)
         self.guid = self._reader.guid
         self._backend = backend
-        backend.announce(add_reader=self.guid)
+        backend.announce(backend.participant, add_reader=self.guid)
         self._on_data(None)  # what arrived before the listener was attached (transient-local history)
 
     def _on_incompatible(self, _reader: Any, status: Any) -> None:
@@ -120,7 +120,7 @@ class DDSFeed:
         with self._lock:
             if self._reader.closed:
                 return
-            self._backend.announce(remove=self.guid)
+            self._backend.announce(self._backend.participant, remove=self.guid)
             self._reader.close()
 
 

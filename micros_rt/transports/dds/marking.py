@@ -2,15 +2,16 @@
 
 Cyclone DDS 11 carries TransportPriority in discovery only and has no setting for
 DSCP or IP_TOS. Its sockets live in our process, though, so micros_rt marks them
-itself: the UDP sockets that appeared while the participant was created are
+itself: the UDP sockets that appeared while a participant was created are
 Cyclone's (its receive sockets on the DDSI ports and its transmit socket on an
 ephemeral port); ``IP_TOS`` (then ``SO_PRIORITY``) is set on them.
 
-What it costs: Cyclone sends all data of a participant through the same sockets,
-so the marking is per process, not per writer. A process marks its DDS traffic with
-the highest transport priority among its writers (discovery and ACKs included);
-a node that mixes HIGH and LOW topics should put them in different processes, or
-use TCPROS (which micros_rt marks per connection) for the topic whose class matters.
+Cyclone sends all data of a participant through the same sockets, so a marking is per
+participant, not per writer. A process's first DDS writer marks the process participant
+(which also carries its readers' acknowledgements and its discovery); a writer of another
+transport priority gets a participant of its own for that priority, with its own sockets
+(:func:`micros_rt.transports.dds.participant.priority_participant`). Each DDS topic then
+leaves with its own priority's DSCP, as each TCPROS connection does.
 """
 
 from __future__ import annotations
@@ -19,11 +20,11 @@ import logging
 import os
 import socket
 import stat
-from typing import Dict, Set, Tuple
+from typing import Callable, Dict, Set, Tuple
 from ...log import nonblocking_logger
 from ..marking import mark_socket_tos
 
-__all__ = ["process_udp_sockets", "mark_udp_sockets"]
+__all__ = ["process_udp_sockets", "mark_udp_sockets", "limit_send_buffers"]
 
 _log = nonblocking_logger("rosout.micros_rt.dds")
 
@@ -59,7 +60,21 @@ def process_udp_sockets() -> Dict[int, Tuple[int, int]]:
 
 def mark_udp_sockets(inodes: Set[int], tos: int, so_priority: int) -> int:
     """Set IP_TOS/IPV6_TCLASS and SO_PRIORITY on the UDP sockets with these inodes; returns how many."""
-    marked = 0
+    return _each_udp_socket(inodes, lambda s, family: mark_socket_tos(s, tos, so_priority, family=family),
+                            f"mark a DDS socket with TOS 0x{tos:02x}")
+
+
+def limit_send_buffers(inodes: Set[int], size: int) -> int:
+    """Set SO_SNDBUF to ``size`` (the kernel doubles it) on the UDP sockets with these inodes; returns how many."""
+    def limit(s: socket.socket, _family: int) -> bool:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, size)
+        return True
+
+    return _each_udp_socket(inodes, limit, f"give a DDS socket a send buffer of {size} bytes")
+
+
+def _each_udp_socket(inodes: Set[int], apply: Callable[[socket.socket, int], bool], what: str) -> int:
+    done = 0
     for inode, (fd, family) in process_udp_sockets().items():
         if inode not in inodes:
             continue
@@ -70,10 +85,10 @@ def mark_udp_sockets(inodes: Set[int], tos: int, so_priority: int) -> int:
         except OSError:
             continue
         try:
-            if mark_socket_tos(s, tos, so_priority, family=family):
-                marked += 1
+            if apply(s, family):
+                done += 1
         except OSError as exc:
-            _log.warning("micros_rt: cannot mark a DDS socket with TOS 0x%02x: %s", tos, exc)
+            _log.warning("micros_rt: cannot %s: %s", what, exc)
         finally:
             s.close()
-    return marked
+    return done

@@ -16,12 +16,13 @@ import os
 import re
 import socket
 import threading
-from typing import Any, Dict, Mapping, Optional, Tuple
+from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 from ...exceptions import DDSUnavailableError
 from ..netif import interface_mtu_of, interface_of
 from ...log import nonblocking_logger
 from .batching import close_flusher
+from .congestion import SocketCongestion
 from .typecache import forget_type_data, load_type_data, save_type_data
 
 __all__ = [
@@ -34,6 +35,9 @@ __all__ = [
     "micros_rt_defaults",
     "domain_id_from_env",
     "get_participant",
+    "priority_participant",
+    "priority_participants",
+    "priority_config",
     "close_participant",
     "delete_entity",
 ]
@@ -239,13 +243,16 @@ def cyclone_config(env: Mapping[str, str] = os.environ) -> str:
     >>> LOOPBACK_CONFIG in cyclone_config({"ROS_IP": "127.0.0.1"})
     True
     """
-    defaults = micros_rt_defaults(env)
+    return f"{micros_rt_defaults(env)},{_network_config(env)}"
+
+
+def _network_config(env: Mapping[str, str]) -> str:
     user = env.get("CYCLONEDDS_URI", "").strip()
     if user:
-        return f"{defaults},{user}"
+        return user
     if _is_loopback(env):
-        return f"{defaults},{LOOPBACK_CONFIG}"
-    return f"{defaults},{_INTERFACE_CONFIG.format(address=_ros_address(env))}"
+        return LOOPBACK_CONFIG
+    return _INTERFACE_CONFIG.format(address=_ros_address(env))
 
 
 def domain_id_from_env(env: Mapping[str, str] = os.environ) -> int:
@@ -265,22 +272,27 @@ def domain_id_from_env(env: Mapping[str, str] = os.environ) -> int:
 class DDSParticipant:
     """One Cyclone domain participant and the topics created on it.
 
-    Created through :func:`get_participant`; ``close()`` releases every entity.
+    Created through :func:`get_participant` (the process's participant: its readers, and its writers of one
+    transport priority) or :func:`priority_participant` (writers of another priority, with sockets of their
+    own); ``close()`` releases every entity.
     """
 
-    def __init__(self, domain_id: int, config: str) -> None:
+    def __init__(self, domain_id: int, config: str, *, local_id: Optional[int] = None) -> None:
         from cyclonedds.core import DDSException
         from cyclonedds.domain import Domain, DomainParticipant
 
         self.domain_id = domain_id
+        #: the id Cyclone knows this participant's domain by in this process (another one than
+        #: ``domain_id`` for a priority participant, which is on ``domain_id`` on the network)
+        self.local_id = domain_id if local_id is None else local_id
         from .marking import process_udp_sockets
 
         before = set(process_udp_sockets())
         try:
             # A Domain with an explicit config keeps our settings out of the
             # process environment (CYCLONEDDS_URI stays the user's).
-            self._domain = Domain(domain_id, config)
-            self.dp = DomainParticipant(domain_id)
+            self._domain = Domain(self.local_id, config)
+            self.dp = DomainParticipant(self.local_id)
         except DDSException as exc:
             raise DDSUnavailableError(
                 f"cannot start a Cyclone DDS participant on domain {domain_id}: {exc}") from exc
@@ -290,15 +302,33 @@ class DDSParticipant:
         self._topics: Dict[str, Tuple[Any, int]] = {}  # name -> (Topic, references)
         self._lock = threading.Lock()
         self._priority: Optional[int] = None
+        #: whether a large write of this participant waits for room in its transmit socket
+        self.congestion = SocketCongestion()
+        #: the send buffer :meth:`limit_send_buffer` gave its sockets (None: Cyclone's, or MICROS_RT_SEND_BUFFER)
+        self.send_buffer: Optional[int] = None
         self.closed = False
 
+    @property
+    def priority(self) -> Optional[int]:
+        """The transport priority level this participant's sockets are marked for (None: no writer yet)."""
+        return self._priority
+
+    def claim_priority(self, level: int, tos: int, so_priority: int) -> bool:
+        """Let a writer of transport priority ``level`` use this participant's sockets: True when they carry
+        that level (the first writer's level marks them), False when they carry another one (that writer
+        belongs on :func:`priority_participant`'s participant for its level)."""
+        with self._lock:
+            if self._priority is not None:
+                return self._priority == level
+            self._priority = level
+        if tos:  # unmarked is the default
+            self._mark(tos, so_priority)
+        return True
+
     def mark_priority(self, level: int, tos: int, so_priority: int) -> None:
-        """Mark this process's DDS traffic for a writer of transport priority ``level``.
-
-        The highest level among the process's writers wins (see :mod:`micros_rt.transports.dds.marking`).
-        """
-        from .marking import mark_udp_sockets
-
+        """Mark this participant's traffic for a writer of transport priority ``level`` when it is higher than
+        what marks it now: what a process without priority participants does (see
+        :mod:`micros_rt.transports.dds.marking`)."""
         with self._lock:
             if self._priority is not None and level <= self._priority:
                 return
@@ -306,8 +336,26 @@ class DDSParticipant:
             self._priority = level
         if first and tos == 0:
             return  # unmarked is the default
+        self._mark(tos, so_priority)
+
+    def limit_send_buffer(self, size: int) -> None:
+        """Give this participant's sockets a UDP send buffer of ``size`` bytes (the kernel doubles it), once: its
+        writers (all below HIGH) then keep at most about twice that queued in a slow link, where HIGH topics'
+        datagrams (another participant's sockets) would wait behind them (:func:`~micros_rt.qos.links.send_buffer_for`)."""
+        from .marking import limit_send_buffers
+
+        with self._lock:
+            if self.send_buffer is not None:
+                return
+            self.send_buffer = size
+        n = limit_send_buffers(self._sockets, size)
+        _log.debug("micros_rt: DDS participant %s: send buffer %d bytes on %d sockets", self.guid, size, n)
+
+    def _mark(self, tos: int, so_priority: int) -> None:
+        from .marking import mark_udp_sockets
+
         n = mark_udp_sockets(self._sockets, tos, so_priority)
-        _log.debug("micros_rt: DDS traffic of this process marked TOS 0x%02x on %d sockets", tos, n)
+        _log.debug("micros_rt: DDS participant %s marked TOS 0x%02x on %d sockets", self.guid, tos, n)
 
     def topic(self, name: str, idl_class: Any) -> Any:
         """The Topic ``name`` with type ``idl_class``, shared by the process's readers and writers of it:
@@ -412,11 +460,111 @@ def get_participant() -> Optional[DDSParticipant]:
         return _participant
 
 
+#: A priority participant's domain id inside this process: ``PRIORITY_DOMAIN_BASE + 10 x domain + level``,
+#: ids no ROS 2 domain uses (0..232); on the network it is on the process's domain (``ExternalDomainId``).
+PRIORITY_DOMAIN_BASE = 10000
+
+_lanes: Dict[Tuple[int, int], DDSParticipant] = {}  # (domain, transport priority level) -> its participant
+_lanes_failed: Optional[str] = None
+
+
+def _own_sections(domain_id: int) -> "re.Pattern[str]":
+    return re.compile(r'(<Domain\b[^>]*\bid\s*=\s*)(["\'])\s*' + str(domain_id) + r'\s*\2', re.IGNORECASE)
+
+
+def priority_config(domain_id: int, env: Mapping[str, str] = os.environ,
+                    scratch: Optional[List[str]] = None) -> str:
+    """The configuration of a priority participant: the process participant's (:func:`cyclone_config`), with
+    ``ExternalDomainId`` putting it on ``domain_id`` on the network.
+
+    Cyclone picks a configuration's ``<Domain id="N">`` sections by the domain's id inside the process, which
+    differs here: in a user's ``CYCLONEDDS_URI`` the sections for ``domain_id`` apply as ``id="any"``. Inline
+    XML is rewritten in place, a file that has such sections is copied, rewritten, to a temporary file whose
+    path is appended to ``scratch`` (the caller removes it once the domain has started). Raises OSError when
+    a file cannot be read."""
+    user = env.get("CYCLONEDDS_URI", "").strip()
+    if not user:
+        network = _network_config(env)
+    else:
+        import tempfile
+
+        own, parts = _own_sections(domain_id), []
+        # sources are comma-separated: inline XML, file:// URIs or paths
+        for part in re.split(r",(?=\s*(?:<|file://|/|\.|~))", user):
+            part = part.strip()
+            if part.startswith("<"):
+                parts.append(own.sub(r"\1\2any\2", part))
+            elif part:
+                path = os.path.expanduser(os.path.expandvars(part[7:] if part.startswith("file://") else part))
+                with open(path, encoding="utf-8") as f:
+                    text = f.read()
+                if own.search(text):
+                    fd, path = tempfile.mkstemp(prefix="micros_rt_cyclonedds_", suffix=".xml")
+                    with os.fdopen(fd, "w", encoding="utf-8") as f:
+                        f.write(own.sub(r"\1\2any\2", text))
+                    if scratch is not None:
+                        scratch.append(path)
+                parts.append(f"file://{path}")
+        network = ",".join(parts)
+    external = (f'<CycloneDDS><Domain id="any"><Discovery><ExternalDomainId>{domain_id}</ExternalDomainId>'
+                "</Discovery></Domain></CycloneDDS>")
+    return f"{micros_rt_defaults(env)},{network},{external}"
+
+
+def priority_participant(domain_id: int, level: int, tos: int, so_priority: int) -> Optional[DDSParticipant]:
+    """The participant for this process's DDS writers on ``domain_id`` of transport priority ``level`` when the
+    process participant's sockets carry another level (:meth:`DDSParticipant.claim_priority`); created on first use.
+
+    Cyclone sends all data of a participant through one socket per interface, so a HIGH and a LOW topic of one
+    participant would leave with one DSCP. This participant has sockets of its own, marked for ``level``. It
+    is in the process's DDS domain on the network (Cyclone's ``ExternalDomainId``; in the process its domain
+    has another id, since an id is one domain per process), so every DDS peer finds and matches its writers
+    as any other. It costs what a participant costs: ~0.1 s to start, a few threads, its discovery traffic.
+
+    None when it cannot start: the failure is logged once, in words, and writers of every level then share
+    the process participant, marked with the highest level (what a process did before).
+    """
+    global _lanes_failed
+    with _lock:
+        lane = _lanes.get((domain_id, level))
+        if lane is not None and not lane.closed:
+            return lane
+        if _lanes_failed is not None:
+            return None
+        scratch: List[str] = []  # rewritten copies of the user's configuration files
+        try:
+            lane = DDSParticipant(domain_id, priority_config(domain_id, scratch=scratch),
+                                  local_id=PRIORITY_DOMAIN_BASE + 10 * domain_id + level)
+        except Exception as exc:
+            _lanes_failed = str(exc)
+            _log.warning(
+                "micros_rt: cannot start a DDS participant for transport priority %d (%s); DDS topics of "
+                "different priorities in this process share one socket, marked with the highest priority", level, exc)
+            return None
+        finally:
+            for path in scratch:
+                os.unlink(path)
+        lane.claim_priority(level, tos, so_priority)
+        _lanes[domain_id, level] = lane
+        _log.debug("micros_rt: DDS writers of transport priority %d use participant %s", level, lane.guid)
+        return lane
+
+
+def priority_participants() -> List[DDSParticipant]:
+    """The priority participants this process started, lowest level first."""
+    with _lock:
+        return [_lanes[key] for key in sorted(_lanes) if not _lanes[key].closed]
+
+
 def close_participant() -> None:
-    """Close the process participant (at shutdown)."""
-    global _participant
+    """Close the process participant and its priority participants (at shutdown)."""
+    global _participant, _lanes_failed
     with _lock:
         close_flusher()  # what batching writers still hold goes out before their participant does
+        for lane in _lanes.values():
+            lane.close()
+        _lanes.clear()
+        _lanes_failed = None
         if _participant is not None:
             _participant.close()
             _participant = None
