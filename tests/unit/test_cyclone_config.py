@@ -4,6 +4,7 @@ under a user's CYCLONEDDS_URI, and that a real Cyclone participant accepts what 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any, List
 
 import pytest
 
@@ -172,7 +173,7 @@ def test_a_priority_participant_is_on_the_process_domain_on_the_network() -> Non
 
     from micros_rt.transports.dds.participant import PRIORITY_DOMAIN_BASE, DDSParticipant, priority_config
 
-    Probe = make_idl_struct("Probe", "micros_rt_test::Probe", {"n": types.int32})
+    Probe: Any = make_idl_struct("Probe", "micros_rt_test::Probe", {"n": types.int32})
     env = {"ROS_IP": "127.0.0.1"}
     main = DDSParticipant(227, cyclone_config(env))
     lane = DDSParticipant(227, priority_config(227, env), local_id=PRIORITY_DOMAIN_BASE + 2270 + 2)
@@ -181,7 +182,7 @@ def test_a_priority_participant_is_on_the_process_domain_on_the_network() -> Non
         assert lane._sockets and not lane._sockets & main._sockets  # its own sockets, to mark on their own
         reader = DataReader(main.dp, Topic(main.dp, "probe", Probe))
         writer = DataWriter(lane.dp, Topic(lane.dp, "probe", Probe))
-        got: list = []
+        got: List[Any] = []
         deadline = time.monotonic() + 30
         while not got and time.monotonic() < deadline:
             writer.write(Probe(n=7))
@@ -200,7 +201,7 @@ def test_a_users_sections_for_the_domain_apply_to_the_priority_participant(tmp_p
     text = ('<CycloneDDS><Domain id="5"><General><Interfaces><NetworkInterface name="lo"/></Interfaces></General>'
             '</Domain><Domain id="6"><Tracing/></Domain></CycloneDDS>')
     user.write_text(text)
-    scratch: list = []
+    scratch: List[str] = []
     config = priority_config(5, {"ROS_IP": "127.0.0.1",
                                  "CYCLONEDDS_URI": f"file://{user},<CycloneDDS><Domain id='5'/></CycloneDDS>"},
                              scratch=scratch)
