@@ -144,3 +144,4 @@ def test_profile_check_offline(tmp_path: Path, capsys: pytest.CaptureFixture[str
     text = capsys.readouterr().out
     assert "valid (0 publisher rules, 0 subscriber rules, 1 link)" in text
     assert "link radio (interface wlan0, 20 Mbit/s, 25% kept for HIGH): topics below HIGH share 15 Mbit/s" in text
+    assert "DDS writers below HIGH: a send buffer of 16,384 bytes" in text  # 20 Mbit/s: the 16 kB floor

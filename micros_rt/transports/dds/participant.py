@@ -349,7 +349,9 @@ class DDSParticipant:
                 return
             self.send_buffer = size
         n = limit_send_buffers(self._sockets, size)
-        _log.debug("micros_rt: DDS participant %s: send buffer %d bytes on %d sockets", self.guid, size, n)
+        _log.info("micros_rt: DDS writers of transport priority %s use a %d-byte UDP send buffer (%d sockets): "
+                  "the profile names a link of limited bandwidth, and they keep little queued in it",
+                  self._priority, size, n)
 
     def _mark(self, tos: int, so_priority: int) -> None:
         from .marking import mark_udp_sockets
