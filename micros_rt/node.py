@@ -184,7 +184,9 @@ def _close_all() -> None:
     _node.subscriptions.close_all()
     close_profile_backends()  # MQTT: disconnect cleanly now, not at interpreter exit
     with _node.lock:
-        _node.dds = None
+        dds, _node.dds = _node.dds, None
+    if dds is not None:
+        dds.close()
     close_participant()
     flush_logs()
 

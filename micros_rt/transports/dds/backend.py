@@ -220,6 +220,15 @@ class DDSBackend:
                   if p.priority is not None and p.domain_id == self.participant.domain_id]
         return lines
 
+    def close(self, timeout: float = 2.0) -> None:
+        """Before the participants close: let announcers still starting finish creating their entities (a
+        participant deleted while another thread creates a Topic on it is a race inside Cyclone)."""
+        with self._lock:
+            announcements = list(self._announcements.values())
+        deadline = time.monotonic() + timeout
+        for announcement in announcements:
+            announcement.wait_started(max(0.0, deadline - time.monotonic()))
+
     def announce(self, participant: DDSParticipant, *, add_reader: str = "", add_writer: str = "",
                  remove: str = "") -> None:
         """Keep ROS 2's graph (``ros_discovery_info``) told which endpoints this node has on ``participant``
@@ -243,13 +252,21 @@ class _Announcement:
         self._announcer: Any = None  # None: not started, True: starting, False: failed
         self._pending: List[Tuple[str, str, str]] = []
         self._lock = threading.Lock()
+        self._thread: Optional[threading.Thread] = None
+
+    def wait_started(self, timeout: float) -> None:
+        """Wait, at most ``timeout`` s, until the announcer's start (Cyclone entities on the participant) ended."""
+        thread = self._thread
+        if thread is not None:
+            thread.join(timeout)
 
     def update(self, add_reader: str, add_writer: str, remove: str) -> None:
         with self._lock:
             self._pending.append((add_reader, add_writer, remove))
             if self._announcer is None:
                 self._announcer = True  # starting
-                threading.Thread(target=self._start, name="micros_rt ROS 2 graph", daemon=True).start()
+                self._thread = threading.Thread(target=self._start, name="micros_rt ROS 2 graph", daemon=True)
+                self._thread.start()
                 return
             if self._announcer is True or self._announcer is False:
                 return
