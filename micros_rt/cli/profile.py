@@ -68,14 +68,14 @@ def check_main(argv: List[str]) -> int:
                 if not matched:
                     print(f"    matches no live {section[:-1]} topic")
     if profile.links:
-        from ..qos.links import send_buffer_for
+        from ..qos.links import send_buffer_below_high
 
         print("\nlinks (TCPROS connections of topics below HIGH to peers across them are paced; DDS writers below "
               "HIGH get a small UDP send buffer):")
         for link in profile.links:
             print(f"  {link.describe()}: topics below HIGH share {link.paced_rate / 1e6:g} Mbit/s")
-        print(f"  DDS writers below HIGH: a send buffer of "
-              f"{min(send_buffer_for(link.bandwidth) for link in profile.links):,} bytes (the slowest link's)")
+        print(f"  DDS writers below HIGH: a send buffer of {send_buffer_below_high(profile.links):,} bytes "
+              f"(the slowest link's)")
     return 0
 
 

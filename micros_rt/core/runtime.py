@@ -110,9 +110,8 @@ def dds_backend() -> "Optional[DDSBackend]":
             from ..transports.dds.backend import DDSBackend
 
             _node.dds = DDSBackend(participant, str(rospy.get_caller_id()))
-            profile = _node.profile
-            if profile is not None and profile.links:
-                from ..qos.links import send_buffer_for
+            if _node.profile is not None:
+                from ..qos.links import send_buffer_below_high
 
-                _node.dds.send_buffer_below_high = min(send_buffer_for(link.bandwidth) for link in profile.links)
+                _node.dds.send_buffer_below_high = send_buffer_below_high(_node.profile.links)
         return _node.dds

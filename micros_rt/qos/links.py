@@ -31,7 +31,8 @@ from typing import Any, Mapping, Optional, Sequence, Tuple, Union
 
 from micros_rt.exceptions import ProfileError
 
-__all__ = ["DEFAULT_RESERVE", "LinkSpec", "LinkSpecError", "parse_bandwidth", "parse_link", "send_buffer_for"]
+__all__ = ["DEFAULT_RESERVE", "LinkSpec", "LinkSpecError", "parse_bandwidth", "parse_link", "send_buffer_for",
+           "send_buffer_below_high"]
 
 #: the share of a link kept free for HIGH topics when a profile does not say
 DEFAULT_RESERVE = 0.1
@@ -52,6 +53,12 @@ def send_buffer_for(bandwidth: float) -> int:
     (16500, 412500, 16384)
     """
     return max(_MIN_SEND_BUFFER, int(bandwidth / 8 * _QUEUE_SECONDS))
+
+
+def send_buffer_below_high(links: Sequence["LinkSpec"]) -> Optional[int]:
+    """The send buffer of a node's DDS writers below HIGH when its profile names ``links``: the slowest link's
+    (:func:`send_buffer_for`); None without links (Cyclone's own)."""
+    return min(send_buffer_for(link.bandwidth) for link in links) if links else None
 
 
 _Network = Union[ipaddress.IPv4Network, ipaddress.IPv6Network]

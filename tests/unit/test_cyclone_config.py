@@ -176,7 +176,8 @@ def test_a_priority_participant_is_on_the_process_domain_on_the_network() -> Non
     Probe: Any = make_idl_struct("Probe", "micros_rt_test::Probe", {"n": types.int32})
     env = {"ROS_IP": "127.0.0.1"}
     main = DDSParticipant(227, cyclone_config(env))
-    lane = DDSParticipant(227, priority_config(227, env), local_id=PRIORITY_DOMAIN_BASE + 2270 + 2)
+    scratch: List[str] = []
+    lane = DDSParticipant(227, priority_config(227, scratch, env), local_id=PRIORITY_DOMAIN_BASE + 2270 + 2)
     try:
         assert lane.domain_id == 227 and lane.local_id != 227 and lane.guid != main.guid
         assert lane._sockets and not lane._sockets & main._sockets  # its own sockets, to mark on their own
@@ -202,9 +203,8 @@ def test_a_users_sections_for_the_domain_apply_to_the_priority_participant(tmp_p
             '</Domain><Domain id="6"><Tracing/></Domain></CycloneDDS>')
     user.write_text(text)
     scratch: List[str] = []
-    config = priority_config(5, {"ROS_IP": "127.0.0.1",
-                                 "CYCLONEDDS_URI": f"file://{user},<CycloneDDS><Domain id='5'/></CycloneDDS>"},
-                             scratch=scratch)
+    config = priority_config(5, scratch, {"ROS_IP": "127.0.0.1",
+                                          "CYCLONEDDS_URI": f"file://{user},<CycloneDDS><Domain id='5'/></CycloneDDS>"})
     try:
         (copy,) = scratch
         rewritten = Path(copy).read_text()
@@ -219,6 +219,6 @@ def test_a_users_sections_for_the_domain_apply_to_the_priority_participant(tmp_p
     # a file without a section for the domain is used as it is; an unreadable one is an error
     user.write_text('<CycloneDDS><Domain id="any"/></CycloneDDS>')
     scratch = []
-    assert f"file://{user}" in priority_config(5, {"CYCLONEDDS_URI": str(user)}, scratch=scratch) and not scratch
+    assert f"file://{user}" in priority_config(5, scratch, {"CYCLONEDDS_URI": str(user)}) and not scratch
     with pytest.raises(OSError):
-        priority_config(5, {"CYCLONEDDS_URI": f"file://{tmp_path}/missing.xml"})
+        priority_config(5, scratch, {"CYCLONEDDS_URI": f"file://{tmp_path}/missing.xml"})

@@ -19,10 +19,10 @@ from .batching import c_function
 
 __all__ = ["SocketCongestion", "RELEASED_WRITE_MIN", "CONGESTED_WRITE", "CONGESTION_HOLD"]
 
-#: Samples at least this large (bytes) are written with Python's GIL released (:func:`write_released`).
+#: Samples at least this large (bytes) are written with Python's GIL released (:meth:`SocketCongestion.write_released`).
 RELEASED_WRITE_MIN = 16 * 1024
 
-#: A write through :func:`write_released` that took longer than this (s) waited for room in a socket that a
+#: A write through :meth:`SocketCongestion.write_released` that took longer than this (s) waited for room in a socket that a
 #: slow link drains: the participant's transmit socket is congested for :data:`CONGESTION_HOLD` seconds, and
 #: meanwhile every write of that participant releases the GIL and KEEP_LAST lanes send from their threads.
 CONGESTED_WRITE = 0.005
