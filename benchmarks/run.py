@@ -74,8 +74,9 @@ REALISTIC = {  # kind: (label, size in bytes)
     # the same message in ROS 1's documented numpy configuration, both ends (rclpy: its own array.array)
     "scan_np": ("sensor_msgs/LaserScan 1,081 ranges, rospy.numpy_msg", 1081 * 8),
 }
-#: latest.json sections written by other benchmark scripts, kept when this one rewrites the file
-OTHER_SECTIONS = ("constrained_link",)
+#: latest.json sections written by other benchmark scripts (constrained_link.py, cross_host.py), kept when this
+#: one rewrites the file
+OTHER_SECTIONS = ("constrained_link", "cross_host")
 FIGURE_GROUPS = ("lat64", "lat64k", "thr64", "thr1m", "fanout4", "disc", "realistic", "scale")
 # (figure, target ratio vs rospy, "<=" or ">=", extra condition)
 TARGETS = {
@@ -873,7 +874,7 @@ def main():
                      "latency in µs (ping-pong, p50/p99), throughput measured at the receiver over first..last "
                      "message; lost = sent − distinct sequence numbers received after a 2 s drain."}
     previous = outdir / "latest.json"
-    try:  # sections other scripts own (benchmarks/constrained_link.py) stay as they were
+    try:  # sections other scripts own (OTHER_SECTIONS) stay as they were
         kept = {k: v for k, v in json.loads(previous.read_text()).items() if k in OTHER_SECTIONS}
     except (OSError, ValueError):
         kept = {}
