@@ -5,9 +5,11 @@ network namespaces this script makes and removes (issue 20; run as root).
     .venv/bin/python benchmarks/cross_host.py            # MTU 1500 and 9000, every figure, 1 round (~8 min)
     .venv/bin/python benchmarks/cross_host.py --quick    # MTU 1500, the stream and fan-out figures only
     .venv/bin/python benchmarks/cross_host.py --mtus 1500 --figures stream,fanout4 --only mrt_dds,rospy
+    .venv/bin/python benchmarks/cross_host.py --rates none,1gbit --figures stream,fanout4   # also a GigE LAN
 
 Hosts: five namespaces joined by veth pairs (every link at the MTU of the run, no shaping) to a Linux bridge
-in a namespace of its own (tests/netns.py); the publisher (or pinger) on host 0, subscribers on hosts 1..4;
+in a namespace of its own (tests/netns.py), unshaped or (--rates) every host's egress at a line rate (tbf,
+20 ms queue: a wired LAN's NICs, whose wire time an unshaped veth pair does not have); the publisher (or pinger) on host 0, subscribers on hosts 1..4;
 a rosmaster on host 0. micros_rt in its default configuration (it follows ROS_IP: the host's interface),
 stock rospy with tcp_nodelay. Every endpoint is its own process (benchmarks/peer.py for round trips and
 one-way rates, benchmarks/cross_host_peer.py for the paced streams).
@@ -20,6 +22,7 @@ Figures (per MTU and stack):
   fanout4   the same stream to hosts 1..4 at once: per host delivered and latency, and the bytes host 0's
             link carried per message, in copies of the message (1.0: multicast; 4.0: one copy per host)
 
+Settings are named by MTU, and by MTU@rate when shaped ("1500", "1500@1gbit").
 Results: benchmarks/results/latest.json under "cross_host" (the rest of the file is left as it is),
 cross_host.md and cross_host.png. Nothing leaves the namespaces: the script checks eth0's tx_packets.
 """
@@ -231,14 +234,35 @@ class Bench:
                 "cdf_ms": [pct(lat, i / 100) for i in range(100)]}
 
 
-def run_mtu(mtu: int, impls: List[str], figures: List[str], P: Dict[str, Any], rnd: int,
+def shape(hosts: Hosts, rate: str) -> None:
+    """Every host's egress at ``rate``: tbf with a 20 ms queue and a bucket of 2 ms of the rate (at least
+    64 KB, so a segmentation-offloaded TCP segment leaves whole), as a wired NIC sends at its line rate."""
+    bucket = max(65536, int(parse_rate(rate) / 8 * 0.002))
+    for i in range(hosts.n):
+        hosts.sh("ip", "netns", "exec", hosts.names[i], "tc", "qdisc", "add", "dev", hosts.link_name(i), "root",
+                 "tbf", "rate", rate, "burst", str(bucket), "latency", "20ms")
+
+
+def parse_rate(rate: str) -> float:
+    """bits per second of a tc rate ("1gbit", "100mbit", "40mbit")"""
+    units = {"gbit": 1e9, "mbit": 1e6, "kbit": 1e3, "bit": 1.0}
+    for unit, factor in units.items():
+        if rate.endswith(unit):
+            return float(rate[:-len(unit)]) * factor
+    raise SystemExit(f"--rates: {rate!r} is not a tc rate such as 1gbit or 100mbit")
+
+
+def run_mtu(mtu: int, rate: str, impls: List[str], figures: List[str], P: Dict[str, Any], rnd: int,
             results: Dict[str, Any], errors: List[str]) -> None:
+    setting = str(mtu) if rate == "none" else f"{mtu}@{rate}"
     hosts = Hosts(5 if "fanout4" in figures else 2, mtu=mtu, plain_bridge=P["plain_bridge"]).up()
     try:
+        if rate != "none":
+            shape(hosts, rate)
         b = Bench(hosts, P)
         order = impls[rnd % len(impls):] + impls[:rnd % len(impls)]
         for impl in order:
-            res = results.setdefault(str(mtu), {}).setdefault(impl, {})
+            res = results.setdefault(setting, {}).setdefault(impl, {})
             steps: List[Any] = []
             if "rtt" in figures:
                 steps += [("rtt", g) for g in GROUPS]
@@ -250,7 +274,7 @@ def run_mtu(mtu: int, impls: List[str], figures: List[str], P: Dict[str, Any], r
                 steps.append(("fanout4", 4))
             for kind, arg in steps:
                 name = kind if kind in ("stream", "fanout4") else f"{kind} {','.join(t for t, _, _ in arg)}"
-                print(f"  MTU {mtu} {impl}: {name} ...", flush=True)
+                print(f"  {setting} {impl}: {name} ...", flush=True)
                 try:
                     if kind == "rtt":
                         for tag, v in b.rtt(impl, arg).items():
@@ -261,7 +285,7 @@ def run_mtu(mtu: int, impls: List[str], figures: List[str], P: Dict[str, Any], r
                     else:
                         res.setdefault(kind, []).append(b.stream(impl, arg))
                 except Exception as exc:  # a failed phase is reported, the run goes on
-                    errors.append(f"MTU {mtu} {impl} {name}: {exc}")
+                    errors.append(f"{setting} {impl} {name}: {exc}")
                     print(f"    failed: {exc}", flush=True)
     finally:
         hosts.down()
@@ -326,7 +350,7 @@ def fmt(v: Optional[float], nd: int = 0) -> str:
 def table(summary: Dict[str, Any]) -> List[str]:
     lines = []
     for mtu, stacks in summary.items():
-        lines += [f"MTU {mtu}", "", "| figure | " + " | ".join(LABEL[i] for i in stacks) + " |",
+        lines += [f"MTU {mtu}".replace("@", ", every link at "), "", "| figure | " + " | ".join(LABEL[i] for i in stacks) + " |",
                   "|---|" + "---|" * len(stacks)]
         keys: List[str] = []
         for flat in stacks.values():
@@ -370,7 +394,7 @@ def plot(results: Dict[str, Any], out: Path) -> None:
                         ax.plot(cdf, [i / len(cdf) for i in range(len(cdf))], label=LABEL[impl] if n == 0 else None,
                                 color={"mrt_dds": "C0", "mrt_tcpros": "C2", "rospy": "C1"}[impl])
             hosts = "1 subscriber host" if kind == "stream" else "4 subscriber hosts"
-            ax.set_title(f"Image 640x480 30 Hz, {hosts}, MTU {mtu}")
+            ax.set_title(f"Image 640x480 30 Hz, {hosts}, MTU {mtu}".replace("@", " at "))
             ax.set_xlabel("one-way latency, ms")
             ax.set_ylabel("fraction of messages")
             ax.legend()
@@ -382,6 +406,8 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="MTU 1500, stream and fan-out only, 3 s streams")
     ap.add_argument("--mtus", default=None, help="comma-separated (default 1500,9000)")
+    ap.add_argument("--rates", default="none", help="comma-separated line rates of every host's link: none "
+                    "(unshaped veth, the default) or a tc rate such as 1gbit")
     ap.add_argument("--figures", default=None, help=f"comma-separated of {','.join(FIGURES)} (default all)")
     ap.add_argument("--only", default="rospy,mrt_dds,mrt_tcpros", help="stacks (rospy, mrt_dds, mrt_tcpros)")
     ap.add_argument("--rounds", type=int, default=1)
@@ -396,6 +422,10 @@ def main() -> int:
     if os.geteuid() != 0:
         raise SystemExit("cross_host.py makes network namespaces: run it as root")
     mtus = [int(m) for m in (args.mtus or ("1500" if args.quick else "1500,9000")).split(",")]
+    rates = args.rates.split(",")
+    for rate in rates:
+        if rate != "none":
+            parse_rate(rate)
     figures = (args.figures or ("stream,fanout4" if args.quick else ",".join(FIGURES))).split(",")
     impls = args.only.split(",")
     P = {"rtt_n": 300, "rtt_big_n": 60, "rtt_s": 4.0, "thr_s": 2.0, "rate": 30.0,
@@ -407,9 +437,10 @@ def main() -> int:
     results: Dict[str, Any] = {}
     errors: List[str] = []
     for rnd in range(args.rounds):
-        for mtu in mtus:
-            print(f"round {rnd + 1}/{args.rounds}: MTU {mtu}", flush=True)
-            run_mtu(mtu, impls, figures, P, rnd, results, errors)
+        for rate in rates:
+            for mtu in mtus:
+                print(f"round {rnd + 1}/{args.rounds}: MTU {mtu}, links {rate}", flush=True)
+                run_mtu(mtu, rate, impls, figures, P, rnd, results, errors)
     tx_after = eth0_tx()
     summary = summarise(results)
     lines = table(summary)
@@ -428,16 +459,26 @@ def main() -> int:
             for kind in ("stream", "fanout4"):
                 for run in res.get(kind, []):
                     run.pop("lat_ms", None)
-    report = {"command": " ".join([".venv/bin/python", "benchmarks/cross_host.py", *sys.argv[1:]]),
-              "rounds": args.rounds, "mtus": mtus, "figures": figures, "params": P,
-              "wall_s": round(time.monotonic() - t0, 1), "eth0_tx_packets_during_run": eth0, "errors": errors,
-              "stacks": {i: LABEL[i] for i in impls}, "summary": summary, "runs": results}
+    command = " ".join([".venv/bin/python", "benchmarks/cross_host.py", *sys.argv[1:]])
+    run = {"command": command, "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "rounds": args.rounds,
+           "figures": figures, "params": P, "wall_s": round(time.monotonic() - t0, 1),
+           "eth0_tx_packets_during_run": eth0, "errors": errors, "stacks": {i: LABEL[i] for i in impls}}
     latest = out / "latest.json"
     data = json.loads(latest.read_text()) if latest.exists() else {}
-    data["cross_host"] = report
+    # settings (MTU, rate) this run did not measure stay as an earlier run left them; each names its run
+    # (ratios are only ever taken within one setting, whose stacks ran in the same run)
+    prev = data.get("cross_host", {})
+    prev_run = prev.get("by_setting") or {k: {key: prev.get(key) for key in ("command", "wall_s", "rounds")}
+                                          for k in prev.get("summary", {})}
+    keep = [k for k in prev.get("summary", {}) if k not in summary]
+    data["cross_host"] = {
+        **run, "by_setting": {**{k: prev_run.get(k) for k in keep}, **{k: run for k in summary}},
+        "summary": {**{k: prev["summary"][k] for k in keep}, **summary},
+        "runs": {**{k: prev.get("runs", {}).get(k, {}) for k in keep}, **results}}
     latest.write_text(json.dumps(data, indent=1))
-    (out / "cross_host.md").write_text("\n".join(lines) + "\n")
-    plot(results, out)
+    merged = data["cross_host"]
+    (out / "cross_host.md").write_text("\n".join(table(merged["summary"])) + "\n")
+    plot(merged["runs"], out)
     return 0
 
 

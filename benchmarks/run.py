@@ -52,7 +52,7 @@ IMPL = {"micros_rt_dds": "mrt_dds", "micros_rt_dds_budget": "mrt_budget", "micro
 TRANSPORTS = tuple(PY)
 BASE = "rospy_tcpros"
 CYCLONE_XML = HERE / "cyclonedds_loopback.xml"
-FASTDDS_XML = REPO / "tests/peers/fastdds_loopback.xml"
+FASTDDS_XML = HERE / "fastdds_loopback.xml"
 CONFIG = {
     "micros_rt_dds": "advertise(queue_size=None) / subscribe(queue_size=None), default QoS (reliable); "
                      "no CYCLONEDDS_URI, ROS_IP=127.0.0.1 (micros_rt's own loopback Cyclone config)",
@@ -63,7 +63,7 @@ CONFIG = {
     "cyclonedds_python": "reliable (max_blocking 10 s), KEEP_ALL; struct {sequence<octet> data} written "
                          "pre-serialised with ddspy_write, taken 256 at a time with ddspy_take (bytes path); "
                          "CYCLONEDDS_URI=benchmarks/cyclonedds_loopback.xml (lo only, unicast discovery, 63 KB fragments)",
-    "rclpy_fastdds": "QoS reliable KEEP_ALL; Fast DDS default publish mode (a publish refused on a full history is retried: back-pressure); tests/peers/fastdds_loopback.xml "
+    "rclpy_fastdds": "QoS reliable KEEP_ALL; Fast DDS default publish mode (a publish refused on a full history is retried: back-pressure); benchmarks/fastdds_loopback.xml "
                      "(UDP 127.0.0.1 + SHM), ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST; single-threaded spin_once",
 }
 REALISTIC = {  # kind: (label, size in bytes)
