@@ -7,12 +7,12 @@ network namespaces this script makes and removes (issue 20; run as root).
     .venv/bin/python benchmarks/cross_host.py --mtus 1500 --figures stream,fanout4 --only mrt_dds,rospy
     .venv/bin/python benchmarks/cross_host.py --rates none,1gbit --figures stream,fanout4   # also a GigE LAN
 
-Hosts: five namespaces joined by veth pairs (every link at the MTU of the run, no shaping) to a Linux bridge
-in a namespace of its own (tests/netns.py), unshaped or (--rates) every host's egress at a line rate (tbf,
-20 ms queue: a wired LAN's NICs, whose wire time an unshaped veth pair does not have); the publisher (or pinger) on host 0, subscribers on hosts 1..4;
-a rosmaster on host 0. micros_rt in its default configuration (it follows ROS_IP: the host's interface),
-stock rospy with tcp_nodelay. Every endpoint is its own process (benchmarks/peer.py for round trips and
-one-way rates, benchmarks/cross_host_peer.py for the paced streams).
+Hosts: five namespaces joined by veth pairs (every link at the MTU of the run) to a Linux bridge in a
+namespace of its own (tests/netns.py), unshaped or (--rates) every host's egress at a line rate (tbf, 20 ms
+queue: a wired LAN's NICs, whose wire time an unshaped veth pair does not have); the publisher (or pinger) on
+host 0, subscribers on hosts 1..4; a rosmaster on host 0. micros_rt in its default configuration (it follows
+ROS_IP: the host's interface), stock rospy with tcp_nodelay. Every endpoint is its own process
+(benchmarks/peer.py for round trips and one-way rates, benchmarks/cross_host_peer.py for the paced streams).
 
 Figures (per MTU and stack):
   rtt       round trip host 0 -> host 1 -> host 0: 64 B, 64 KiB, LaserScan, Image 640x480, PointCloud2 1 MiB
@@ -350,7 +350,8 @@ def fmt(v: Optional[float], nd: int = 0) -> str:
 def table(summary: Dict[str, Any]) -> List[str]:
     lines = []
     for mtu, stacks in summary.items():
-        lines += [f"MTU {mtu}".replace("@", ", every link at "), "", "| figure | " + " | ".join(LABEL[i] for i in stacks) + " |",
+        title = f"MTU {mtu}".replace("@", ", every link at ")
+        lines += [title, "", "| figure | " + " | ".join(LABEL[i] for i in stacks) + " |",
                   "|---|" + "---|" * len(stacks)]
         keys: List[str] = []
         for flat in stacks.values():
