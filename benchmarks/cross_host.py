@@ -45,6 +45,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 from netns import Hosts  # noqa: E402
 
+from micros_rt.qos.links import parse_bandwidth  # noqa: E402  (the units of a profile's links, tc's)
+
 PEER = str(ROOT / "benchmarks" / "peer.py")
 STREAM_PEER = str(ROOT / "benchmarks" / "cross_host_peer.py")
 RESULTS = ROOT / "benchmarks" / "results"
@@ -235,21 +237,14 @@ class Bench:
 
 
 def shape(hosts: Hosts, rate: str) -> None:
-    """Every host's egress at ``rate``: tbf with a 20 ms queue and a bucket of 2 ms of the rate (at least
-    64 KB, so a segmentation-offloaded TCP segment leaves whole), as a wired NIC sends at its line rate."""
-    bucket = max(65536, int(parse_rate(rate) / 8 * 0.002))
+    """Every host's egress at ``rate`` (a profile's bandwidth text: 1gbit, 100Mbit): tbf with a 20 ms queue and
+    a bucket of 2 ms of the rate (at least 64 KB, so a segmentation-offloaded TCP segment leaves whole), as a
+    wired NIC sends at its line rate."""
+    bps = parse_bandwidth(rate)
+    bucket = max(65536, int(bps / 8 * 0.002))
     for i in range(hosts.n):
         hosts.sh("ip", "netns", "exec", hosts.names[i], "tc", "qdisc", "add", "dev", hosts.link_name(i), "root",
-                 "tbf", "rate", rate, "burst", str(bucket), "latency", "20ms")
-
-
-def parse_rate(rate: str) -> float:
-    """bits per second of a tc rate ("1gbit", "100mbit", "40mbit")"""
-    units = {"gbit": 1e9, "mbit": 1e6, "kbit": 1e3, "bit": 1.0}
-    for unit, factor in units.items():
-        if rate.endswith(unit):
-            return float(rate[:-len(unit)]) * factor
-    raise SystemExit(f"--rates: {rate!r} is not a tc rate such as 1gbit or 100mbit")
+                 "tbf", "rate", f"{int(bps)}bit", "burst", str(bucket), "latency", "20ms")
 
 
 def run_mtu(mtu: int, rate: str, impls: List[str], figures: List[str], P: Dict[str, Any], rnd: int,
@@ -426,7 +421,10 @@ def main() -> int:
     rates = args.rates.split(",")
     for rate in rates:
         if rate != "none":
-            parse_rate(rate)
+            try:
+                parse_bandwidth(rate)
+            except ValueError as exc:
+                raise SystemExit(f"--rates: {exc}") from None
     figures = (args.figures or ("stream,fanout4" if args.quick else ",".join(FIGURES))).split(",")
     impls = args.only.split(",")
     P = {"rtt_n": 300, "rtt_big_n": 60, "rtt_s": 4.0, "thr_s": 2.0, "rate": 30.0,
