@@ -34,7 +34,7 @@ from .transports.pacing import LinkPacer
 from .transports.dds.participant import close_participant
 from .exceptions import NodeNotInitializedError, QoSTypeError
 from .negotiation.hints import TransportHints
-from .negotiation.protocol import DDS, TCPROS
+from .negotiation.protocol import DDS, SHM, TCPROS
 from .qos import (
     AdvertiseQoSOptions,
     QoSProfile,
@@ -269,10 +269,17 @@ class NodeHandle:
             off_dds = (f"topic {resolved}: the publisher's profile ({node_profile.source}) keeps it off DDS "
                        f"(transport_hints: [{TCPROS}]); using TCPROS")
 
+        off_shm = None
+        if node_profile is not None and served is not None and SHM not in served:
+            off_shm = (f"topic {resolved}: the publisher's profile ({node_profile.source}) serves "
+                       f"{', '.join(served)} only (transport_hints), not shared memory")
+
         def create() -> _Publication:
-            return _Publication(resolved, data_class, queue_size, latch, effective,
-                                dds=None if off_dds else dds_backend(), tag=_tag(), extra=_profile_backends(),
-                                pacer=_node.pacer, off_dds=off_dds)
+            pub = _Publication(resolved, data_class, queue_size, latch, effective,
+                               dds=None if off_dds else dds_backend(), tag=_tag(), extra=_profile_backends(),
+                               pacer=_node.pacer, off_dds=off_dds)
+            pub.off_shm = off_shm
+            return pub
 
         pub = _node.publications.acquire(resolved, create, reuse)
         return Publisher(pub, _node.publications)

@@ -95,6 +95,10 @@ def dds_env(domain_id: int) -> Dict[str, str]:
     """Environment for loopback-only DDS on ``domain_id`` (Cyclone and Fast DDS/rclpy)."""
     return {
         "ROS_DOMAIN_ID": str(domain_id),
+        # The suite tests the DDS plane between micros_rt nodes of this one machine, as between hosts: shared
+        # memory (chosen first on one host) is off unless a test turns it on ("0"), as tests/integration/
+        # test_shm.py and the SHM contract tests do.
+        "MICROS_RT_DISABLE_SHM": "1",
         "CYCLONEDDS_URI": CYCLONEDDS_CONFIG.as_uri(),
         "FASTRTPS_DEFAULT_PROFILES_FILE": str(FASTDDS_PROFILE),
         "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",

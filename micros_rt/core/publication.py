@@ -26,6 +26,10 @@ from ..negotiation import (
     MAX_PENDING_DDS_OFFERS,
     UNMATCHED_READER_TIMEOUT,
     DDS,
+    SHM,
+    ShmAnswer,
+    ShmOffer,
+    decide_shm,
     DDSAnswer,
     DDSOffer,
     NegotiatedTransport,
@@ -42,6 +46,7 @@ from ..log import nonblocking_logger
 if TYPE_CHECKING:
     from ..transports.pacing import LinkPacer
     from ..transports.dds.backend import DDSBackend, DDSTopicWriter
+    from ..transports.shm.channel import ShmChannel, ShmWriter
 
 __all__ = ["Publisher", "ForeignWriters"]
 
@@ -92,6 +97,11 @@ class _Publication:
         self.published = 0
         self.blocked_seconds = 0.0
         self.tcpros: Optional[compat.TcprosWriter] = None
+        #: shared memory: the writer (made when a first subscriber chooses SHM) and its pseudo-connections
+        self.shm: "Optional[ShmWriter]" = None
+        self.shm_links: Dict[str, compat.DDSConnection] = {}  # subscriber caller id -> SHM link
+        #: why this topic serves no SHM by choice (the node's profile), in words; None: it does if it can
+        self.off_shm: Optional[str] = None
         self.dds: "Optional[DDSTopicWriter]" = None
         self._dds_backend = dds
         if dds is not None:
@@ -120,7 +130,7 @@ class _Publication:
 
     def start(self) -> None:
         self.tcpros = compat.TcprosWriter(self.topic, self.data_class, self.queue_size, self.latch,
-                                          pseudo_links=self.connections.__len__)
+                                          pseudo_links=lambda: len(self.connections) + len(self.shm_links))
         self._refresh_writers()
 
     def _refresh_writers(self) -> None:
@@ -132,7 +142,8 @@ class _Publication:
             idle = (self._foreign is not None and not self.latch and self.dds is not None
                     and all(sub in self.delegated for sub in self.connections))
         # the DDS writer's sender is the first when there is one (__init__)
-        self.writers = (self.tcpros,) + (self.senders[1:] if idle else self.senders)
+        shm: Tuple[TransportWriter, ...] = (self.shm,) if self.shm is not None else ()
+        self.writers = (self.tcpros,) + shm + (self.senders[1:] if idle else self.senders)
 
     def delegate_dds(self, source: ForeignSource, alive: ReaderAlive) -> None:
         self._foreign = (source, alive)
@@ -153,11 +164,87 @@ class _Publication:
         """What ``requestTopic`` may negotiate for this topic with ``subscriber``: DDS, judged here (none when
         the profile keeps the topic off DDS: the subscriber's DDS entry is skipped as a stock publisher would,
         with no warning, and ``micros-rt topic info`` shows why)."""
+        negotiated: Dict[str, NegotiatedTransport] = {}
+        if self.off_shm is None:
+            negotiated[SHM] = NegotiatedTransport(
+                parse=lambda params, source: ShmOffer.from_xmlrpc(params, source=source),
+                judge=lambda offer: self.judge_shm(offer, subscriber))
         if self.off_dds is not None:
             with self.lock:
                 remember_verdict(self.verdicts, short(subscriber, 256), Verdict(False, "profile", self.off_dds))
-            return {}
-        return {DDS: dds_transport(lambda offer: self.judge(offer, subscriber))}
+            return negotiated
+        negotiated[DDS] = dds_transport(lambda offer: self.judge(offer, subscriber))
+        return negotiated
+
+    # -- shared memory ------------------------------------------------------
+    def judge_shm(self, offer: ShmOffer, subscriber: str) -> Tuple[Verdict, Optional[ShmAnswer]]:
+        """Accept a subscriber of this host and user on a channel of its own, or say why not."""
+        from ..transports import shm as shm_transport
+
+        who = short(subscriber)
+        unavailable = shm_transport.unavailable_reason()
+        if unavailable is None and self.shm is not None and self.shm.failed:
+            unavailable = self.shm.failed
+        facts = PublicationFacts(topic=self.topic, dds_topic="", domain=None, type_name=self.data_class._type,
+                                 md5=self.data_class._md5sum, options=self.options, latch=self.latch)
+        verdict = decide_shm(offer, facts, host=shm_transport.host_identity(), unavailable=unavailable,
+                             subscriber=who)
+        if verdict.accepted:
+            try:
+                channel = self._shm_writer().open_channel(subscriber)
+            except MicrosRtError as exc:
+                verdict = Verdict(False, "shm-unavailable", f"{exc}; serving {who} otherwise")
+        with self.lock:
+            remember_verdict(self.verdicts, short(subscriber, 256), verdict)
+        if not verdict.accepted:
+            return verdict, None
+        info = (f"SHM connection on channel {channel.name} to {who} ("
+                f"{'lossless' if is_lossless(self.queue_size) else f'newest {self.queue_size} kept'}, "
+                f"priority {self.options.transport_priority.name})")
+        conn = compat.DDSConnection(self.topic, subscriber, "o", info, peer_guid=channel.name,
+                                    on_close=self._shm_connection_closed, transport=SHM)
+        with self.lock:
+            old = self.shm_links.get(subscriber)
+            self.shm_links[subscriber] = conn
+        if old is not None:
+            compat.remove_pseudo_connection(self.topic, old, publisher=True)
+            old.close()
+        if not compat.add_pseudo_connection(self.topic, conn, publisher=True):
+            conn.close()
+            return Verdict(False, "closing", f"topic {self.topic}: no rospy publisher to attach the SHM link of "
+                                             f"{who} to (unregistered); using the next protocol"), None
+        return verdict, ShmAnswer(channel=channel.name, latch=self.latch, qos=self.options, node=compat.caller_id())
+
+    def _shm_writer(self) -> "ShmWriter":
+        with self.lock:
+            if self.shm is None:
+                from ..transports.shm.channel import ShmWriter
+
+                self.shm = ShmWriter(self.topic, lossless=is_lossless(self.queue_size), latch=self.latch)
+                created = True
+            else:
+                created = False
+        if created:
+            self._refresh_writers()
+        return self.shm
+
+    def _shm_connection_closed(self, conn: compat.DDSConnection) -> None:
+        with self.lock:
+            if self.shm_links.get(conn.endpoint_id) is conn:
+                del self.shm_links[conn.endpoint_id]
+        shm = self.shm
+        if shm is not None:
+            for channel in shm.channels():
+                if channel.name == conn.peer_guid:
+                    shm.close_channel(channel)
+
+    def _shm_channel_gone(self, channel: "ShmChannel") -> None:
+        with self.lock:
+            conn = self.shm_links.get(channel.subscriber)
+        if conn is not None and conn.peer_guid == channel.name:
+            _log.debug("micros_rt: topic %s: SHM subscriber %s is gone", self.topic, short(channel.subscriber))
+            compat.remove_pseudo_connection(self.topic, conn, publisher=True)
+            conn.close()
 
     def judge(self, offer: DDSOffer, subscriber: str) -> Tuple[Verdict, Optional[DDSAnswer]]:
         facts = self.facts()
@@ -246,7 +333,10 @@ class _Publication:
 
     def housekeeping(self, now: float) -> None:
         """Drop DDS links whose reader went away, or that discovery never matched in time
-        (an offer nobody follows up must not stay a connection forever)."""
+        (an offer nobody follows up must not stay a connection forever), and SHM channels whose subscriber
+        left (a SIGKILLed one's ports are reclaimed first)."""
+        if self.shm is not None:
+            self.shm.housekeeping(now, self._shm_channel_gone)
         dds = self.dds
         with self.lock:
             conns = list(self.connections.values())
@@ -298,7 +388,10 @@ class _Publication:
             return 0
         with self.lock:
             conns = list(self.connections.values())
-        n_tcp = max(tcpros.links() - len(conns), 0)
+            n_shm = len(self.shm_links)
+        n_tcp = max(tcpros.links() - len(conns) - n_shm, 0)
+        if n_shm and self.shm is not None:
+            n_tcp += self.shm.attached_count()
         if not conns or self.dds is None:
             return n_tcp
         matched = self._reached(conns, self.dds)
@@ -332,16 +425,21 @@ class _Publication:
                     f"topic {self.topic}: cannot serialize {type(msg).__name__}: {exc}") from exc
 
     def statistics(self) -> PublisherStatistics:
-        return PublisherStatistics(published=self.published, dropped=sum(lane.dropped for lane in self.lanes),
+        shm_dropped = self.shm.dropped if self.shm is not None else 0
+        return PublisherStatistics(published=self.published,
+                                   dropped=sum(lane.dropped for lane in self.lanes) + shm_dropped,
                                    blocked_seconds=self.blocked_seconds,
                                    expired=sum(lane.expired for lane in self.lanes))
 
     def close(self) -> None:
         """Release the DDS links and writer and unregister from rospy (the registry calls this once)."""
         with self.lock:
-            conns = list(self.connections.values())
+            conns = list(self.connections.values()) + list(self.shm_links.values())
         for conn in conns:
             conn.close()
+        shm, self.shm = self.shm, None
+        if shm is not None:
+            shm.close()
         self.dds, self.mirrors = None, ()
         senders, self.senders, self.writers = self.senders, (), ()
         for sender in reversed(senders):

@@ -40,7 +40,8 @@ import rospy.impl.registration
 import rospy.names
 import rospy.topics
 import rosgraph
-from ..negotiation import DDS, TCPROS, DDSAnswer, DDSOffer, MalformedNegotiationError, RateLimitedLog, Verdict
+from ..negotiation import (DDS, SHM, TCPROS, DDSAnswer, DDSOffer, MalformedNegotiationError, RateLimitedLog, ShmAnswer,
+                           Verdict)
 from ..negotiation import NegotiatedTransport, choose_protocol
 from rospy.impl.registration import (
     RegManager,
@@ -101,6 +102,9 @@ class SubscriptionHook(Protocol):
     def connect_dds(self, pub_uri: str, answer: DDSAnswer) -> Tuple[int, str, int]:
         """Create the DDS pseudo-connection after the publisher accepted DDS."""
 
+    def connect_shm(self, pub_uri: str, answer: ShmAnswer) -> Tuple[int, str, int]:
+        """Open the shared-memory link (and its pseudo-connection) after the publisher accepted SHM."""
+
 
 _find_publication: Callable[[str], Optional[PublicationHook]] = lambda topic: None
 _find_subscription: Callable[[str], Optional[SubscriptionHook]] = lambda topic: None
@@ -119,7 +123,7 @@ def caller_id() -> str:
 
 
 class DDSConnection:
-    """A connection in rospy's bookkeeping whose data flows over DDS.
+    """A connection in rospy's bookkeeping whose data flows over DDS, or shared memory (``transport="SHM"``).
 
     It has no socket (``fileno()`` is None) and writes nothing: the DDS writer
     carries the data once for every DDS reader, however many of these exist.
@@ -133,8 +137,9 @@ class DDSConnection:
     latch = None
 
     def __init__(self, topic: str, endpoint_id: str, direction: str, info: str, peer_guid: str = "",
-                 on_close: Optional[Callable[["DDSConnection"], None]] = None) -> None:
+                 on_close: Optional[Callable[["DDSConnection"], None]] = None, *, transport: str = DDS) -> None:
         self.id = next(_ids)
+        self.transport_type = transport
         self.peer_guid = peer_guid  # the DDS reader (publisher side) or writer (subscriber side)
         self.seen = False  # has DDS discovery matched the peer yet?
         self.created = time.monotonic()
@@ -378,6 +383,19 @@ def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
             _log.warning("micros_rt: publisher %s answered requestTopic for %s with %s; ignoring it",
                          pub_uri, topic, short(repr(result)))
             return 0, "ERROR: publisher returned invalid protocol choice", 0
+        if result[0] == SHM:
+            try:
+                shm = ShmAnswer.from_xmlrpc(result[1] if len(result) > 1 else None, source=f"publisher {pub_uri}")
+            except MalformedNegotiationError as exc:
+                _log.warning("micros_rt: topic %s: publisher %s accepted shared memory with a malformed answer (%s); "
+                             "not connected to it", topic, pub_uri, exc)
+                return 0, "malformed SHM answer", 0
+            if existing is not None:
+                if existing.peer_guid == shm.channel:
+                    return 1, already, 0
+                remove_pseudo_connection(topic, existing, publisher=False)
+                existing.close()
+            return hook.connect_shm(pub_uri, shm)
         if result[0] == DDS:
             try:
                 answer = DDSAnswer.from_xmlrpc(result[1] if len(result) > 1 else None, source=f"publisher {pub_uri}")
@@ -413,6 +431,9 @@ def _wrapped_request_topic(original: Callable[..., Any]) -> Callable[..., Any]:
                                  supports=lambda name: any(h.supports(name) for h in self.protocol_handlers),
                                  topic=short(resolved))
         for verdict in choice.declined:
+            if verdict.quiet:
+                _log.debug("micros_rt: %s", verdict.reason)
+                continue
             _declines.warning((short(caller_id, 256), verdict.kind), verdict.reason, group=verdict.kind.split(":")[0])
         if choice.answer is not None:
             return 1, f"ready on {choice.protocol}", choice.answer.to_xmlrpc()
@@ -441,7 +462,7 @@ def _wrapped_publisher_add_connection(original: Callable[..., Any]) -> Callable[
     # QueuedConnection); micros_rt publications mark the socket with their transport priority.
     def add_connection(self: Any, c: Any) -> Any:
         hook = _find_publication(getattr(self, "resolved_name", ""))
-        if hook is not None and getattr(c, "transport_type", "TCPROS") != DDS:
+        if hook is not None and getattr(c, "transport_type", "TCPROS") not in (DDS, SHM):
             try:
                 hook.on_tcpros_connection(c, transport_socket(c))
             except Exception:

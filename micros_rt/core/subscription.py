@@ -26,7 +26,7 @@ from .stats import LatencyStats, SubscriberStatistics
 from .writers import DELIVER, HOLD, Accepted, WriterState, WriterTable
 from ..transports.base import TIME_FILTER, EndpointSpec, Feed, ProfileBackend, PushReader, TransportReader
 from ..exceptions import MicrosRtError
-from ..negotiation import DDS, TCPROS, DDSAnswer, DDSOffer, TransportHints
+from ..negotiation import DDS, SHM, TCPROS, DDSAnswer, DDSOffer, ShmAnswer, ShmOffer, TransportHints
 from ..qos import (
     UNBOUNDED_QUEUE_DEPTH,
     DeadlineMissed,
@@ -42,6 +42,7 @@ from ..log import nonblocking_logger
 
 if TYPE_CHECKING:
     from ..transports.dds.backend import DDSBackend, DDSTopicReader
+    from ..transports.shm.channel import ShmLink
 
 __all__ = ["Subscriber", "DeadlineMissed", "LatencyStats"]
 
@@ -110,7 +111,10 @@ class _Subscription:
         # is shared by every MQTT topic of the process, so it never waits; the oldest is dropped, counted)
         self.tcp_in = PushReader(TCPROS, self.depth or UNBOUNDED_QUEUE_DEPTH, self.inbox.wake, blocking=True,
                                  links=self._tcpros_links)
-        self.pushed: Tuple[PushReader, ...] = (self.tcp_in,)
+        # shared memory: one link thread per publisher that chose SHM for us, each waiting for room as TCPROS's
+        self.shm_in = PushReader(SHM, self.depth or UNBOUNDED_QUEUE_DEPTH, self.inbox.wake, blocking=True)
+        self.shm_links: Dict[str, "ShmLink"] = {}  # publisher URI -> link
+        self.pushed: Tuple[PushReader, ...] = (self.tcp_in, self.shm_in)
         self._pushed_dropped = 0  # drops of non-blocking pushed readers already reported in a burst
         self._extra = extra
         self.feeds: Tuple[Feed, ...] = ()
@@ -165,7 +169,13 @@ class _Subscription:
         out: List[List[Any]] = []
         for proto in self.hints.protocols:
             reader, dds = self.reader, self._dds
-            if proto == DDS and reader is not None and dds is not None:
+            if proto == SHM:
+                from ..transports import shm
+
+                if shm.unavailable_reason() is None:
+                    out.append(ShmOffer(host=shm.host_identity(), md5=self.data_class._md5sum,
+                                        type_name=self.data_class._type, qos=self.effective).to_xmlrpc())
+            elif proto == DDS and reader is not None and dds is not None:
                 out.append(DDSOffer(domain=dds.domain_id, topic=reader.dds_topic, type_name=reader.dds_type.type_name,
                                     md5=self.data_class._md5sum, qos=self.effective, reader=reader.guid,
                                     participant=dds.participant.guid, graph=self.writers.graph,
@@ -207,6 +217,70 @@ class _Subscription:
         _log.debug("micros_rt: topic %s: receiving from %s over DDS", self.topic, pub_uri)
         self.inbox.wake()
         return 1, f"Connected topic[{self.topic}] over DDS", 0
+
+    def connect_shm(self, pub_uri: str, answer: ShmAnswer) -> Tuple[int, str, int]:
+        """Open the shared-memory link to the channel the publisher made for this subscription."""
+        from ..transports.shm.channel import ShmLink
+
+        if self.closed:
+            return 0, "subscriber closed", 0
+        node = answer.node or pub_uri
+        header = {"callerid": node, "topic": self.topic, "type": self.data_class._type,
+                  "md5sum": self.data_class._md5sum, "transport": SHM}
+        conn = compat.DDSConnection(self.topic, pub_uri, "i", f"SHM connection on channel {answer.channel} from "
+                                    f"{node}", peer_guid=answer.channel, on_close=self._shm_connection_closed,
+                                    transport=SHM)
+        put: Callable[[Any, int, Any], None] = self.shm_in.put
+        if answer.latch:
+            queue_put = self.shm_in.put
+
+            def put_latched(msg: Any, source_ns: int, link: Any) -> None:
+                conn.latch = msg  # for callbacks added later (replay_latched), as rospy keeps it per connection
+                queue_put(msg, source_ns, link)
+
+            put = put_latched
+
+        def dropped(n: int) -> None:
+            self.shm_in.dropped += n
+
+        try:
+            link = ShmLink(self.topic, answer.channel, self.data_class, header=header, qos=answer.qos, put=put,
+                           on_drop=dropped, on_gone=lambda _link: self._shm_link_gone(conn))
+        except MicrosRtError as exc:
+            _log.warning("micros_rt: %s; the publisher %s is asked again", exc, pub_uri)
+            return 0, str(exc), 0
+        with self.lock:
+            old = self.shm_links.get(pub_uri)
+            self.shm_links[pub_uri] = link
+        if old is not None:
+            old.close()
+        if answer.qos is not None and (self.priority is None or answer.qos.transport_priority > self.priority):
+            self.priority = TransportPriority(answer.qos.transport_priority)
+        if not compat.add_pseudo_connection(self.topic, conn, publisher=False):
+            conn.close()
+            return 0, "subscriber closed", 0
+        _log.debug("micros_rt: topic %s: receiving from %s over shared memory", self.topic, pub_uri)
+        self.inbox.wake()
+        return 1, f"Connected topic[{self.topic}] over SHM", 0
+
+    def _shm_connection_closed(self, conn: compat.DDSConnection) -> None:
+        with self.lock:
+            link = self.shm_links.get(conn.endpoint_id)
+            if link is not None and link.channel == conn.peer_guid:
+                del self.shm_links[conn.endpoint_id]
+            else:
+                link = None
+        if link is not None:
+            link.close()
+
+    def _shm_link_gone(self, conn: compat.DDSConnection) -> None:
+        """The publisher's end went (unregistered, or its process died): drop the connection, so that rospy
+        connects again when the master names the publisher anew (a restart)."""
+        if self.closed or conn.done:
+            return
+        _log.debug("micros_rt: topic %s: SHM publisher %s is gone", self.topic, conn.endpoint_id)
+        compat.remove_pseudo_connection(self.topic, conn, publisher=False)
+        conn.close()
 
     def _follow(self, topic: str, latched: bool) -> str:
         """A reader of ``topic`` (another ROS name of this subscription's data, a relay's outside name) for
@@ -361,9 +435,11 @@ class _Subscription:
     def _deliver_pushed(self, reader: PushReader, msg: Any, info: Any) -> None:
         self.received += 1
         source_ns = info.source_timestamp or _header_stamp(msg)
-        if not self._admit_enforced(reader, source_ns or 0, None):
+        # a link that knows its publisher's QoS (shared memory's, from the answer) has its lifespan and budget
+        qos = getattr(info.publication_handle, "qos", None)
+        if not self._admit_enforced(reader, source_ns or 0, qos):
             return
-        self._deliver(msg, source_ns, 0.0)
+        self._deliver(msg, source_ns, qos.latency_budget if qos is not None else 0.0)
 
     def _deliver_dds(self, data: bytes, info: Any, state: WriterState) -> None:
         qos = state.qos
@@ -542,6 +618,10 @@ class _Subscription:
         for state in self.writers.accepted_states():
             if state.accepted is not None:
                 state.accepted.conn.close()
+        with self.lock:
+            links, self.shm_links = list(self.shm_links.values()), {}
+        for link in links:
+            link.close()
         readers, self.readers = self.readers, ()
         self.reader = self.tl_reader = None
         for reader in readers:

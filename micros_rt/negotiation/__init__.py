@@ -3,12 +3,14 @@ protocol-order loop. Pure: nothing here touches rospy or creates DDS entities
 (:mod:`micros_rt.core.rospy_compat` adapts it to rospy's ``requestTopic``)."""
 
 from .choose import Choice, NegotiatedTransport, choose_protocol, dds_transport
-from .decide import MAX_VERDICTS, PublicationFacts, Verdict, decide, remember_verdict
+from .decide import MAX_VERDICTS, PublicationFacts, Verdict, decide, decide_shm, remember_verdict
 from .hints import TransportHints
-from .messages import DDSAnswer, DDSOffer, MalformedNegotiationError, is_guid
+from .messages import DDSAnswer, DDSOffer, MalformedNegotiationError, ShmAnswer, ShmOffer, is_guid
 from .protocol import (
     DDS,
     DEFAULT_PROTOCOLS,
+    NEGOTIATED_PROTOCOLS,
+    SHM,
     MAX_FIELD_CHARS,
     MAX_PENDING_DDS_OFFERS,
     TCPROS,
@@ -19,6 +21,11 @@ from ..ratelimit import RateLimitedLog
 __all__ = [
     "DDS",
     "DEFAULT_PROTOCOLS",
+    "NEGOTIATED_PROTOCOLS",
+    "SHM",
+    "ShmAnswer",
+    "ShmOffer",
+    "decide_shm",
     "MAX_FIELD_CHARS",
     "MAX_PENDING_DDS_OFFERS",
     "MAX_VERDICTS",

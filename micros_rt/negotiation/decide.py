@@ -11,11 +11,11 @@ import collections
 from dataclasses import dataclass
 from typing import Optional
 
-from ..qos import AdvertiseQoSOptions, check_compatibility
-from .messages import DDSOffer
+from ..qos import AdvertiseQoSOptions, SubscribeQoSOptions, check_compatibility
+from .messages import DDSOffer, ShmOffer
 from .protocol import MAX_PENDING_DDS_OFFERS
 
-__all__ = ["PublicationFacts", "Verdict", "decide"]
+__all__ = ["PublicationFacts", "Verdict", "decide", "decide_shm"]
 
 
 @dataclass(frozen=True)
@@ -39,6 +39,8 @@ class Verdict:
     accepted: bool
     kind: str
     reason: str
+    #: an expected decline, logged at debug level only (SHM with a subscriber on another host)
+    quiet: bool = False
 
     def __bool__(self) -> bool:
         return self.accepted
@@ -83,6 +85,41 @@ def decide(offer: DDSOffer, facts: PublicationFacts, *, subscriber: str) -> Verd
                        f"topic {topic}: {facts.pending} DDS subscribers accepted but not yet discovered (limit "
                        f"{MAX_PENDING_DDS_OFFERS}); serving {subscriber} over TCPROS")
     return Verdict(True, "accepted", f"topic {topic}: DDS accepted for subscriber {subscriber}")
+
+
+def decide_shm(offer: ShmOffer, facts: PublicationFacts, *, host: str, unavailable: Optional[str],
+               subscriber: str) -> Verdict:
+    """Accept ``offer`` for shared memory, or say why not. ``host`` is this publisher's host identity
+    (:func:`micros_rt.transports.shm.host_identity`), ``unavailable`` why shared memory cannot be used in
+    this process (None: it can).
+
+    >>> facts = PublicationFacts("/chatter", "", None, "", "992c", AdvertiseQoSOptions(), latch=False)
+    >>> offer = ShmOffer("boot/net/mnt/1000", "992c", "std_msgs/String", SubscribeQoSOptions())
+    >>> decide_shm(offer, facts, host="boot/net/mnt/1000", unavailable=None, subscriber="/l").kind
+    'accepted'
+    >>> decide_shm(offer, facts, host="other/net/mnt/1000", unavailable=None, subscriber="/l").quiet
+    True
+    """
+    topic = facts.topic
+    if offer.host != host:
+        # a subscriber on another machine or network namespace is the normal case: no warning
+        same_machine = offer.host.split("/")[:3] == host.split("/")[:3]
+        why = ("runs as another Unix user (processes of different users cannot share iceoryx2 memory)"
+               if same_machine else "is on another host")
+        return Verdict(False, "shm-host", f"topic {topic}: subscriber {subscriber} {why}; not using shared memory",
+                       quiet=not same_machine)
+    if unavailable is not None:
+        return Verdict(False, "shm-unavailable", f"topic {topic}: subscriber {subscriber} asked for shared memory "
+                                                 f"but this publisher cannot use it: {unavailable}")
+    if offer.md5 not in ("*", facts.md5):
+        return Verdict(False, "md5", f"topic {topic}: message type mismatch with {subscriber} (md5 {offer.md5} vs "
+                                     f"{facts.md5}); not using shared memory")
+    verdict = check_compatibility(facts.options, offer.qos, topic=topic, offered_latch=facts.latch,
+                                  requested_transient_local=offer.transient_local)
+    if not verdict.compatible:
+        return Verdict(False, f"qos:{verdict.option}",
+                       f"QoS mismatch with subscriber {subscriber}, not using shared memory: {verdict.reason}")
+    return Verdict(True, "accepted", f"topic {topic}: shared memory accepted for subscriber {subscriber}")
 
 
 #: Verdicts remembered per publication (fake offers from many caller ids must not grow memory).

@@ -2,23 +2,26 @@
 
 >>> TransportHints().tcp().dds().protocols
 ('TCPROS', 'DDS')
+>>> TransportHints().protocols
+('SHM', 'DDS', 'TCPROS')
 """
 
 from __future__ import annotations
 
 from typing import Tuple
 
-from .protocol import DDS, DEFAULT_PROTOCOLS, TCPROS
+from .protocol import DDS, DEFAULT_PROTOCOLS, SHM, TCPROS
 
-__all__ = ["TransportHints", "DDS", "TCPROS", "DEFAULT_PROTOCOLS"]
+__all__ = ["TransportHints", "DDS", "SHM", "TCPROS", "DEFAULT_PROTOCOLS"]
 
 
 class TransportHints:
     """Ordered protocol preference for a subscription, built by chaining.
 
-    ``TransportHints()`` alone means the default order, DDS then TCPROS.
-    ``.dds()`` and ``.tcp()`` append in call order: ``.tcp()`` alone never uses
-    DDS; ``.tcp().dds()`` prefers TCPROS. ``.dds()`` alone connects only to
+    ``TransportHints()`` alone means the default order: shared memory (SHM) with a
+    micros_rt publisher of the same host and user, DDS, then TCPROS.
+    ``.shm()``, ``.dds()`` and ``.tcp()`` append in call order: ``.tcp()`` alone never uses
+    SHM or DDS; ``.tcp().dds()`` prefers TCPROS. ``.dds()`` alone connects only to
     publishers that can speak DDS; a stock ROS publisher is then left
     unconnected and micros_rt logs a warning saying so (as ROS 1 does when a
     subscriber asks only for UDPROS and the publisher cannot).
@@ -38,14 +41,19 @@ class TransportHints:
 
     @classmethod
     def from_names(cls, names: "Tuple[str, ...] | list[str]") -> "TransportHints":
-        """Hints offering ``names`` (``"DDS"``, ``"TCPROS"``) in that order (a YAML profile's
+        """Hints offering ``names`` (``"SHM"``, ``"DDS"``, ``"TCPROS"``) in that order (a YAML profile's
         ``transport_hints``); ValueError names an unknown one."""
         hints = cls()
         for name in names:
-            if name not in (DDS, TCPROS):
-                raise ValueError(f"unknown transport {name!r}: expected {DDS!r} or {TCPROS!r}")
+            if name not in (SHM, DDS, TCPROS):
+                raise ValueError(f"unknown transport {name!r}: expected {SHM!r}, {DDS!r} or {TCPROS!r}")
             hints = hints._with(name)
         return hints
+
+    def shm(self) -> "TransportHints":
+        """Add shared memory (iceoryx2) to the preference: used with a micros_rt publisher of the same host
+        and Unix user; any other publisher declines it and the next protocol is tried."""
+        return self._with(SHM)
 
     def dds(self) -> "TransportHints":
         """Add DDS to the preference (Cyclone DDS, with the subscription's QoS)."""
@@ -65,6 +73,10 @@ class TransportHints:
         return DDS in self.protocols
 
     @property
+    def allows_shm(self) -> bool:
+        return SHM in self.protocols
+
+    @property
     def allows_tcp(self) -> bool:
         return TCPROS in self.protocols
 
@@ -75,5 +87,5 @@ class TransportHints:
         return hash(self.protocols)
 
     def __repr__(self) -> str:
-        chain = "".join(".dds()" if p == DDS else ".tcp()" for p in self._order)
+        chain = "".join({SHM: ".shm()", DDS: ".dds()"}.get(p, ".tcp()") for p in self._order)
         return f"TransportHints(){chain}"

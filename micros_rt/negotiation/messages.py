@@ -21,9 +21,9 @@ from typing import Any, Dict, List, Mapping
 
 from ..exceptions import MicrosRtError, QoSTypeError, QoSValueError
 from ..qos import AdvertiseQoSOptions, SubscribeQoSOptions
-from .protocol import DDS, MAX_FIELD_CHARS
+from .protocol import DDS, MAX_FIELD_CHARS, SHM
 
-__all__ = ["DDSOffer", "DDSAnswer", "MalformedNegotiationError", "is_guid"]
+__all__ = ["DDSOffer", "DDSAnswer", "MalformedNegotiationError", "ShmAnswer", "ShmOffer", "is_guid"]
 
 _GUID = re.compile(r"^[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}$")
 _INT32 = (-(2 ** 31), 2 ** 31 - 1)
@@ -177,3 +177,61 @@ class DDSAnswer:
         return cls(writer=_str(d, "writer", guid=True), participant=_str(d, "participant", guid=True),
                    latch=_bool(d, "latch"), qos=qos, node=_str(d, "node", required=False),
                    via=_str(d, "via", required=False), topic=_topic_name(d, "topic"))
+
+
+#: A shared-memory channel's name as a publisher makes them (:mod:`micros_rt.transports.shm`).
+_CHANNEL = re.compile(r"^micros_rt/[0-9a-f]{8,64}$")
+
+
+@dataclass(frozen=True)
+class ShmOffer:
+    """What a micros_rt subscriber offers in its ``['SHM', {...}]`` protocol entry: where it runs (``host``:
+    the machine's boot id, network and mount namespaces and Unix user, so two network-namespace "hosts" of
+    one machine never share memory) and what it reads."""
+
+    host: str
+    md5: str
+    type_name: str        # the ROS type, e.g. std_msgs/String
+    qos: SubscribeQoSOptions
+    #: the subscriber wants the latched message
+    transient_local: bool = False
+
+    def to_xmlrpc(self) -> List[Any]:
+        return [SHM, {"host": self.host, "md5": self.md5, "type": self.type_name, "qos": self.qos.to_dict(),
+                      "transient_local": self.transient_local}]
+
+    @classmethod
+    def from_xmlrpc(cls, params: object, *, source: str = "a subscriber") -> "ShmOffer":
+        d = _mapping(params, "SHM offer")
+        try:
+            qos = SubscribeQoSOptions.from_dict(_qos_dict(d), source=source)
+        except (QoSValueError, QoSTypeError) as exc:
+            raise MalformedNegotiationError("qos", str(exc)[:300]) from exc
+        return cls(host=_str(d, "host"), md5=_str(d, "md5"), type_name=_str(d, "type"), qos=qos,
+                   transient_local=_bool(d, "transient_local"))
+
+
+@dataclass(frozen=True)
+class ShmAnswer:
+    """What a micros_rt publisher answers when it accepts SHM: ``['SHM', {...}]``, the channel it made for
+    this subscriber (its own shared-memory service: no other subscriber reads it, so nothing arrives twice)."""
+
+    channel: str
+    latch: bool
+    qos: AdvertiseQoSOptions
+    node: str = ""
+
+    def to_xmlrpc(self) -> List[Any]:
+        return [SHM, {"channel": self.channel, "latch": self.latch, "qos": self.qos.to_dict(), "node": self.node}]
+
+    @classmethod
+    def from_xmlrpc(cls, params: object, *, source: str = "a publisher") -> "ShmAnswer":
+        d = _mapping(params, "SHM answer")
+        try:
+            qos = AdvertiseQoSOptions.from_dict(_qos_dict(d), source=source)
+        except (QoSValueError, QoSTypeError) as exc:
+            raise MalformedNegotiationError("qos", str(exc)[:300]) from exc
+        channel = _str(d, "channel")
+        if not _CHANNEL.fullmatch(channel):
+            raise MalformedNegotiationError("channel", f"{_short(channel)} is not a micros_rt shared-memory channel")
+        return cls(channel=channel, latch=_bool(d, "latch"), qos=qos, node=_str(d, "node", required=False))

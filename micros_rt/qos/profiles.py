@@ -50,7 +50,7 @@ from typing import Any, Mapping, TypeVar, Union
 import yaml
 
 from micros_rt.exceptions import MicrosRtError, ProfileError, UnsupportedQoSError
-from micros_rt.negotiation.protocol import DDS, TCPROS
+from micros_rt.negotiation.protocol import DDS, SHM, TCPROS
 from micros_rt.qos.links import LinkSpec, LinkSpecError, parse_link
 from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions
 from micros_rt.qos.topic_rules import TopicPattern, best_match
@@ -300,13 +300,13 @@ def _take_transport_hints(node: yaml.Node, source: str, path: str, *, publisher:
         return None
     del node.value[i]
     where, key = _where(source, value_node), f"{path}.transport_hints"
-    allowed = f"a list of {DDS!r} and {TCPROS!r} in the order preferred, e.g. [{TCPROS}, {DDS}]"
+    allowed = f"a list of {SHM!r}, {DDS!r} and {TCPROS!r} in the order preferred, e.g. [{TCPROS}, {DDS}]"
     if not isinstance(value_node, yaml.SequenceNode) or not value_node.value:
         raise ProfileError(f"{where}: {key}: expected {allowed}, got {_kind(value_node)}")
     names: list[str] = []
     for item in value_node.value:
         name = str(item.value).upper() if isinstance(item, yaml.ScalarNode) else ""
-        if name not in (DDS, TCPROS):
+        if name not in (SHM, DDS, TCPROS):
             shown = item.value if isinstance(item, yaml.ScalarNode) else _kind(item)
             raise ProfileError(f"{_where(source, item)}: {key}: {shown!r} is not a transport; expected {allowed}")
         if name in names:

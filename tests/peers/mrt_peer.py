@@ -155,7 +155,7 @@ def main() -> int:
     ap.add_argument("--queue-size", type=int, default=100)
     ap.add_argument("--latch", action="store_true")
     ap.add_argument("--qos", default=None, help="JSON dict of Advertise/SubscribeQoSOptions fields")
-    ap.add_argument("--hints", default=None, help="comma list: dds,tcp")
+    ap.add_argument("--hints", default=None, help="comma list: shm,dds,tcp")
     ap.add_argument("--prefix", default="hello")
     ap.add_argument("--stamp", action="store_true", help="stamp Header with the wall clock")
     ap.add_argument("--wait-subscribers", type=int, default=0)
@@ -265,7 +265,7 @@ def main() -> int:
         if args.hints:
             hints = micros_rt.TransportHints()
             for h in args.hints.split(","):
-                hints = hints.dds() if h.strip() == "dds" else hints.tcp()
+                hints = {"shm": hints.shm, "dds": hints.dds}.get(h.strip(), hints.tcp)()
 
         def on_deadline(info: Any) -> None:
             emit("deadline", silent_for=info.silent_for, total=info.total_count)

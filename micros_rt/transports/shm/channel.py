@@ -1,0 +1,339 @@
+"""Shared-memory channels (iceoryx2): one per publisher and subscriber that negotiated SHM.
+
+A channel is an iceoryx2 publish-subscribe service with one publisher port and one subscriber port, and an
+event service beside it that wakes the subscriber. One channel per pair, not one service per topic:
+
+- nothing arrives twice: a subscriber reads only the publishers that chose SHM for it (over a topic-wide
+  service it would also read those that serve it over DDS or TCPROS);
+- back-pressure is per subscriber: iceoryx2's blocking send holds Python's GIL (measured: a sender blocked
+  on a full subscriber stopped the whole process, the subscriber's own thread included), so a lossless
+  channel refuses when full (``DiscardData``) and :class:`ShmWriter` retries with
+  :func:`~micros_rt.transports.base.send_with_backoff`, which sleeps without the GIL; over a topic-wide
+  service a retry would send again to the subscribers that already took the sample;
+- QoS is per pair: the first creator of an iceoryx2 service fixes its limits.
+
+Each sample is ``<seq u64><source time ns u64>`` then the ROS 1 serialization of the message. The sequence
+number counts per channel, so a subscriber counts what a KEEP_LAST channel overwrote (``queue_size``: the
+newest are kept, as ROS does) as dropped.
+"""
+
+from __future__ import annotations
+
+import binascii
+import ctypes
+import io
+import itertools
+import os
+import struct
+import threading
+import time
+from typing import Any, Callable, Dict, Optional, Tuple, Type
+
+import genpy
+
+from ...exceptions import PublishTimeoutError, TransportError
+from ...log import nonblocking_logger
+from ...negotiation.protocol import SHM
+from ..base import send_with_backoff
+from .host import cleanup_dead_nodes, iceoryx2, shm_node
+
+__all__ = ["ShmChannel", "ShmLink", "ShmWriter", "TRANSIT_DEPTH", "PUBLISH_BLOCK_TIMEOUT"]
+
+_log = nonblocking_logger("rosout.micros_rt.shm")
+
+_HEAD = struct.Struct("<QQ")
+#: Samples a channel holds between the publisher and the subscriber's link thread, which moves them at once
+#: into the subscription's queue (``queue_size`` applies there). Each holds the largest message sent so far,
+#: so this bounds the shared memory a channel of 6 MB images takes.
+TRANSIT_DEPTH = 16
+#: How long a lossless (``queue_size=None``) publish() waits for a subscriber that does not keep up.
+PUBLISH_BLOCK_TIMEOUT = 10.0
+#: The link thread's wait between looks at whether its publisher is still there.
+_POLL = 0.5
+
+_ids = itertools.count(1)
+
+
+def _channel_name() -> str:
+    return f"micros_rt/{os.getpid():08x}{next(_ids):08x}{binascii.hexlify(os.urandom(4)).decode()}"
+
+
+def _services(name: str, *, create: bool, lossless: bool = False, latch: bool = False) -> Tuple[Any, Any]:
+    iox2 = iceoryx2()
+    node = shm_node()
+    service_name = iox2.ServiceName.new(name)
+    pubsub = node.service_builder(service_name).publish_subscribe(iox2.Slice[ctypes.c_uint8])
+    events = node.service_builder(service_name).event()
+    if not create:
+        return pubsub.open(), events.open()
+    pubsub = (pubsub.max_publishers(1).max_subscribers(1).max_nodes(4)
+              .subscriber_max_buffer_size(TRANSIT_DEPTH).history_size(1 if latch else 0)
+              .enable_safe_overflow(not lossless))
+    return pubsub.create(), events.create()
+
+
+class ShmChannel:
+    """The publisher's end of one channel."""
+
+    def __init__(self, subscriber: str, *, lossless: bool, latch: bool, initial_len: int) -> None:
+        iox2 = iceoryx2()
+        self.subscriber = subscriber
+        self.name = _channel_name()
+        self.closed = False
+        self.seen = False           # the subscriber's port attached at least once
+        self.created = time.monotonic()
+        self._service, events = _services(self.name, create=True, lossless=lossless, latch=latch)
+        self._publisher = (self._service.publisher_builder().initial_max_slice_len(max(initial_len, 64))
+                           .allocation_strategy(iox2.AllocationStrategy.PowerOfTwo)
+                           .backpressure_strategy(iox2.BackpressureStrategy.DiscardData).create())
+        self._events = events
+        self._notifier = events.notifier_builder().create()
+        self._seq = 0
+
+    def attached(self) -> bool:
+        """The subscriber's port is there now (a SIGKILLed one only after its node was cleaned up)."""
+        attached = bool(self._service.dynamic_config.number_of_subscribers > 0)
+        if attached:
+            self.seen = True
+        return attached
+
+    def try_send(self, body: bytes) -> bool:
+        """Put one message into the channel; False when it was not taken (a lossless channel full, or no
+        subscriber attached: then a latched channel keeps it as history)."""
+        n = len(body)
+        sample = self._publisher.loan_slice_uninit(n + 16)
+        ptr = sample.payload_ptr
+        seq = self._seq + 1
+        ctypes.memmove(ptr, _HEAD.pack(seq, time.time_ns()), 16)
+        ctypes.memmove(ptr + 16, body, n)
+        if not sample.assume_init().send():
+            return False
+        self._seq = seq
+        self._notifier.notify()
+        return True
+
+    def update_connections(self) -> None:
+        """Hand a newly attached subscriber the history (a latched topic's last message)."""
+        self._publisher.update_connections()
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        for port in (self._notifier, self._publisher):
+            try:
+                port.delete()
+            except Exception:
+                pass
+        self._service = self._events = None
+
+
+class ShmWriter:
+    """A publication's shared-memory writer: its channels, one per subscriber that chose SHM (a
+    :class:`~micros_rt.transports.base.TransportWriter`)."""
+
+    protocol = SHM
+
+    def __init__(self, topic: str, *, lossless: bool, latch: bool) -> None:
+        self.topic = topic
+        self.lossless = lossless
+        self.latch = latch
+        self.closed = False
+        #: why this publication stopped offering SHM (a channel could not be made or written), or None
+        self.failed: Optional[str] = None
+        self.dropped = 0
+        self._lock = threading.Lock()
+        self._channels: Dict[str, ShmChannel] = {}
+        self._active: Tuple[ShmChannel, ...] = ()
+        self._last: Optional[bytes] = None
+        self._largest = 64
+
+    # -- channels (negotiation and housekeeping threads) -------------------------------------------------
+    def open_channel(self, subscriber: str) -> ShmChannel:
+        """A new channel for ``subscriber`` (replacing its old one); raises TransportError in words."""
+        try:
+            channel = ShmChannel(subscriber, lossless=self.lossless, latch=self.latch, initial_len=self._largest)
+        except Exception as exc:
+            raise TransportError(f"topic {self.topic}: cannot create a shared-memory channel ({exc}); is /dev/shm "
+                                 f"full, or iceoryx2's limits reached?") from exc
+        last = self._last
+        if last is not None:
+            channel.try_send(last)  # kept as history until the subscriber attaches
+        with self._lock:
+            old = self._channels.get(subscriber)
+            self._channels[subscriber] = channel
+            self._active = tuple(self._channels.values())
+        if old is not None:
+            old.close()
+        return channel
+
+    def close_channel(self, channel: ShmChannel) -> None:
+        with self._lock:
+            if self._channels.get(channel.subscriber) is channel:
+                del self._channels[channel.subscriber]
+                self._active = tuple(self._channels.values())
+        channel.close()
+
+    def channels(self) -> Tuple[ShmChannel, ...]:
+        return self._active
+
+    def attached_count(self) -> int:
+        return sum(1 for ch in self._active if ch.seen or ch.attached())
+
+    def housekeeping(self, now: float, gone: Callable[[ShmChannel], None]) -> None:
+        """Close channels whose subscriber left (or never attached within 10 s): ``gone(channel)`` first."""
+        if not self._active:
+            return
+        cleanup_dead_nodes()
+        for ch in self._active:
+            if ch.attached():
+                if self.latch:
+                    ch.update_connections()
+                continue
+            if ch.seen or now - ch.created > 10.0:
+                gone(ch)
+                self.close_channel(ch)
+
+    # -- data (the publishing thread) --------------------------------------------------------------------
+    def prepare(self, msg: Any) -> Optional[bytes]:
+        if not self._active and not self.latch:
+            return None
+        buff = io.BytesIO()
+        msg.serialize(buff)
+        return buff.getvalue()
+
+    def send(self, body: bytes) -> None:
+        if self.latch:
+            self._last = body
+        if len(body) + 16 > self._largest:
+            self._largest = len(body) + 16
+        for ch in self._active:
+            try:
+                if ch.try_send(body):
+                    continue
+                if not ch.attached():
+                    continue  # not attached yet (or gone): housekeeping decides
+                if not self.lossless:
+                    continue
+                if not send_with_backoff(ch.try_send, body, PUBLISH_BLOCK_TIMEOUT, lambda: ch.closed or self.closed):
+                    if ch.closed or self.closed:
+                        continue
+                    raise PublishTimeoutError(
+                        f"topic {self.topic}: publish() stayed blocked for {PUBLISH_BLOCK_TIMEOUT:.1f} s because "
+                        f"shared-memory subscriber {ch.subscriber} does not keep up (queue_size=None never drops)")
+            except PublishTimeoutError:
+                raise
+            except Exception as exc:
+                if ch.closed or self.closed:
+                    continue
+                self.dropped += 1
+                self._fail(ch, exc)
+
+    def _fail(self, ch: ShmChannel, exc: Exception) -> None:
+        """A channel that cannot be written: close it (its subscriber sees the link go and connects again,
+        and this publication then declines SHM, so that subscriber gets DDS or TCPROS)."""
+        self.failed = (f"writing shared memory failed ({type(exc).__name__}: {exc}); /dev/shm may be full "
+                       f"(df -h /dev/shm)")
+        _log.warning("micros_rt: topic %s: %s; subscriber %s is moved off shared memory", self.topic, self.failed,
+                     ch.subscriber)
+        self.close_channel(ch)
+
+    def close(self) -> None:
+        self.closed = True
+        with self._lock:
+            channels, self._channels, self._active = list(self._channels.values()), {}, ()
+        for ch in channels:
+            ch.close()
+
+
+class ShmLink:
+    """The subscriber's end of one channel: a thread of its own (as rospy's receive thread per TCPROS
+    connection) that decodes each message and hands it to ``put(msg, source_ns, link)``, which may wait for
+    room in the subscription's queue: back-pressure to this publisher only."""
+
+    def __init__(self, topic: str, channel: str, data_class: Type[genpy.Message], *, header: Dict[str, str],
+                 qos: Any, put: Callable[[Any, int, Any], None], on_drop: Callable[[int], None],
+                 on_gone: Callable[["ShmLink"], None]) -> None:
+        self.topic = topic
+        self.channel = channel
+        self.qos = qos                # the publisher's QoS (lifespan, latency budget), from its answer
+        self.closed = False
+        self.malformed = 0
+        self._data_class = data_class
+        self._header = header
+        self._put = put
+        self._on_drop = on_drop
+        self._on_gone = on_gone
+        try:
+            self._service, events = _services(channel, create=False)
+            self._subscriber = self._service.subscriber_builder().create()
+            self._listener = events.listener_builder().create()
+        except Exception as exc:
+            raise TransportError(f"topic {topic}: cannot open shared-memory channel {channel} ({exc})") from exc
+        self._events = events
+        self._thread = threading.Thread(target=self._run, name=f"micros_rt SHM {topic}", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        iox2 = iceoryx2()
+        receive = self._subscriber.receive
+        wait = self._listener.timed_wait
+        timeout = iox2.Duration.from_secs_f64(_POLL) if hasattr(iox2.Duration, "from_secs_f64") \
+            else iox2.Duration.from_millis(int(_POLL * 1000))
+        unpack = _HEAD.unpack_from
+        data_class, header, put = self._data_class, self._header, self._put
+        last = 0
+        try:
+            while not self.closed:
+                sample = receive()
+                if sample is None:
+                    if not wait(timeout) and not self.closed and self._publisher_gone():
+                        break
+                    continue
+                view = sample.payload().as_memory_view()
+                seq, source_ns = unpack(view, 0)
+                body = bytes(view[16:])
+                del view
+                sample.delete()
+                if last and seq > last + 1:
+                    self._on_drop(seq - last - 1)  # overwritten in a KEEP_LAST channel: counted, never silent
+                last = seq
+                try:
+                    msg = data_class()
+                    msg.deserialize(body)
+                except (genpy.DeserializationError, struct.error, ValueError, TypeError, UnicodeError) as exc:
+                    self._malformed(exc)
+                    continue
+                msg._connection_header = header
+                put(msg, source_ns, self)
+        except Exception as exc:
+            if not self.closed:
+                _log.warning("micros_rt: topic %s: shared-memory link %s failed (%s); connecting again",
+                             self.topic, self.channel, exc)
+        finally:
+            if not self.closed:
+                self._on_gone(self)
+
+    def _publisher_gone(self) -> bool:
+        cleanup_dead_nodes()
+        return bool(self._service.dynamic_config.number_of_publishers == 0)
+
+    def _malformed(self, exc: Exception) -> None:
+        self.malformed += 1
+        if self.malformed == 1:
+            _log.warning("micros_rt: topic %s: dropped a malformed shared-memory sample from %s (%s); is its type "
+                         "really %s? Further ones are counted, not logged", self.topic, self._header.get("callerid"),
+                         str(exc)[:200], self._data_class._type)
+
+    def close(self) -> None:
+        """Stop the thread (within its poll) and release the ports; harmless twice."""
+        if self.closed:
+            return
+        self.closed = True
+        if threading.current_thread() is not self._thread:
+            self._thread.join(_POLL * 4)
+        for port in (self._listener, self._subscriber):
+            try:
+                port.delete()
+            except Exception:
+                pass
