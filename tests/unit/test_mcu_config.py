@@ -46,12 +46,12 @@ def test_defaults() -> None:
     assert cfg.microcontroller.topic_port == 20000 and cfg.microcontroller.service_port == 20001
     assert cfg.bind.address == "0.0.0.0" and cfg.bind.topic_port == 20000 and cfg.mtu == 1472
     assert cfg.to_microcontroller == () and cfg.stats_period == 1.0
-    assert cfg.wire_form is WireForm.CVRA   # CVRA's [name, {fields}] unless the board wants the README's form
+    assert cfg.wire_form is WireForm.FINAL  # CVRA's final [name, args] unless the board speaks an older era
 
 
 def test_wire_form_per_board() -> None:
     assert parse_config("microcontroller: {address: 10.0.0.7}\nwire_form: readme").wire_form is WireForm.README
-    assert parse_config("microcontroller: {address: 10.0.0.7}\nwire_form: cvra").wire_form is WireForm.CVRA
+    assert parse_config("microcontroller: {address: 10.0.0.7}\nwire_form: cvra").wire_form is WireForm.FINAL
 
 
 def test_qos_on_entries() -> None:
@@ -99,7 +99,7 @@ BAD = [
      "mcu.yaml:3: to_microcontroller[0].topic: 'bad name' is not a legal ROS name"),
     ("microcontroller: {address: 10.0.0.7}\nbind: {address: '::1'}\n", "must both be IPv4 or both IPv6"),
     ("microcontroller: {address: 10.0.0.7}\nwire_form: array\n",
-     "mcu.yaml:2: wire_form: 'array' is invalid: expected cvra (write [name, {fields}]"),
+     "mcu.yaml:2: wire_form: 'array' is invalid: expected the form the board's firmware speaks -- final"),
     ("microcontroller: {address: 10.0.0.7}\nto_microcontroller:\n  - {topic: /cmd, type: geometry_msgs/Twist,"
      " qos: {data_centric_update: true}}\n", "mcu.yaml:3: to_microcontroller[0].qos.data_centric_update: does not"),
 ]

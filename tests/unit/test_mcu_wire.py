@@ -48,8 +48,12 @@ def twist() -> Twist:
 def test_twist_datagram_is_name_then_map_of_nested_maps() -> None:
     readme = wire.WireForm.README
     assert wire.encode_datagram("cmd_vel", wire.codec_for(Twist).to_wire(twist()), form=readme) == TWIST_DATAGRAM
-    # the default (CVRA's form) is the same name and map inside one array of two
-    assert wire.encode_datagram("cmd_vel", wire.codec_for(Twist).to_wire(twist())) == b"\x92" + TWIST_DATAGRAM
+    # the map form is the same name and map inside one array of two
+    assert wire.encode_datagram("cmd_vel", wire.codec_for(Twist).to_wire(twist()), form=wire.WireForm.MAP) \
+        == b"\x92" + TWIST_DATAGRAM
+    # the default (CVRA's final form): [name, [linear, angular]], nested messages as arrays in definition order
+    assert wire.encode_datagram("cmd_vel", wire.codec_for(Twist).to_wire(twist())) == bytes.fromhex(
+        "92" "a7636d645f76656c" "92" "93" "cb3ff8000000000000" f"{F0}{F0}" "93" f"{F0}{F0}" "cbbfe0000000000000")
 
 
 def test_time_is_secs_nsecs_array() -> None:
@@ -57,17 +61,20 @@ def test_time_is_secs_nsecs_array() -> None:
     assert wire.encode_datagram("hdr", wire.codec_for(Header).to_wire(msg), form=wire.WireForm.README) \
         == HEADER_DATAGRAM
     name, body = wire.split_datagram(HEADER_DATAGRAM)
-    assert name == "hdr" and wire.codec_for(Header).from_wire(body) == msg
+    assert name == "hdr" and wire.codec_for(Header).from_args(body) == msg
 
 
 def test_negative_duration_and_uint8_array_as_bin() -> None:
     dur = wire.encode_datagram("d", wire.codec_for(Duration).to_wire(Duration(data=genpy.Duration(-1, 5))))
-    assert dur == bytes.fromhex("92" "a164" "81" "a464617461" "92ff05")
+    assert dur == bytes.fromhex("92" "a164" "92ff05")   # one field: its value bare
     arr = UInt8MultiArray(data=b"\x01\x02\x03")
-    got = wire.encode_datagram("u", wire.codec_for(UInt8MultiArray).to_wire(arr))
+    got = wire.encode_datagram("u", wire.codec_for(UInt8MultiArray).to_wire(arr), form=wire.WireForm.MAP)
     assert got == bytes.fromhex("92" "a175" "82" "a66c61796f7574" "82" "a364696d" "90" "ab646174615f6f6666736574" "00"
                                 "a464617461" "c403010203")
-    assert wire.codec_for(UInt8MultiArray).from_wire(wire.split_datagram(got)[1]).data == b"\x01\x02\x03"
+    assert wire.codec_for(UInt8MultiArray).from_args(wire.split_datagram(got)[1]).data == b"\x01\x02\x03"
+    final = wire.encode_datagram("u", wire.codec_for(UInt8MultiArray).to_wire(arr))
+    assert final == bytes.fromhex("92" "a175" "92" "92" "90" "00" "c403010203")
+    assert wire.codec_for(UInt8MultiArray).from_args(wire.split_datagram(final)[1]) == arr
 
 
 def test_array_form_is_accepted_with_nested_maps_or_arrays() -> None:
@@ -76,7 +83,7 @@ def test_array_form_is_accepted_with_nested_maps_or_arrays() -> None:
     cvra = msgpack.packb(["cmd_vel", {"linear": {"x": 1.5, "y": 0, "z": 0}, "angular": {"x": 0, "y": 0, "z": -0.5}}])
     for data in (as_arrays, as_maps, cvra, TWIST_DATAGRAM):
         name, body = wire.split_datagram(data)
-        assert name == "cmd_vel" and wire.codec_for(Twist).from_wire(body) == twist()
+        assert name == "cmd_vel" and wire.codec_for(Twist).from_args(body) == twist()
 
 
 def test_map_form_round_trip_of_a_full_imu() -> None:
@@ -86,9 +93,10 @@ def test_map_form_round_trip_of_a_full_imu() -> None:
     msg.orientation.w = 1.0
     msg.orientation_covariance = [0.01 * i for i in range(9)]
     msg.linear_acceleration.z = 9.81
-    data = wire.encode_datagram("imu", wire.codec_for(Imu).to_wire(msg))
-    name, body = wire.split_datagram(data)
-    assert name == "imu" and wire.codec_for(Imu).from_wire(body) == msg
+    for form in wire.WireForm:
+        data = wire.encode_datagram("imu", wire.codec_for(Imu).to_wire(msg), form=form)
+        name, body = wire.split_datagram(data)
+        assert name == "imu" and wire.codec_for(Imu).from_args(body) == msg, form
 
 
 @pytest.mark.parametrize("data, kind", [
@@ -96,7 +104,7 @@ def test_map_form_round_trip_of_a_full_imu() -> None:
     (b"\xa3im", "not_msgpack"),                                         # truncated string
     (b"", "not_msgpack"),
     (msgpack.packb(42), "bad_shape"),
-    (msgpack.packb("imu") + msgpack.packb([1, 2]), "bad_shape"),        # name then an array
+    (msgpack.packb(1) + msgpack.packb({}), "bad_shape"),                # a number then a map
     (msgpack.packb("a") + msgpack.packb({}) + msgpack.packb(1), "bad_shape"),
 ])
 def test_malformed_datagrams_are_refused_by_kind(data: bytes, kind: str) -> None:
@@ -158,16 +166,24 @@ def test_serial_datagram_escapes_payload_and_crc() -> None:
 def test_service_request_is_framed_name_and_params() -> None:
     req = SetBoolRequest(data=True)
     fields = wire.codec_for(SetBool._request_class).to_wire(req)
-    readme = wire.encode_request("set_mode", fields, form=wire.WireForm.README)
-    assert readme == bytes.fromhex("92" "a87365745f6d6f6465" "c3" "b3779734" "c0")
-    assert wire.decode_request(readme[:-1]) == ("set_mode", [True])
+    mid = wire.encode_request("set_mode", fields, form=wire.WireForm.MID2015)
+    assert mid == bytes.fromhex("92" "a87365745f6d6f6465" "c3" "b3779734" "c0")
+    assert wire.encode_request("set_mode", fields) == mid     # final, one field: the same bytes
+    assert wire.decode_request(mid[:-1]) == ("set_mode", [True])
     assert wire.codec_for(SetBool._request_class).from_request([True]) == req
+    readme = wire.encode_request("set_mode", fields, form=wire.WireForm.README)  # two objects in one frame
+    assert readme == bytes.fromhex("a87365745f6d6f6465" "81a464617461c3" "b308dbdced" "c0")
+    assert wire.decode_request(readme[:-1]) == ("set_mode", [{"data": True}])
 
 
 def test_service_response_is_a_plain_map() -> None:
-    data = wire.encode_response(wire.codec_for(TriggerResponse).to_wire(TriggerResponse(True, "ok")))
+    fields = wire.codec_for(TriggerResponse).to_wire(TriggerResponse(True, "ok"))
+    data = wire.encode_response(fields, form=wire.WireForm.MAP)
     assert data == bytes.fromhex("82" "a773756363657373" "c3" "a76d657373616765" "a26f6b")
-    assert wire.codec_for(TriggerResponse).from_wire(wire.decode_response(data)) == TriggerResponse(True, "ok")
+    assert wire.codec_for(TriggerResponse).from_answer(wire.decode_response(data)).response == TriggerResponse(True, "ok")
+    final = wire.encode_response(fields)            # as CVRA's handlers answer: the fields as an array
+    assert final == bytes.fromhex("92" "c3" "a26f6b")
+    assert wire.codec_for(TriggerResponse).from_answer(wire.decode_response(final)).response == TriggerResponse(True, "ok")
 
 
 @pytest.mark.parametrize("body, kind", [
@@ -211,7 +227,7 @@ def test_fuzzed_datagrams_and_frames_only_ever_raise_wire_error() -> None:
                 request.from_request(params)
             else:
                 name, body = wire.split_datagram(bytes(data))
-                imu.from_wire(body)
+                imu.from_args(body)
         except WireError as exc:
             kinds[exc.kind] = kinds.get(exc.kind, 0) + 1
     assert {"not_msgpack", "bad_shape", "bad_crc"} <= set(kinds)
@@ -271,41 +287,43 @@ def cvra_decode_call(frame: bytes) -> tuple[Any, Any]:
 def test_cvra_topic_datagrams_read_as_their_messages() -> None:
     from std_msgs.msg import Empty, Float32, Float64
     name, body = wire.split_datagram(CVRA_CHATTER)      # read as the positional form before: "should be a string"
-    assert (name, wire.codec_for(String).from_wire(body)) == ("chatter", String(data="hi"))
+    assert (name, wire.codec_for(String).from_args(body)) == ("chatter", String(data="hi"))
     name, body = wire.split_datagram(CVRA_SPEED_01)     # float32 on the wire, for a float64 field too
-    assert wire.codec_for(Float64).from_wire(body).data == pytest.approx(0.1, abs=1e-8)
-    assert wire.codec_for(Float32).from_wire(body).data == pytest.approx(0.1, abs=1e-8)
+    assert wire.codec_for(Float64).from_args(body).data == pytest.approx(0.1, abs=1e-8)
+    assert wire.codec_for(Float32).from_args(body).data == pytest.approx(0.1, abs=1e-8)
     name, body = wire.split_datagram(CVRA_TWIST)
-    assert (name, wire.codec_for(Twist).from_wire(body)) == ("cmd_vel", twist())
-    assert wire.split_datagram(CVRA_NO_ARGS) == ("foo", {})   # no arguments: an empty message
-    assert wire.codec_for(Empty).from_wire(wire.split_datagram(CVRA_NO_ARGS)[1]) == Empty()
+    assert (name, wire.codec_for(Twist).from_args(body)) == ("cmd_vel", twist())
+    assert wire.split_datagram(CVRA_NO_ARGS) == ("foo", [None])   # no arguments: an empty message
+    assert wire.codec_for(Empty).from_args(wire.split_datagram(CVRA_NO_ARGS)[1]) == Empty()
     assert wire.split_datagram(CVRA_POSITIONAL_ARGS) == ("foo", [[1, 2, 3]])  # one positional field, an array
 
 
 def test_written_topic_datagrams_are_cvra_bytes_and_read_by_cvra() -> None:
     from std_msgs.msg import Float32, Float64
-    assert wire.encode_datagram("chatter", wire.codec_for(String).to_wire(String(data="hi"))) == CVRA_CHATTER
+    m = wire.WireForm.MAP
+    assert wire.encode_datagram("chatter", wire.codec_for(String).to_wire(String(data="hi")), form=m) == CVRA_CHATTER
     # a float32 field is written as MessagePack float32, as CVRA's use_single_float=True does
-    assert wire.encode_datagram("speed", wire.codec_for(Float32).to_wire(Float32(data=1.5))) == CVRA_SPEED
-    assert wire.encode_datagram("speed", wire.codec_for(Float32).to_wire(Float32(data=0.1))) == CVRA_SPEED_01
+    assert wire.encode_datagram("speed", wire.codec_for(Float32).to_wire(Float32(data=1.5)), form=m) == CVRA_SPEED
+    assert wire.encode_datagram("speed", wire.codec_for(Float32).to_wire(Float32(data=0.1)), form=m) == CVRA_SPEED_01
     # a float64 field stays float64 (CVRA's decoder reads either)
-    f64 = wire.encode_datagram("speed", wire.codec_for(Float64).to_wire(Float64(data=0.1)))
+    f64 = wire.encode_datagram("speed", wire.codec_for(Float64).to_wire(Float64(data=0.1)), form=m)
     assert f64 == bytes.fromhex("92" "a57370656564" "81" "a464617461" "cb3fb999999999999a")
     assert cvra_decode(f64) == ("speed", {"data": 0.1})
     # CVRA's decoder read the README form as name 'c', args 'h'; the default form it reads as sent
     readme = wire.encode_datagram("chatter", {"data": "hi"}, form=wire.WireForm.README)
     assert cvra_decode(readme) == ("c", "h")
-    assert cvra_decode(wire.encode_datagram("chatter", {"data": "hi"})) == ("chatter", {"data": "hi"})
+    assert cvra_decode(wire.encode_datagram("chatter", {"data": "hi"}, form=m)) == ("chatter", {"data": "hi"})
+    assert cvra_decode(wire.encode_datagram("chatter", {"data": "hi"})) == ("chatter", "hi")   # final: bare
 
 
 def test_float32_fields_are_float32_also_in_arrays_and_nested() -> None:
     from sensor_msgs.msg import LaserScan
     scan = LaserScan(angle_min=-1.5, ranges=[0.5, 2.0], intensities=[])
-    data = wire.encode_datagram("scan", wire.codec_for(LaserScan).to_wire(scan))
+    data = wire.encode_datagram("scan", wire.codec_for(LaserScan).to_wire(scan), form=wire.WireForm.MAP)
     assert bytes.fromhex("a9616e676c655f6d696e" "cabfc00000") in data        # angle_min: float32 -1.5
     assert bytes.fromhex("a672616e676573" "92" "ca3f000000" "ca40000000") in data  # ranges: [0.5, 2.0] as float32
     assert b"\xcb" not in data                                             # no float64 anywhere
-    assert wire.codec_for(LaserScan).from_wire(wire.split_datagram(data)[1]) == scan
+    assert wire.codec_for(LaserScan).from_args(wire.split_datagram(data)[1]) == scan
     from std_msgs.msg import Float32
     with pytest.raises(genpy.SerializationError, match="float32's range"):
         wire.codec_for(Float32).to_wire(Float32(data=1e40))
@@ -328,16 +346,18 @@ def test_cvra_service_calls_read_as_requests() -> None:
 def test_requests_in_both_forms_with_several_and_one_nested_field() -> None:
     logger = wire.codec_for(roslib.message.get_service_class("roscpp/SetLoggerLevel")._request_class)
     want = logger.data_class(logger="ros", level="debug")
-    cvra_map = wire.decode_request(wire.encode_request("lvl", {"logger": "ros", "level": "debug"})[:-1])[1]
+    cvra_map = wire.decode_request(wire.encode_request("lvl", {"logger": "ros", "level": "debug"},
+                                                       form=wire.WireForm.MAP)[:-1])[1]
     cvra_list = [["ros", "debug"]]                                  # encode_call("lvl", ["ros", "debug"])
+    mid = wire.decode_request(wire.encode_request("lvl", logger.to_wire(want), form=wire.WireForm.MID2015)[:-1])[1]
+    assert mid == ["ros", "debug"]
     readme = wire.decode_request(wire.encode_request("lvl", logger.to_wire(want), form=wire.WireForm.README)[:-1])[1]
-    assert readme == ["ros", "debug"]
-    for rest in (cvra_map, cvra_list, readme):
+    assert readme == [{"logger": "ros", "level": "debug"}]
+    for rest in (cvra_map, cvra_list, mid, readme):
         assert logger.from_request(rest) == want
-    # CVRA's call written by default: [name, {fields}], which CVRA's decode_call gives its handler as one map
-    assert cvra_decode_call(wire.encode_request("lvl", logger.to_wire(want))) == ("lvl", {"logger": "ros",
-                                                                                            "level": "debug"})
-    assert cvra_decode_call(wire.encode_request("reset", {})) == ("reset", {})
+    # CVRA's final call written by default: [name, [fields...]], which CVRA's decode_call gives its handler as a list
+    assert cvra_decode_call(wire.encode_request("lvl", logger.to_wire(want))) == ("lvl", ["ros", "debug"])
+    assert cvra_decode_call(wire.encode_request("reset", {})) == ("reset", None)
     # one field that is a message: CVRA's {camera_info: {...}} and the README's [name, {...}] both read
     cam_class = roslib.message.get_service_class("sensor_msgs/SetCameraInfo")._request_class
     cam = wire.codec_for(cam_class)
@@ -354,13 +374,14 @@ def test_cvra_test_shapes_both_directions() -> None:
     # their test_decoding_method / test_correct_callback_called: encode_call("bar", [10]) is [name, [10]]
     assert wire.decode_request(CVRA_CALL_BAR_10[:-1]) == ("bar", [[10]])
     assert wire.codec_for(SetBool._request_class).from_request([[1]]) == SetBoolRequest(data=True)
-    # ours, read by their decode_call: the request's fields as one object
-    assert cvra_decode_call(wire.encode_request("set_mode", {"data": True})) == ("set_mode", {"data": True})
-    assert wire.encode_request("set_mode", {"data": True}) == CVRA_CALL_SET_MODE_MAP
+    # ours, read by their decode_call: the only field bare (final), or the request's fields as one map (map form)
+    assert cvra_decode_call(wire.encode_request("set_mode", {"data": True})) == ("set_mode", True)
+    assert wire.encode_request("set_mode", {"data": True}, form=wire.WireForm.MAP) == CVRA_CALL_SET_MODE_MAP
     # their single-float check: 1. + 1e-8 written into a float32 field reads back as 1.0
     from std_msgs.msg import Float32
     data = wire.encode_datagram("foo", wire.codec_for(Float32).to_wire(Float32(data=1.0 + 1e-8)))
-    assert cvra_decode(data) == ("foo", {"data": 1.0})
-    # answers unchanged: a plain map, which their call() unpacks as is
-    assert msgpack.unpackb(wire.encode_response({"success": True, "message": "ok"})) == {"success": True,
-                                                                                         "message": "ok"}
+    assert cvra_decode(data) == ("foo", 1.0)
+    # answers: as their handlers answer (an array of the fields), or a plain map in the map form
+    assert msgpack.unpackb(wire.encode_response({"success": True, "message": "ok"})) == [True, "ok"]
+    assert msgpack.unpackb(wire.encode_response({"success": True, "message": "ok"}, form=wire.WireForm.MAP)) == {
+        "success": True, "message": "ok"}

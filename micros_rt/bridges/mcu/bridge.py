@@ -248,20 +248,25 @@ class McuBridge:
 
     # -- services
     def _call_board(self, entry: ServiceEntry, request: Any) -> Any:
-        """A ROS client calls a service the board serves."""
+        """A ROS client calls a service the board serves. The board's answer, in any era's form (a map, an
+        array, a bare value or nil), is read by :meth:`wire.MessageCodec.from_answer`; what it could not put in
+        the response is logged (once per service, then counted in the rate-limited summary)."""
         response_class = entry.service_class._response_class
         params = wire.codec_for(entry.service_class._request_class).to_wire(request)
         try:
             answer = self.link.call(entry, params)
-            response = wire.codec_for(response_class).from_wire(answer)
+            read = wire.codec_for(response_class).from_answer(answer)
         except McuServiceError as exc:
             raise rospy.ServiceException(str(exc)) from exc
         except WireError as exc:
             self.stats.add("services_on_microcontroller", "failed", entry=entry.name)
             raise rospy.ServiceException(f"the microcontroller answered {entry.service} with a bad "
                                          f"{entry.type} response: {exc}") from exc
+        if read.note is not None:
+            self.link.warn(("answer", entry.name), f"microcontroller link: {entry.service} ({entry.name!r}): "
+                           f"{read.note}", group="answer")
         self.stats.add("services_on_microcontroller", "ok", entry=entry.name)
-        return response
+        return read.response
 
     def _call_ros(self, entry: ServiceEntry, params: List[Any]) -> Dict[str, Any]:
         """The board calls a ROS service (on one of the link's call threads)."""

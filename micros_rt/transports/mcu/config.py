@@ -5,8 +5,8 @@
     microcontroller: {address: 127.0.0.2, topic_port: 20000, service_port: 20001}   # the board
     bind: {address: 127.0.0.1, topic_port: 20000, service_port: 20001}              # the bridge
     mtu: 1472                                    # payload bytes per datagram
-    wire_form: cvra                              # what is written: cvra ([name, {fields}], the default) or
-                                                 # readme (name then {fields}; requests [name, *fields])
+    wire_form: final                             # what is written (every form is read): final (CVRA's last
+                                                 # cvra_rpc, the default; also "cvra"), mid2015, readme, map
     stats_period: 1.0                            # seconds between ~stats messages
     to_microcontroller:                          # ROS topics sent to the board
       - {topic: /cmd_vel, type: geometry_msgs/Twist, qos: {time_filter_duration: 0.05}}
@@ -40,7 +40,7 @@ from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions
 from micros_rt.qos.profiles import _construct, _expect_mapping, _is_null, _kind, _pairs, _parse_options, _where
 
 from .errors import McuConfigError
-from .wire import WireForm
+from .wire import WIRE_FORM_NAMES, WireForm
 
 __all__ = ["Address", "TopicEntry", "ServiceEntry", "McuConfig", "load_config", "parse_config",
            "DEFAULT_TOPIC_PORT", "DEFAULT_SERVICE_PORT", "DEFAULT_MTU", "MAX_MTU"]
@@ -112,7 +112,7 @@ class McuConfig:
     bind: Address = Address("0.0.0.0")
     mtu: int = DEFAULT_MTU
     stats_period: float = 1.0
-    wire_form: WireForm = WireForm.CVRA
+    wire_form: WireForm = WireForm.FINAL
     to_microcontroller: Tuple[TopicEntry, ...] = ()
     from_microcontroller: Tuple[TopicEntry, ...] = ()
     services_on_microcontroller: Tuple[ServiceEntry, ...] = ()
@@ -211,12 +211,16 @@ class _Parser:
 
     def wire_form(self, node: yaml.Node, path: str) -> WireForm:
         value = self.scalar(node, path)
-        for form in WireForm:
-            if value == form.value:
-                return form
-        raise self.error(node, path, f"{value!r} is invalid: expected cvra (write [name, {{fields}}], CVRA's "
-                                     f"cvra_rpc form, the default) or readme (write the name then {{fields}}, "
-                                     f"and service requests as [name, *fields])")
+        form = WIRE_FORM_NAMES.get(value.strip().lower()) if isinstance(value, str) else None
+        if form is not None:
+            return form
+        raise self.error(node, path, f"{value!r} is invalid: expected the form the board's firmware speaks -- "
+                                     f"final (CVRA's last cvra_rpc, cvra/robot-software babf2cfa: [name, args] with "
+                                     f"args nil, one bare value or a list in field order; the default, also "
+                                     f"'cvra' or 'babf2cfa'), mid2015 (CVRA's feb95469: [name, field1, ...]; also "
+                                     f"'feb95469'), readme (the seed README, 0670b782: the name then a map of "
+                                     f"fields, two objects; also '0670b782') or map ([name, {{fields}}], what "
+                                     f"micros_rt wrote as 'cvra' before). Every form is read whatever this says")
 
     def address(self, node: yaml.Node, path: str, *, required_address: bool) -> Address:
         _expect_mapping(node, self.source, path, "a mapping with address, topic_port, service_port")

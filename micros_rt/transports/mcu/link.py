@@ -174,9 +174,9 @@ class UdpReader(PushReader):
 
     def decode_datagram(self, payload: bytes) -> Any:
         """The ROS message of one datagram; :class:`WireError` (a ``ValueError``) when malformed."""
-        name, body = wire.split_datagram(payload)
+        name, rest = wire.split_datagram(payload)
         try:
-            return self.codec.from_wire(body)
+            return self.codec.from_args(rest)
         except WireError as exc:
             raise WireError(exc.kind, f"stream {name!r} ({self.entry.type}): {exc}") from exc
 
@@ -393,7 +393,7 @@ class McuLink:
                               f"no answer (the connection is closed)", group="call_failed")
                     return
                 _set_tos(conn, entry.advertise.transport_priority, self._family)
-                conn.sendall(wire.encode_response(answer))
+                conn.sendall(wire.encode_response(answer, form=self.config.wire_form))
                 self.stats.add("services_for_microcontroller", "ok", entry=entry.name)
         except OSError as exc:
             self.warn((peer.rsplit(":", 1)[0], "socket"), f"microcontroller link: service connection from {peer}: "
@@ -406,10 +406,11 @@ class McuLink:
     # -- services: calls to the board
     def call(self, entry: ServiceEntry, params: Dict[str, Any]) -> Any:
         """Call the board's service ``entry`` with the request's fields ``params`` (written in the link's
-        ``wire_form``); the undecoded answer (a map or list).
+        ``wire_form``); the undecoded answer (one MessagePack object: a map, an array, a bare value or nil).
 
         Raises :class:`McuServiceError` naming the board and the service when it cannot connect, does not
-        answer within ``entry.timeout`` or answers garbage.
+        answer within ``entry.timeout``, closes the connection without answering (whatever the response
+        type: an empty response is answered with nil) or answers something that is not MessagePack.
         """
         board = self.config.microcontroller
         where = f"the microcontroller at {board.address}:{board.service_port}"
@@ -437,6 +438,12 @@ class McuLink:
                     size += len(chunk)
                     if size > MAX_FRAME:
                         raise McuServiceError(f"{where} answered {entry.service} with more than {MAX_FRAME:,} bytes")
+            if not chunks:
+                self.stats.add("services_on_microcontroller", "failed", entry=entry.name)
+                raise McuServiceError(
+                    f"{where} closed the connection without answering {entry.service} ({entry.name!r}): the call "
+                    f"failed or the board has no service named {entry.name!r} (a board answers even an empty "
+                    f"response, with nil; CVRA's firmware closes without an answer when its handler fails)")
             answer = wire.decode_response(b"".join(chunks))
         except socket.timeout:
             self.stats.add("services_on_microcontroller", "timeout", entry=entry.name)
@@ -444,8 +451,8 @@ class McuLink:
                                   f"{entry.timeout:g} s (timeout: in the bridge configuration)") from None
         except WireError as exc:
             self.stats.add("services_on_microcontroller", "failed", entry=entry.name)
-            raise McuServiceError(f"{where} answered {entry.service} with something that is not a MessagePack "
-                                  f"map: {exc}") from exc
+            raise McuServiceError(f"{where} answered {entry.service} with something that is not one MessagePack "
+                                  f"object: {exc}") from exc
         except OSError as exc:
             self.stats.add("services_on_microcontroller", "failed", entry=entry.name)
             raise McuServiceError(f"cannot call {entry.service} ({entry.name!r}) on {where}: "

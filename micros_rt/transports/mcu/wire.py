@@ -1,29 +1,32 @@
 """The microcontroller link's wire format (seed 003, the CVRA ROS MessagePack bridge): pure functions.
 
-**Topic datagram** (one UDP datagram per message), read in any of three forms::
+CVRA's cvra_rpc (cvra/robot-software) went through three forms; the link **reads every one of them** from
+every board and **writes the one its configuration names** (:class:`WireForm`, the ``wire_form`` key)::
 
-    msgpack([name, {field: value, ...}])                 # CVRA's form (cvra_rpc message.encode): written by default
-    msgpack(name) + msgpack({field: value, ...})        # the seed README's form: a string, then a map
-    msgpack([name, field1, field2, ...])                 # positional form (accepted on input)
+    final   (babf2cfa, 2018..2019; the default)  msgpack([name, args])
+            args: nil (no fields), the one field's value bare (one field), or [field1, field2, ...]
+    mid2015 (feb95469)                            msgpack([name, field1, field2, ...])
+    readme  (0670b782, the seed README)           msgpack(name) + msgpack({field: value, ...})   (two objects)
+    map     (micros_rt before issue 37)           msgpack([name, {field: value, ...}])
 
-An array of exactly two whose second element is a map is CVRA's form; ``[name, nil]`` (CVRA's
-``encode(name)`` without arguments) is an empty map. Which form is written is :class:`WireForm`.
+A topic datagram is one of these; a service request is one of these as a *serial datagram* -- the payload,
+its CRC32 (zlib's, big-endian) appended, SLIP-escaped (END 0xC0 -> ESC 0xDB + 0xDC, ESC -> ESC + 0xDD) and
+closed by END. What follows the name (:func:`split_datagram`, :func:`decode_request`) is read by
+:meth:`MessageCodec.from_args`: nothing or nil is no fields; one map is the fields by name; one array is the
+fields in definition order; several values are the fields in order; one other value is the value of a type's
+only field. The server answers one MessagePack object, unframed, and closes the connection: CVRA's handlers
+answer bare values (``"pong"``, ``true``) or nil; :meth:`MessageCodec.from_answer` maps each onto the ROS
+response. A connection closed without any answer is an error for every response type.
 
-Nested messages are nested maps (or, on input, arrays in definition order), arrays are arrays,
-``time``/``duration`` are ``[secs, nsecs]``, ``uint8[]``/``char[]`` are MessagePack bin.
-
-**Service call** (one TCP connection per call): the client sends ``msgpack([name, params])``, ``params``
-one object -- a map of the request fields, or an array of them in definition order (CVRA's
-``service_call.encode_call``; written as a map by default) -- or, in the README's form, ``msgpack([name,
-*request fields])`` (still read where unambiguous, see :meth:`MessageCodec.from_request`), as a *serial datagram* -- the payload, its CRC32 (zlib's, big-endian) appended, SLIP-escaped
-(END 0xC0 -> ESC 0xDB + 0xDC, ESC -> ESC + 0xDD) and closed by END; the server answers
-``msgpack({response field: value})`` unframed and closes the connection.
+Nested messages are nested maps in the readme and map forms and arrays in definition order in the final and
+mid2015 forms (CVRA's handlers index positional arguments); either is read. ``time``/``duration`` are
+``[secs, nsecs]``, ``uint8[]``/``char[]`` are MessagePack bin.
 
 Every ROS message type works: codecs are built from genpy's ``__slots__``/``_slot_types``.
 
 >>> from std_msgs.msg import String
 >>> encode_datagram("chatter", MessageCodec(String).to_wire(String(data="hi")))
-b'\\x92\\xa7chatter\\x81\\xa4data\\xa2hi'
+b'\\x92\\xa7chatter\\xa2hi'
 >>> encode_datagram("chatter", {"data": "hi"}, form=WireForm.README)
 b'\\xa7chatter\\x81\\xa4data\\xa2hi'
 """
@@ -45,7 +48,7 @@ from micros_rt.rostypes import FLOAT_TYPES, INT_RANGES
 from .errors import WireError
 
 __all__ = [
-    "WireForm", "Float32", "pack", "END", "ESC", "ESC_END", "ESC_ESC", "MessageCodec", "codec_for", "encode_datagram", "split_datagram",
+    "WireForm", "WIRE_FORM_NAMES", "Float32", "pack", "Answer", "to_args", "END", "ESC", "ESC_END", "ESC_ESC", "MessageCodec", "codec_for", "encode_datagram", "split_datagram",
     "frame", "unframe", "FrameReader", "encode_request", "decode_request", "encode_response",
     "decode_response",
 ]
@@ -61,12 +64,32 @@ _NSEC = 1_000_000_000
 
 
 class WireForm(enum.Enum):
-    """What the link writes (it reads every form whatever this is): the ``wire_form`` config key."""
+    """What the link writes to a board (it reads every form whatever this is): the ``wire_form`` config key.
 
-    #: CVRA's cvra_rpc: a topic is ``[name, {fields}]``, a service request ``[name, {fields}]``.
-    CVRA = "cvra"
-    #: The seed README's: a topic is ``name`` then ``{fields}`` (two objects), a request ``[name, *fields]``.
+    Each is what one era of CVRA's cvra/robot-software writes and reads (the commit is the one whose code the
+    fixtures in tests/fixtures/cvra/ were captured from).
+    """
+
+    #: CVRA's final cvra_rpc (babf2cfa; unchanged until a5061d96): ``[name, args]``, args nil (no fields), the
+    #: only field's value bare, or ``[field1, ...]``; nested messages as arrays. Answers the same way.
+    FINAL = "final"
+    #: The name this form had before: ``wire_form: cvra`` means the final form.
+    CVRA = "final"
+    #: CVRA's cvra_rpc of mid-2015 (feb95469): ``[name, field1, field2, ...]``; nested messages as arrays.
+    MID2015 = "mid2015"
+    #: The seed README's (and 0670b782's service calls): ``name`` then ``{fields}``, two MessagePack objects.
     README = "readme"
+    #: ``[name, {fields}]``: what micros_rt wrote as ``cvra`` before issue 37 (answers as a map of fields).
+    MAP = "map"
+
+
+#: ``wire_form`` values a configuration may use, with what each means (the error message lists them).
+WIRE_FORM_NAMES: Dict[str, WireForm] = {
+    "final": WireForm.FINAL, "cvra": WireForm.FINAL, "babf2cfa": WireForm.FINAL,
+    "mid2015": WireForm.MID2015, "feb95469": WireForm.MID2015,
+    "readme": WireForm.README, "0670b782": WireForm.README,
+    "map": WireForm.MAP,
+}
 
 
 class Float32(float):
@@ -124,7 +147,9 @@ def _shown(obj: Any) -> str:
     kinds = {bool: "a boolean", int: "an integer", float: "a float", str: "the string",
              bytes: "bin data", list: "an array", dict: "a map", type(None): "nil"}
     kind = kinds.get(type(obj), type(obj).__name__)
-    if isinstance(obj, (bool, int, float, str)) or obj is None:
+    if obj is None:
+        return kind
+    if isinstance(obj, (bool, int, float, str)):
         text = repr(obj)
         return f"{kind} {text[:40]}{'...' if len(text) > 40 else ''}"
     if isinstance(obj, (bytes, list, dict)):
@@ -326,38 +351,133 @@ class MessageCodec:
         return self._enc(msg, "")  # type: ignore[no-any-return]
 
     def to_wire_list(self, msg: genpy.Message) -> List[Any]:
-        """The fields of ``msg`` as a list in definition order (service requests)."""
+        """The fields of ``msg`` as a list in definition order (nested messages stay maps)."""
         return list(self.to_wire(msg).values())
 
     def from_wire(self, obj: Any) -> genpy.Message:
         """A message from a map of fields or an array of them in definition order."""
         return self._dec(obj, "")
 
-    def from_request(self, rest: List[Any]) -> genpy.Message:
-        """A service request from what follows its name (:func:`decode_request`).
+    @property
+    def field_count(self) -> int:
+        return len(self._codecs)
 
-        ``[params]`` with ``params`` a map, an array in definition order or nil is CVRA's form; else the
-        README's ``[*fields]``. One map or array is ambiguous only for a one-field request (e.g. ``int32[]
-        values``): CVRA's reading is tried first, the README's if that fails.
+    def from_args(self, rest: List[Any]) -> genpy.Message:
+        """A message from what follows its name in a datagram or request (:func:`split_datagram`,
+        :func:`decode_request`), in any era's form:
 
-        >>> codec_for(roslib.message.get_service_class("std_srvs/SetBool")._request_class).from_request([[True]])
+        - ``[]`` or ``[nil]``: no fields (CVRA's ``encode(name)``; mid-2015's ``[name]``);
+        - ``[{fields}]``: the fields by name (the README's and micros_rt's map form);
+        - ``[[f1, f2, ...]]``: the fields in definition order (CVRA's final list arguments);
+        - ``[f1, f2, ...]`` (two or more): the fields in definition order (CVRA's mid-2015 form);
+        - ``[value]``: the value of the type's only field (CVRA's final bare argument, mid-2015's one field).
+
+        For a type with one field, ``[x]`` with ``x`` a map or an array is ambiguous (the fields, or the only
+        field's value): the fields are tried first, the bare value if that fails, and the first error is
+        reported if neither reads.
+
+        >>> from geometry_msgs.msg import Pose2D
+        >>> codec_for(Pose2D).from_args([[1.5, 2.5, 0.5]]).theta
+        0.5
+        >>> codec_for(roslib.message.get_service_class("std_srvs/SetBool")._request_class).from_args([True])
         data: True
         """
-        if len(rest) == 1:
-            params = rest[0]
-            if params is None:
-                return self.from_wire({})
-            if isinstance(params, (dict, list)):
+        if not rest or (len(rest) == 1 and rest[0] is None):
+            return self._dec({}, "")
+        if len(rest) > 1:
+            return self._dec(rest, "")
+        args = rest[0]
+        if isinstance(args, (dict, list)):
+            try:
+                return self._dec(args, "")
+            except WireError as as_fields:
+                if len(self._codecs) != 1:
+                    raise
                 try:
-                    return self.from_wire(params)
-                except WireError as cvra_error:
-                    if len(self._codecs) != 1:
-                        raise
-                    try:
-                        return self.from_wire(rest)
-                    except WireError:
-                        raise cvra_error from None
-        return self.from_wire(rest)
+                    return self._dec([args], "")
+                except WireError:
+                    raise as_fields from None
+        if len(self._codecs) != 1:
+            raise WireError("bad_shape", f"one bare value ({_shown(args)}) can only stand for a type with one "
+                                         f"field; {self.type_name} has {len(self._codecs)}"
+                            + (f" ({', '.join(self.field_names)}): send them as an array in this order or a map"
+                               if self._codecs else ": send nil or nothing"))
+        return self._dec([args], "")
+
+    def from_request(self, rest: List[Any]) -> genpy.Message:
+        """A service request from what follows its name (:func:`decode_request`): :meth:`from_args`."""
+        return self.from_args(rest)
+
+    def from_answer(self, answer: Any) -> "Answer":
+        """A service response from a board's answer (:func:`decode_response`), in any era's form.
+
+        A map is the fields by name, an array the fields in definition order, and for a response type with
+        one field, any other value is that field's. CVRA's handlers answer bare values or nil, mapped thus:
+
+        - ``nil``: an empty response type (``std_srvs/Empty``, ``roscpp/SetLoggerLevel``) is answered. A type
+          with a ``success`` bool (``std_srvs/Trigger``, ``SetBool``) gets ``success: false`` and a message
+          saying the board answered nil: CVRA's C firmware answers nil both when a handler wrote nothing and
+          when it has no handler of that name, so nil is no evidence of success. Any other type: an error.
+        - ``true``/``false``: a ``success`` bool field gets it (the message stays empty); an empty response
+          type accepts ``true`` and is an error for ``false``.
+        - a string: a type with ``success`` and ``message`` gets ``success: true`` and the string as its
+          message (CVRA's ``ping`` answers ``"pong"``); an empty type accepts it and the text is reported in
+          :attr:`Answer.note` (CVRA's ``config_update`` answers its errors as text).
+
+        Anything else that does not fit raises :class:`WireError` naming the response type and its fields.
+
+        >>> from std_srvs.srv import Trigger
+        >>> codec_for(Trigger._response_class).from_answer("pong").response
+        success: True
+        message: "pong"
+        """
+        fields = dict(zip(self.field_names, (slot for slot in self.data_class._slot_types)))
+        has_success = fields.get("success") == "bool"
+        has_message = fields.get("message") == "string"
+        if isinstance(answer, (dict, list)):
+            try:
+                return Answer(self._dec(answer, ""))
+            except WireError as as_fields:
+                if len(self._codecs) != 1:
+                    raise
+                try:
+                    return Answer(self._dec([answer], ""))
+                except WireError:
+                    raise as_fields from None
+        if len(self._codecs) == 1 and answer is not None:
+            try:
+                return Answer(self._dec([answer], ""))
+            except WireError:
+                if not has_success:
+                    raise
+        if not self._codecs:
+            if answer is None or answer is True:
+                return Answer(self.data_class())
+            if answer is False:
+                raise WireError("bad_field", f"the board answered false: the call failed ({self.type_name} has no "
+                                             f"field to carry more)")
+            return Answer(self.data_class(), f"the board answered {_shown(answer)}, which {self.type_name} has no "
+                                             f"field for; the call is taken as answered")
+        if has_success:
+            msg = self.data_class()
+            if answer is None:
+                msg.success = False
+                if has_message:
+                    msg.message = ("the board answered nil (no result): CVRA's firmware answers nil when its handler "
+                                   "wrote nothing and also when it has no handler of that name, so this is not "
+                                   "reported as a success")
+                return Answer(msg, "the board answered nil; success is false")
+            if isinstance(answer, bool):
+                msg.success = answer
+                return Answer(msg)
+            if isinstance(answer, str) and has_message:
+                msg.success = True
+                msg.message = answer
+                return Answer(msg)
+        raise WireError("bad_shape", f"the answer {_shown(answer)} cannot fill a {self.type_name}, whose fields are "
+                                     f"{', '.join(self.field_names)}: the board should answer a map of them, an array "
+                                     f"of them in this order" + (", or one value for the only field"
+                                                                 if len(self._codecs) == 1 else ""))
 
     def _enc(self, msg: Any, path: str) -> Any:
         if not isinstance(msg, self.data_class):
@@ -391,6 +511,39 @@ class MessageCodec:
         raise _bad(path or ".", f"a {self.type_name} as a map of fields (or an array in definition order)", obj)
 
 
+class Answer:
+    """A board's answer read as a ROS response (:meth:`MessageCodec.from_answer`): ``response``, and ``note``
+    when part of the answer had no field to go to (the bridge logs it)."""
+
+    __slots__ = ("response", "note")
+
+    def __init__(self, response: genpy.Message, note: Optional[str] = None) -> None:
+        self.response = response
+        self.note = note
+
+
+def _as_arrays(value: Any) -> Any:
+    """A to_wire value with every nested message (a dict) turned into an array in definition order."""
+    if isinstance(value, dict):
+        return [_as_arrays(v) for v in value.values()]
+    if isinstance(value, list):
+        return [_as_arrays(v) for v in value]
+    return value
+
+
+def to_args(fields: Dict[str, Any]) -> Any:
+    """The arguments CVRA's final form carries for ``fields`` (:meth:`MessageCodec.to_wire`'s map): nil when
+    there are none, the only field's value bare, else an array in definition order; nested messages as arrays.
+
+    >>> to_args({}), to_args({"data": True}), to_args({"x": 1.5, "y": 2.5, "theta": 0.5})
+    (None, True, [1.5, 2.5, 0.5])
+    """
+    values = [_as_arrays(v) for v in fields.values()]
+    if not values:
+        return None
+    return values[0] if len(values) == 1 else values
+
+
 _codecs: Dict[Type[genpy.Message], MessageCodec] = {}
 _codecs_lock = threading.RLock()
 
@@ -406,12 +559,24 @@ def codec_for(data_class: Type[genpy.Message]) -> MessageCodec:
 
 # --------------------------------------------------------------------------- topic datagrams
 
-def encode_datagram(name: str, fields: Dict[str, Any], *, form: WireForm = WireForm.CVRA) -> bytes:
-    """One topic datagram: ``[name, {fields}]`` (CVRA's form), or with ``form=WireForm.README`` the stream
-    name then the map of fields, two objects."""
+def _call(name: str, fields: Dict[str, Any], form: WireForm) -> bytes:
+    """``name`` and ``fields`` (a to_wire map) in ``form``: the payload of a datagram or of a request."""
     if form is WireForm.README:
         return pack(name) + pack(fields)
-    return pack([name, fields])
+    if form is WireForm.MAP:
+        return pack([name, fields])
+    if form is WireForm.MID2015:
+        return pack([name, *(_as_arrays(v) for v in fields.values())])
+    return pack([name, to_args(fields)])
+
+
+def encode_datagram(name: str, fields: Dict[str, Any], *, form: WireForm = WireForm.FINAL) -> bytes:
+    """One topic datagram of ``fields`` (:meth:`MessageCodec.to_wire`'s map) in ``form`` (see the module).
+
+    >>> encode_datagram("odometry_raw", {"x": Float32(1.5), "y": Float32(2.5), "theta": Float32(0.5)}).hex(" ")
+    '92 ac 6f 64 6f 6d 65 74 72 79 5f 72 61 77 93 ca 3f c0 00 00 ca 40 20 00 00 ca 3f 00 00 00'
+    """
+    return _call(name, fields, form)
 
 
 def _unpack_all(data: bytes, at_most: int) -> List[Any]:
@@ -437,34 +602,27 @@ def _unpack_all(data: bytes, at_most: int) -> List[Any]:
     return objects
 
 
-def split_datagram(data: bytes) -> Tuple[str, Any]:
-    """The stream name and the undecoded fields (a map, or a list in definition order) of a datagram.
+def _split(objects: List[Any], what: str) -> Tuple[str, List[Any]]:
+    first = objects[0]
+    if len(objects) == 2 and isinstance(first, str):
+        return first, [objects[1]]              # the README's name then {fields} (or any one object)
+    if len(objects) == 1 and isinstance(first, list) and first and isinstance(first[0], str):
+        return first[0], first[1:]              # [name, args] (final), [name, *fields] (mid-2015), [name, {..}]
+    raise WireError("bad_shape", f"{what} must be an array [name, args...] or a name (string) followed by its "
+                                 f"arguments; got {' + '.join(_shown(o) for o in objects)}")
+
+
+def split_datagram(data: bytes) -> Tuple[str, List[Any]]:
+    """The stream name and what follows it, undecoded (read it with :meth:`MessageCodec.from_args`).
 
     >>> split_datagram(bytes.fromhex("a3696d7581a17801"))
-    ('imu', {'x': 1})
+    ('imu', [{'x': 1}])
     >>> split_datagram(bytes.fromhex("92a3696d7581a17801"))
-    ('imu', {'x': 1})
+    ('imu', [{'x': 1}])
     >>> split_datagram(bytes.fromhex("93a3696d750102"))
     ('imu', [1, 2])
     """
-    objects = _unpack_all(data, 2)
-    first = objects[0]
-    if len(objects) == 2 and isinstance(first, str):
-        if not isinstance(objects[1], dict):
-            raise WireError("bad_shape", f"stream {first!r}: the name must be followed by a map of fields, "
-                                         f"got {_shown(objects[1])}")
-        return first, objects[1]
-    if len(objects) == 1 and isinstance(first, list) and first and isinstance(first[0], str):
-        # CVRA's [name, {fields}] (or [name, nil]: no arguments) is told from [name, field1, ...] by shape;
-        # a one-field type whose field is a message, sent positionally, therefore reads as CVRA's form.
-        if len(first) == 2 and isinstance(first[1], dict):
-            return first[0], first[1]
-        if len(first) == 2 and first[1] is None:
-            return first[0], {}
-        return first[0], first[1:]
-    raise WireError("bad_shape", "expected an array [name, {fields}], a stream name (string) followed by a map "
-                                 "of fields, or an array [name, field1, field2, ...]; got "
-                                 f"{' + '.join(_shown(o) for o in objects)}")
+    return _split(_unpack_all(data, 2), "a topic datagram")
 
 
 # --------------------------------------------------------------------------- serial datagrams (SLIP + CRC32)
@@ -543,37 +701,32 @@ class FrameReader:
 
 # --------------------------------------------------------------------------- service calls
 
-def encode_request(name: str, fields: Dict[str, Any], *, form: WireForm = WireForm.CVRA) -> bytes:
-    """A service request as sent on the wire: the serial datagram of ``[name, {fields}]`` (CVRA's form), or
-    with ``form=WireForm.README`` of ``[name, *fields]`` (values in definition order).
+def encode_request(name: str, fields: Dict[str, Any], *, form: WireForm = WireForm.FINAL) -> bytes:
+    """A service request as sent on the wire: the serial datagram of ``name`` and ``fields`` in ``form``.
 
     >>> encode_request("reset", {}).hex()
-    '92a57265736574809b51fdb0c0'
-    >>> encode_request("reset", {}, form=WireForm.README).hex()
-    '91a572657365740bbd6afbc0'
+    '92a57265736574dbdced8dbc20c0'
+    >>> encode_request("set_mode", {"data": True}, form=WireForm.README).hex(" ")
+    'a8 73 65 74 5f 6d 6f 64 65 81 a4 64 61 74 61 c3 b3 08 db dc ed c0'
     """
-    call = [name, *fields.values()] if form is WireForm.README else [name, fields]
-    return frame(pack(call))
+    return frame(_call(name, fields, form))
 
 
 def decode_request(body: bytes) -> Tuple[str, List[Any]]:
-    """``(name, rest)`` from a received frame body (before END): ``rest`` is what follows the name, undecoded
-    (``[params]`` in CVRA's form, the fields in the README's); :meth:`MessageCodec.from_request` reads it."""
-    objects = _unpack_all(unframe(body), 1)
-    call = objects[0]
-    if not isinstance(call, list) or not call or not isinstance(call[0], str):
-        raise WireError("bad_shape", f"a service request must be an array [name, params] (or [name, param1, "
-                                     f"...]), got {_shown(call)}")
-    return call[0], call[1:]
+    """``(name, rest)`` from a received frame body (before END): ``rest`` is what follows the name, undecoded,
+    in any era's form (:meth:`MessageCodec.from_args` reads it)."""
+    return _split(_unpack_all(unframe(body), 2), "a service request")
 
 
-def encode_response(fields: Dict[str, Any]) -> bytes:
-    """A service answer: the response's fields as a MessagePack map (not framed)."""
-    return pack(fields)
+def encode_response(fields: Dict[str, Any], *, form: WireForm = WireForm.FINAL) -> bytes:
+    """A service answer (not framed): in the map form the response's fields as a map, in every other form
+    as CVRA's handlers answer -- nil (no fields), the only field's value, or an array in definition order."""
+    return pack(fields) if form is WireForm.MAP else pack(to_args(fields))
 
 
 def decode_response(data: bytes) -> Any:
-    """The undecoded answer (a map, or an array in definition order); an empty answer is ``{}``."""
+    """The undecoded answer: one MessagePack object (:meth:`MessageCodec.from_answer` reads it). No bytes at
+    all is not an answer: :class:`WireError` ``no_answer``."""
     if not data:
-        return {}
+        raise WireError("no_answer", "the connection was closed without an answer")
     return _unpack_all(data, 1)[0]
