@@ -220,7 +220,8 @@ class _Publication:
             if self.shm is None:
                 from ..transports.shm.channel import ShmWriter
 
-                self.shm = ShmWriter(self.topic, lossless=is_lossless(self.queue_size), latch=self.latch)
+                self.shm = ShmWriter(self.topic, latch=self.latch, lossless=is_lossless(self.queue_size)
+                                     and not self.options.using_best_effort_protocol)
                 created = True
             else:
                 created = False

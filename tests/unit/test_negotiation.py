@@ -565,8 +565,8 @@ def test_choose_supports_other_protocols() -> None:
         seen.append(name)
         return name == "UDPROS"
 
-    choice = choose([["SHM"], ["UDPROS", 1], TCP_ENTRY], Judge(), supports=supports)
-    assert choice.entry == ["UDPROS", 1] and seen == ["SHM", "UDPROS"]
+    choice = choose([["XSHM"], ["UDPROS", 1], TCP_ENTRY], Judge(), supports=supports)
+    assert choice.entry == ["UDPROS", 1] and seen == ["XSHM", "UDPROS"]
 
 
 # -------------------------------------------------------------------------------------------- ratelimit

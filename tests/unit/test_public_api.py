@@ -48,8 +48,10 @@ def test_priority_levels() -> None:
 
 
 @pytest.mark.parametrize("hints,order", [
-    (TransportHints(), ("DDS", "TCPROS")),
+    (TransportHints(), ("SHM", "DDS", "TCPROS")),
     (TransportHints().tcp(), ("TCPROS",)),
+    (TransportHints().shm().tcp(), ("SHM", "TCPROS")),
+    (TransportHints().dds().shm(), ("DDS", "SHM")),
     (TransportHints().dds(), ("DDS",)),
     (TransportHints().dds().tcp(), ("DDS", "TCPROS")),
     (TransportHints().tcp().dds(), ("TCPROS", "DDS")),
@@ -59,13 +61,16 @@ def test_transport_hints_order(hints: TransportHints, order: tuple[str, ...]) ->
     assert hints.protocols == order
     assert hints.allows_dds == ("DDS" in order)
     assert hints.allows_tcp == ("TCPROS" in order)
+    assert hints.allows_shm == ("SHM" in order)
+    assert TransportHints.from_names(list(order)) == hints
 
 
 def test_transport_hints_are_immutable() -> None:
     base = TransportHints()
     tcp = base.tcp()
-    assert base.protocols == ("DDS", "TCPROS") and tcp.protocols == ("TCPROS",)
+    assert base.protocols == ("SHM", "DDS", "TCPROS") and tcp.protocols == ("TCPROS",)
     assert repr(TransportHints().tcp().dds()) == "TransportHints().tcp().dds()"
+    assert repr(TransportHints().shm().tcp()) == "TransportHints().shm().tcp()"
 
 
 def test_names_on_dds() -> None:

@@ -370,7 +370,7 @@ def test_subscriber_transport_hints_are_read_in_order_and_looked_up_like_options
     ("UDPROS", "got the value 'UDPROS'"),
     ("[UDPROS]", "'UDPROS' is not a transport"),
     ("[DDS, dds]", "DDS is given twice"),
-    ("[]", "expected a list of 'DDS' and 'TCPROS'"),
+    ("[]", "expected a list of 'SHM', 'DDS' and 'TCPROS'"),
     ("{a: 1}", "got a mapping"),
 ])
 def test_bad_transport_hints_are_refused_with_file_line_and_key(value: str, says: str) -> None:
