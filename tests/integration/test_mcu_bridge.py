@@ -108,17 +108,20 @@ def test_twist_commands_reach_the_c_board_field_for_field_and_oversized_is_refus
     texts = [e for e in board.events("recv") if e["name"] == "text"]
     refusal = [line for line in bridge.stderr_tail(200).splitlines() if "/mcu_b/text: the message encodes" in line]
     print(f"\nmicros_rt talker -> bridge -> C board: {len(commands)}/20 Twist, e.g. {commands[0]['fields']} "
-          f"with IP TOS {commands[0]['tos']}; texts at the board {[t['fields']['data'] for t in texts]}; "
+          f"with IP TOS {commands[0]['tos']}; texts at the board {[t['fields'] for t in texts]}; "
           f"bridge counters {stats['to_microcontroller']}; "
           f"the bridge said: {refusal[0].split('micros_rt: ')[-1][:160]}")
     assert len(commands) == 20
-    assert all(c["fields"] == twist and c["tos"] == 34 << 2 for c in commands)  # HIGH = DSCP AF41
-    assert [t["fields"] for t in texts] == [{"data": "small 0"}, {"data": "small 1"}]
+    # CVRA's final form (the default): [name, args], the fields in definition order, nested messages as arrays
+    positional = [[0.25, -1.5, 0.0], [0.0, 0.0, 3.0]]
+    assert all(c["fields"] == positional and c["tos"] == 34 << 2 for c in commands)  # HIGH = DSCP AF41
+    assert [t["fields"] for t in texts] == ["small 0", "small 1"]   # one field: its value bare
     assert all(t["tos"] == 0 for t in texts) and max(e["bytes"] for e in board.events("recv")) <= 1472
     assert stats["to_microcontroller"]["cmd_vel"]["sent"] == 20
     assert stats["to_microcontroller"]["text"] == {"sent": 2, "oversized": 2, "expired": 0, "filtered": 0,
                                                    "send_failed": 0}
-    assert len(refusal) == 1 and "2,015 bytes" in refusal[0] and "mtu of 1,472" in refusal[0]
+    # [text, "x" * 2000]: 92, a4 "text", da 07d0, 2,000 bytes (2,015 in the map form)
+    assert len(refusal) == 1 and "2,009 bytes" in refusal[0] and "mtu of 1,472" in refusal[0]
 
 
 def test_services_both_ways_with_rosservice_and_the_c_board(
@@ -146,7 +149,8 @@ def test_services_both_ways_with_rosservice_and_the_c_board(
           f"rosservice call /mcu_c/reset: {reset.stdout.strip()!r}; /mcu_c/slow: {slow.stderr.strip()[-140:]!r}; "
           f"counters {stats['services_on_microcontroller']} {stats['services_for_microcontroller']}; "
           f"array-form Imu at 50 Hz with time_filter_duration 0.1: {stats['from_microcontroller']['imu']}")
-    assert result["response"] == {"success": True, "message": "mode on"} and called["data"] is True
+    # the answer as CVRA's handlers answer: [success, message]
+    assert result["response"] == [True, "mode on"] and called["data"] is True
     assert reset.returncode == 0 and "success: True" in reset.stdout and 'message: "reset done (1)"' in reset.stdout
     assert reset_again.returncode == 0 and "reset done (2)" in reset_again.stdout
     assert slow.returncode != 0
@@ -157,14 +161,15 @@ def test_services_both_ways_with_rosservice_and_the_c_board(
     assert imu["published"] > 0 and imu["filtered"] > 0 and imu["published"] <= imu["received"] / 3
     assert stats["bad_input"]["total"] == 0
     served = board.events("served")
-    # CVRA's form both ways: the board's call was [set_mode, [true]], the bridge's calls [reset, {}]
-    assert [s["name"] for s in served] == ["reset", "slow", "reset"] and served[0]["params"] == {}
+    # CVRA's final form both ways: the board's call was [set_mode, [true]], the bridge's calls [reset, nil]
+    assert [s["name"] for s in served] == ["reset", "slow", "reset"] and served[0]["params"] is None
 
 
 def test_a_board_speaking_the_readme_form_with_wire_form_readme(
         standin: Path, ros_master: harness.RosMaster, spawn: harness.Spawner, tmp_path: Path) -> None:
-    """wire_form: readme keeps the seed README's form working: topics as name then {fields} both ways,
-    service requests as [name, *fields] both ways; a board in that form understands nothing else."""
+    """wire_form: readme keeps the seed README's form working: topics as name then {fields} both ways, service
+    requests as the name then {fields} (two objects in one frame) both ways; a board in that form understands
+    nothing else."""
     ports = Ports.pick()
     server = spawn([harness.STOCK_PYTHON, str(mcu_harness.ROS_SERVICE_PEER), "--service", "/mcu_r/set_mode"])
     server.wait_for("ready", 60)
@@ -176,7 +181,7 @@ def test_a_board_speaking_the_readme_form_with_wire_form_readme(
                           "services_for_microcontroller:\n"
                           "  - {service: /mcu_r/set_mode, type: std_srvs/SetBool, name: set_mode}\n", "mcu_bridge_r")
     board = spawn(standin_argv(standin, ports, "--form", "readme", "--rate", 20, "--call", "set_mode",
-                               "--call-arg", "true", "--call-after", 0.5, "--duration", 90))
+                               "--call-key", "data", "--call-arg", "true", "--call-after", 0.5, "--duration", 90))
     result = board.wait_for("call_result", 30)
     called = server.wait_for("called", 10)
     reset = mcu_harness.rosservice(ros_master, "call", "/mcu_r/reset")
@@ -192,9 +197,9 @@ def test_a_board_speaking_the_readme_form_with_wire_form_readme(
     print(f"\nREADME-form board: call {result['response']}; rosservice call /mcu_r/reset: {reset.stdout.strip()!r}, "
           f"the board got {served}; texts at the board {[(t['name'], t['fields']) for t in texts]}; "
           f"imu {stats['from_microcontroller']['imu']}")
-    assert result["response"] == {"success": True, "message": "mode on"} and called["data"] is True
+    assert result["response"] == [True, "mode on"] and called["data"] is True
     assert reset.returncode == 0 and "reset done (1)" in reset.stdout
-    assert [(s["name"], s["params"]) for s in served] == [("reset", [])]   # [name, *fields] of an empty request
+    assert [(s["name"], s["params"]) for s in served] == [("reset", {})]   # "reset" then {}: an empty request
     assert [(t["name"], t["fields"]) for t in texts] == [("text", {"data": f"r {i}"}) for i in range(3)]
     assert stats["bad_input"]["total"] == 0
 

@@ -85,7 +85,8 @@ def test_best_effort_through_30_percent_loss_and_a_silent_board(lossy_link: Host
     distinct, duplicates = len(set(z)), len(z) - len(set(z))
     times = sorted(e["t"] for e in recv)
     gaps = sorted((b - a for a, b in zip(times, times[1:])), reverse=True)
-    commands = [e["fields"]["header"]["frame_id"] for e in board.events("recv") if e["name"] == "cmd"]
+    # CVRA's final form: [cmd, [header, twist]], nested messages as arrays (header = [seq, stamp, frame_id])
+    commands = [e["fields"][0][2] for e in board.events("recv") if e["name"] == "cmd"]
     misses = [e for e in bridge.events("deadline") if paused["_rx"] <= e["_rx"] <= resumed["_rx"] + 0.5]
     said = [line.split("micros_rt: ")[-1] for line in bridge.stderr_tail(200).splitlines()
             if "resumed after" in line or "no 'imu' datagram" in line]

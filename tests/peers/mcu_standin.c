@@ -3,9 +3,11 @@
  * do, in C, with Debian's libmsgpack-dev (seed 003, the CVRA ROS MessagePack bridge).
  *
  * It speaks one form (--form), as a real board does, and understands nothing else:
- *    cvra (default): CVRA's cvra_rpc -- a topic datagram is [name, {fields}], a service request [name, params]
- *                    with params one object (its calls send an array of --call-arg values, or nil without);
- *    readme:         the seed README's -- a topic datagram is name then {fields}, a request [name, *params].
+ *    cvra (default): CVRA's final cvra_rpc (message.c/service_call.c: an array of exactly 2) -- a datagram or
+ *                    request is [name, args], args one object; it writes its Imu as [name, {fields}] and its
+ *                    calls as [name, [--call-arg values...]] (or [name, nil] without);
+ *    readme:         the seed README's -- a topic datagram is name then {fields}, and so is a service request
+ *                    (two objects in one serial datagram; its calls map each --call-key to its --call-arg).
  * --array-form writes its Imu datagrams as [name, field1, ...] instead (nested messages as arrays too).
  *  - streams sensor_msgs/Imu datagrams ("imu") to the bridge at --rate Hz, optionally pausing once
  *    (--pause-after N --pause SECONDS);
@@ -50,7 +52,8 @@ static void on_signal(int sig) { (void)sig; stop_requested = 1; }
 struct options {
     const char *address, *bridge, *stream_name, *service_name, *hang_name, *call_name;
     const char *call_args[MAX_ARGS];
-    int n_call_args;
+    const char *call_keys[MAX_ARGS];
+    int n_call_args, n_call_keys;
     int topic_port, service_port, bridge_topic_port, bridge_service_port;
     double rate, duration, pause, call_after, linger;
     long count, pause_after;
@@ -316,30 +319,33 @@ static void serve_one(int listener, const char *service_name, const char *hang_n
     if (conn < 0) return;
     long n = read_until(conn, buf, sizeof buf, 2.0, 1);
     long len = n < 0 ? -1 : slip_unframe(buf, (size_t)n);
-    msgpack_unpacked req;
+    msgpack_unpacked req, req2;
     msgpack_unpacked_init(&req);
+    msgpack_unpacked_init(&req2);
     size_t off = 0;
-    if (len < 0 || msgpack_unpack_next(&req, (const char *)buf, (size_t)len, &off) != MSGPACK_UNPACK_SUCCESS ||
-        req.data.type != MSGPACK_OBJECT_ARRAY || req.data.via.array.size < 1 ||
-        (form == FORM_CVRA && req.data.via.array.size != 2) ||  /* as CVRA's service_call_process */
-        req.data.via.array.ptr[0].type != MSGPACK_OBJECT_STR) {
+    int ok = len >= 0 && msgpack_unpack_next(&req, (const char *)buf, (size_t)len, &off) == MSGPACK_UNPACK_SUCCESS;
+    if (form == FORM_CVRA)  /* as CVRA's service_call_process: an array of exactly 2, a name first */
+        ok = ok && req.data.type == MSGPACK_OBJECT_ARRAY && req.data.via.array.size == 2 &&
+             req.data.via.array.ptr[0].type == MSGPACK_OBJECT_STR;
+    else  /* the README's: the name, then the parameters' map, two objects */
+        ok = ok && req.data.type == MSGPACK_OBJECT_STR &&
+             msgpack_unpack_next(&req2, (const char *)buf, (size_t)len, &off) == MSGPACK_UNPACK_SUCCESS &&
+             req2.data.type == MSGPACK_OBJECT_MAP;
+    if (!ok) {
         printf("{\"event\": \"bad_frame\", \"bytes\": %ld}\n", n);
         fflush(stdout);
         msgpack_unpacked_destroy(&req);
+        msgpack_unpacked_destroy(&req2);
         close(conn);
         return;
     }
-    const msgpack_object_str *name = &req.data.via.array.ptr[0].via.str;
+    const msgpack_object_str *name = form == FORM_CVRA ? &req.data.via.array.ptr[0].via.str : &req.data.via.str;
     int ours = name->size == strlen(service_name) && memcmp(name->ptr, service_name, name->size) == 0;
     int hang = *hang_name && name->size == strlen(hang_name) && memcmp(name->ptr, hang_name, name->size) == 0;
     printf("{\"event\": \"served\", \"name\": ");
     json_string(name->ptr, name->size);
     printf(", \"params\": ");
-    msgpack_object params = req.data;  /* cvra: the one params object; readme: the array after the name */
-    params.via.array.ptr++;
-    params.via.array.size--;
-    if (form == FORM_CVRA) params = req.data.via.array.ptr[1];
-    json_object(&params);
+    json_object(form == FORM_CVRA ? &req.data.via.array.ptr[1] : &req2.data);  /* what follows the name */
     printf(", \"known\": %s}\n", ours ? "true" : "false");
     fflush(stdout);
     if (hang) read_until(conn, buf, sizeof buf, 3.0, 0);  /* a board that never answers: wait for the caller to give up */
@@ -359,6 +365,7 @@ static void serve_one(int listener, const char *service_name, const char *hang_n
         msgpack_sbuffer_destroy(&sb);
     }
     msgpack_unpacked_destroy(&req);
+    msgpack_unpacked_destroy(&req2);
     close(conn);
 }
 
@@ -383,11 +390,14 @@ static void call_bridge(const struct options *o) {
         msgpack_pack_array(&pk, 2);
         pack_str(&pk, o->call_name);
         if (o->n_call_args) msgpack_pack_array(&pk, o->n_call_args); else msgpack_pack_nil(&pk);
-    } else {
-        msgpack_pack_array(&pk, 1 + o->n_call_args);
+    } else {  /* the README's: the name, then a map of --call-key: --call-arg */
         pack_str(&pk, o->call_name);
+        msgpack_pack_map(&pk, o->n_call_args);
     }
-    for (int i = 0; i < o->n_call_args; i++) pack_arg(&pk, o->call_args[i]);
+    for (int i = 0; i < o->n_call_args; i++) {
+        if (o->form != FORM_CVRA) pack_str(&pk, i < o->n_call_keys ? o->call_keys[i] : "data");
+        pack_arg(&pk, o->call_args[i]);
+    }
     size_t flen = slip_frame((const unsigned char *)sb.data, sb.size, frame);
     msgpack_sbuffer_destroy(&sb);
     int fd = make_socket(SOCK_STREAM, o->address, 0);
@@ -421,12 +431,12 @@ static void usage(void) {
             "mcu_standin [--address A] [--topic-port P] [--service-port P] [--bridge A] [--bridge-topic-port P]\n"
             "            [--bridge-service-port P] [--rate HZ] [--count N] [--stream-name NAME] [--form cvra|readme] [--array-form]\n"
             "            [--pause-after N --pause S] [--service-name NAME] [--hang-name NAME] [--call NAME [--call-arg V]...\n"
-            "            --call-after S] [--duration S] [--linger S]\n");
+            "            [--call-key K]... --call-after S] [--duration S] [--linger S]\n");
     exit(2);
 }
 
 int main(int argc, char **argv) {
-    struct options o = {"127.0.0.2", "127.0.0.1", "imu", "reset", "", NULL, {0}, 0,
+    struct options o = {"127.0.0.2", "127.0.0.1", "imu", "reset", "", NULL, {0}, {0}, 0, 0,
                         20000, 20001, 20000, 20001, 100.0, 60.0, 0.0, 0.5, 1.0, 0, 0, FORM_CVRA, 0};
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
@@ -449,6 +459,7 @@ int main(int argc, char **argv) {
         else if (strcmp(a, "--hang-name") == 0) o.hang_name = v;
         else if (strcmp(a, "--call") == 0) o.call_name = v;
         else if (strcmp(a, "--call-arg") == 0 && o.n_call_args < MAX_ARGS) o.call_args[o.n_call_args++] = v;
+        else if (strcmp(a, "--call-key") == 0 && o.n_call_keys < MAX_ARGS) o.call_keys[o.n_call_keys++] = v;
         else if (strcmp(a, "--call-after") == 0) o.call_after = atof(v);
         else if (strcmp(a, "--duration") == 0) o.duration = atof(v);
         else if (strcmp(a, "--linger") == 0) o.linger = atof(v);

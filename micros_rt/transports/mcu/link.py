@@ -442,8 +442,9 @@ class McuLink:
                 self.stats.add("services_on_microcontroller", "failed", entry=entry.name)
                 raise McuServiceError(
                     f"{where} closed the connection without answering {entry.service} ({entry.name!r}): the call "
-                    f"failed or the board has no service named {entry.name!r} (a board answers even an empty "
-                    f"response, with nil; CVRA's firmware closes without an answer when its handler fails)")
+                    f"failed or the board has no service named {entry.name!r}. A board answers even an empty "
+                    f"response (with nil); CVRA's C firmware closes without answering when a handler fails, and "
+                    f"CVRA's Python server when its handler returns None")
             answer = wire.decode_response(b"".join(chunks))
         except socket.timeout:
             self.stats.add("services_on_microcontroller", "timeout", entry=entry.name)
