@@ -222,6 +222,9 @@ class _Publication:
 
                 self.shm = ShmWriter(self.topic, latch=self.latch, lossless=is_lossless(self.queue_size)
                                      and not self.options.using_best_effort_protocol)
+                last = self.tcpros.latched() if self.latch and self.tcpros is not None else None
+                if last is not None:
+                    self.shm.keep_latched(last)  # published before the first SHM subscriber came
                 created = True
             else:
                 created = False

@@ -695,6 +695,10 @@ class TcprosWriter:
         """rospy's publish lock (ordering of publish() calls across threads)."""
         return self._impl.publock
 
+    def latched(self) -> Any:
+        """The message a latching publisher keeps for new subscribers (None: none yet)."""
+        return None if self._impl is None else self._impl.latch
+
     def prepare(self, msg: Any) -> Any:
         if self.latch or len(self._impl.connections) > self._pseudo_links():
             return msg

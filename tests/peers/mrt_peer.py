@@ -160,6 +160,8 @@ def main() -> int:
     ap.add_argument("--stamp", action="store_true", help="stamp Header with the wall clock")
     ap.add_argument("--wait-subscribers", type=int, default=0)
     ap.add_argument("--linger", type=float, default=0.5, help="seconds to stay up after the last message")
+    ap.add_argument("--start-delay", type=float, default=0.0,
+                    help="talk: seconds to wait after the subscribers are there (a ROS 2 reader's own discovery)")
     ap.add_argument("--deadline-events", action="store_true")
     ap.add_argument("--callback-sleep", type=float, default=0.0,
                     help="listen: seconds every callback sleeps after printing (a slow subscriber)")
@@ -241,6 +243,7 @@ def main() -> int:
             emit("dds_matched", n=dds_readers(), participant=writer.participant.guid if writer is not None else None,
                  process_participant=backend.participant.guid if backend is not None else None)
         values = json.loads(args.data_json) if args.data_json else None
+        time.sleep(args.start_delay)
         period = 1.0 / args.rate if args.rate > 0 else 0.0
         start = time.monotonic()
         for i in range(args.count):
@@ -297,9 +300,9 @@ def main() -> int:
             if args.deadline_events:
                 import dataclasses
                 opts = dataclasses.replace(opts, deadline_cb=on_deadline)
-            sub = nh.subscribe_with_qos(args.topic, data_class, cb, args.queue_size, opts)
+            sub = nh.subscribe_with_qos(args.topic, data_class, cb, args.queue_size or None, opts)
         else:
-            sub = nh.subscribe(args.topic, data_class, cb, args.queue_size, hints)
+            sub = nh.subscribe(args.topic, data_class, cb, args.queue_size or None, hints)  # 0: None, lossless
         slow = None
         if args.slow_topic:
             def slow_cb(msg: Any) -> None:
@@ -320,6 +323,7 @@ def main() -> int:
         if slow is not None:
             emit("slow_statistics", **dataclasses_asdict(slow.statistics()))
         emit("done", transports=sub.connection_transports(), latency_count=sub.latency.count,
+             statistics=dataclasses_asdict(sub.statistics()),
              latency=sub.latency.summary(), expired=getattr(getattr(sub, "_sub", None), "expired_total", None))
     micros_rt.shutdown()
     return 0

@@ -144,9 +144,11 @@ def save_type_data(idl_class: Any) -> None:
     if path is None:
         return
     info, mapping = idl_class.__idl__._xt_bytedata
-    if not isinstance(info, bytes) or not isinstance(mapping, bytes) or path.exists():
+    if not isinstance(info, bytes) or not isinstance(mapping, bytes):
         return
     try:
+        if path.exists():  # raises PermissionError where the cache's directory cannot be entered
+            return
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-")
         try:

@@ -148,6 +148,12 @@ class ShmWriter:
         self._last: Optional[bytes] = None
         self._largest = 64
 
+    def keep_latched(self, msg: Any) -> None:
+        """The last message of a latching publication, for subscribers that come later."""
+        body = self.prepare(msg)
+        if body is not None:
+            self._last = body
+
     # -- channels (negotiation and housekeeping threads) -------------------------------------------------
     def open_channel(self, subscriber: str) -> ShmChannel:
         """A new channel for ``subscriber`` (replacing its old one); raises TransportError in words."""

@@ -1,0 +1,173 @@
+"""Shared memory (SHM) between micros_rt nodes of one host, beside TCPROS and DDS on the same topic.
+
+Real processes: a rosmaster, micros_rt nodes (SHM on: the harness turns it off for the rest of the suite),
+a stock rospy listener, an rclpy listener in its own venv. Every message is counted at every subscriber.
+"""
+
+from __future__ import annotations
+
+import os
+import pwd
+import shutil
+import tempfile
+import time
+from typing import Dict, List
+
+import pytest
+
+import harness
+from helpers import mrt, received, stock_listener, transports
+
+pytestmark = pytest.mark.integration
+
+T = 60.0
+
+
+def shm_env(master: harness.RosMaster) -> Dict[str, str]:
+    return {**master.env, "MICROS_RT_DISABLE_SHM": "0"}
+
+
+def iox_entries() -> List[str]:
+    return sorted(n for n in os.listdir("/dev/shm") if n.startswith("iox2_"))
+
+
+def test_shm_tcpros_and_dds_on_one_topic_each_message_once(ros_master: harness.RosMaster,
+                                                          spawn: harness.Spawner) -> None:
+    env = shm_env(ros_master)
+    topic = "/shm/mixed"
+    n = 100
+    shm_listener = spawn(mrt("listen", "--topic", topic, "--exit-after", n, "--duration", T), env,
+                         name="mrt_listener")
+    stock = spawn(stock_listener("--topic", topic, "--count", n, "--duration", T), name="stock_listener")
+    ros2 = spawn(harness.ros2_peer_argv("listen", "--topic", topic, "--count", str(n), "--duration", str(T)),
+                 name="rclpy_listener")
+    for peer in (shm_listener, stock, ros2):
+        peer.wait_for("ready", T)
+    talker = spawn(mrt("talk", "--topic", topic, "--count", n, "--rate", 50, "--wait-subscribers", 2,
+                       "--wait-dds-readers", 1, "--start-delay", 1.5, "--linger", 1.0, "--queue-size", 0), env,
+                   name="mrt_talker")
+    want = [f"hello {i}" for i in range(n)]
+    shm_listener.wait_for_count("recv", n, T)
+    stock.wait_for_count("recv", n, T)
+    ros2.wait_for_count("recv", n, T)
+    talker.wait_for("done", T)
+    time.sleep(0.5)  # nothing may arrive twice: give a duplicate the time to show up
+    assert received(shm_listener) == want
+    assert set(transports(shm_listener)) == {"SHM"}
+    assert [e["data"] for e in stock.events("recv")] == want
+    assert sorted(e["data"] for e in ros2.events("recv")) == sorted(want)
+
+
+def test_a_killed_publisher_is_noticed_and_its_restart_reconnects_over_shm(ros_master: harness.RosMaster,
+                                                                         spawn: harness.Spawner) -> None:
+    env = shm_env(ros_master)
+    topic = "/shm/restart"
+    listener = spawn(mrt("listen", "--topic", topic, "--duration", T), env, name="mrt_listener")
+    listener.wait_for("ready", T)
+    first = spawn(mrt("talk", "--topic", topic, "--node-name", "shm_talker", "--count", 100000, "--rate", 50,
+                      "--prefix", "first"), env, name="first_talker")
+    listener.wait_for(lambda e: e.get("event") == "recv" and e.get("transport") == "SHM", T)
+    attached = iox_entries()
+    first.proc.kill()
+    killed = time.monotonic()
+    start = len(listener.events())
+    # the listener drops the dead link within 2 s (its status lists the connections it has)
+    listener.wait_for(lambda e: e.get("event") == "status" and not e.get("transports"), T, start=start)
+    noticed = time.monotonic() - killed
+    assert noticed < 2.0 + 0.6, f"the dead publisher was noticed after {noticed:.1f} s"
+    start = len(listener.events())
+    second = spawn(mrt("talk", "--topic", topic, "--node-name", "shm_talker", "--count", 100000, "--rate", 50,
+                       "--prefix", "second"), env, name="second_talker")
+    got = listener.wait_for(lambda e: e.get("event") == "recv" and str(e.get("data", "")).startswith("second"),
+                            T, start=start)
+    assert got["transport"] == "SHM"
+    # what the killed process had in /dev/shm was reclaimed: the restart does not add a second set of files
+    assert len(iox_entries()) <= len(attached), (attached, iox_entries())
+    second.stop()
+
+
+def test_latched_message_reaches_a_late_shm_subscriber(ros_master: harness.RosMaster,
+                                                        spawn: harness.Spawner) -> None:
+    env = shm_env(ros_master)
+    topic = "/shm/latched"
+    talker = spawn(mrt("talk", "--topic", topic, "--count", 3, "--rate", 50, "--latch", "--linger", T), env,
+                   name="latched_talker")
+    talker.wait_for(lambda e: e.get("event") == "sent" and e["seq"] == 2, T)
+    listener = spawn(mrt("listen", "--topic", topic, "--exit-after", 1, "--duration", T), env, name="late")
+    listener.wait_for("ready", T)
+    t0 = time.monotonic()
+    got = listener.wait_for("recv", T)
+    assert got["data"] == "hello 2" and got["transport"] == "SHM"
+    assert time.monotonic() - t0 < 2.0
+
+
+def test_lossless_burst_to_a_slow_shm_subscriber_loses_nothing(ros_master: harness.RosMaster,
+                                                               spawn: harness.Spawner) -> None:
+    env = shm_env(ros_master)
+    topic = "/shm/lossless"
+    n = 3000
+    listener = spawn(mrt("listen", "--topic", topic, "--queue-size", 0, "--exit-after", n, "--duration", T,
+                         "--callback-sleep", 0.0002), env, name="slow_listener")
+    listener.wait_for("ready", T)
+    talker = spawn(mrt("talk", "--topic", topic, "--count", n, "--rate", 0, "--queue-size", 0,
+                       "--wait-subscribers", 1, "--linger", 0.5), env, name="burst_talker")
+    listener.wait_for_count("recv", n, T)
+    done = listener.wait_for("done", T)
+    assert received(listener) == [f"hello {i}" for i in range(n)]
+    assert set(transports(listener)) == {"SHM"}
+    assert done["statistics"]["dropped_queue_full"] == 0
+    talker.wait_for("done", T)
+
+
+def test_keep_last_drops_are_counted_on_shm(ros_master: harness.RosMaster, spawn: harness.Spawner) -> None:
+    env = shm_env(ros_master)
+    topic = "/shm/keep_last"
+    n = 2000
+    listener = spawn(mrt("listen", "--topic", topic, "--queue-size", 1, "--duration", 8,
+                         "--callback-sleep", 0.002), env, name="slow_listener")
+    listener.wait_for("ready", T)
+    talker = spawn(mrt("talk", "--topic", topic, "--count", n, "--rate", 0, "--queue-size", 1,
+                       "--wait-subscribers", 1, "--linger", 0.5), env, name="burst_talker")
+    talker.wait_for("done", T)
+    done = listener.wait_for("done", T)
+    stats = done["statistics"]
+    got = received(listener)
+    assert set(transports(listener)) == {"SHM"}
+    assert 0 < len(got) < n and got[-1] == f"hello {n - 1}"  # the newest is kept
+    assert stats["delivered"] == len(got)
+    # every message sent is either delivered or counted as dropped: none lost silently
+    assert stats["delivered"] + stats["dropped_queue_full"] == n, stats
+
+
+@pytest.mark.parametrize("hints,want", [("tcp,shm", "TCPROS"), ("dds", "DDS"), ("shm,tcp", "SHM")])
+def test_transport_hints_order_shm_like_the_others(ros_master: harness.RosMaster, spawn: harness.Spawner,
+                                                   hints: str, want: str) -> None:
+    env = shm_env(ros_master)
+    topic = f"/shm/hints_{hints.replace(',', '_')}"
+    listener = spawn(mrt("listen", "--topic", topic, "--hints", hints, "--exit-after", 5, "--duration", T), env,
+                     name="listener")
+    listener.wait_for("ready", T)
+    spawn(mrt("talk", "--topic", topic, "--count", 1000, "--rate", 50), env, name="talker")
+    listener.wait_for_count("recv", 5, T)
+    assert set(transports(listener)) == {want}
+
+
+def test_another_unix_user_falls_back_to_dds_in_words(ros_master: harness.RosMaster, spawn: harness.Spawner,
+                                                       request: pytest.FixtureRequest) -> None:
+    if os.geteuid() != 0 or shutil.which("setpriv") is None:
+        pytest.fail("this test runs the listener as another user: it needs root and setpriv (util-linux)")
+    nobody = pwd.getpwnam("nobody")
+    home = tempfile.mkdtemp(prefix="micros_rt_nobody_")  # /tmp: pytest's own directories are root's only
+    os.chmod(home, 0o755)
+    os.chown(home, nobody.pw_uid, nobody.pw_gid)
+    request.addfinalizer(lambda: shutil.rmtree(home, ignore_errors=True))
+    env = {**shm_env(ros_master), "HOME": home, "ROS_HOME": home, "ROS_LOG_DIR": home}
+    topic = "/shm/two_users"
+    listener = spawn(["setpriv", f"--reuid={nobody.pw_uid}", f"--regid={nobody.pw_gid}", "--clear-groups",
+                      *mrt("listen", "--topic", topic, "--exit-after", 5, "--duration", T)], env,
+                     name="other_user_listener")
+    listener.wait_for("ready", T)
+    talker = spawn(mrt("talk", "--topic", topic, "--count", 1000, "--rate", 50), env, name="talker")
+    listener.wait_for_count("recv", 5, T)
+    assert set(transports(listener)) == {"DDS"}
+    talker.wait_for(lambda e: e.get("event") == "log" and "another Unix user" in e.get("text", ""), T)
