@@ -399,3 +399,45 @@ def test_a_board_calling_in_each_eras_form_is_served(link_to: Any) -> None:
     assert answers == [bytes.fromhex("92 c3 a7 6d6f6465206f6e")] * 4       # [True, "mode on"], as CVRA answers
     assert link.stats.get("services_for_microcontroller", "ok", entry="set_mode") == 4
 
+
+
+def test_any_object_after_a_name_or_as_an_answer_only_ever_raises_wire_error() -> None:
+    """Nothing malformed escapes as another exception (the link counts WireError and goes on)."""
+    import random
+
+    from sensor_msgs.msg import Imu
+
+    rnd = random.Random(37)
+    leaves: List[Any] = [None, True, False, 0, -1, 2**40, 1.5, float("nan"), "", "pong", b"\x01", "x" * 40]
+
+    def any_object(depth: int = 0) -> Any:
+        kind = rnd.randrange(5 if depth < 3 else 1)
+        if kind == 0:
+            return rnd.choice(leaves)
+        if kind in (1, 2):
+            return [any_object(depth + 1) for _ in range(rnd.randrange(5))]
+        if kind == 3:
+            return {rnd.choice(["x", "y", "theta", "success", "message", "data", 1]): any_object(depth + 1)
+                    for _ in range(rnd.randrange(4))}
+        return rnd.choice([[1.5, 2.5, 0.5], {"x": 1, "y": 2, "theta": 3}, [[0, [1, 2], "f"]]])
+
+    readers = [wire.codec_for(c) for c in (Pose2D, Imu, Empty, Float32, String, Twist)]
+    answers = [wire.codec_for(s._response_class) for s in (Trigger, SetBool, LVL,
+                                                           roslib.message.get_service_class("roscpp/GetLoggers"))]
+    read = failed = 0
+    for _ in range(20_000):
+        obj = any_object()
+        rest = obj if isinstance(obj, list) and rnd.random() < 0.5 else [obj]
+        for codec in readers:
+            try:
+                codec.from_args(rest)
+                read += 1
+            except WireError:
+                failed += 1
+        for codec in answers:
+            try:
+                codec.from_answer(obj)
+                read += 1
+            except WireError:
+                failed += 1
+    assert read > 1000 and failed > 1000
