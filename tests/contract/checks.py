@@ -42,6 +42,10 @@ class Pair:
     #: a second reader of the topic with a time filter of ``period`` s, for readers declaring TIME_FILTER
     filtering_reader: Optional[Callable[[float], TransportReader]] = None
     cleanup: Callable[[], None] = lambda: None
+    #: sends a message its transport stamps as written ``age`` s ago, for transports that carry the write
+    #: time (SHM, as DDS: lifespan counts from the write, not from the Header stamp); None: the Header stamp
+    #: is what a pushed reader's lifespan goes by, so the message's stamp is made old
+    send_stale: Optional[Callable[[PointStamped, float], None]] = None
 
 
 def wait_until(predicate: Callable[[], Any], timeout: float, what: str) -> None:
@@ -213,7 +217,10 @@ def check_a_pushed_reader_feeds_the_core_which_drops_expired_messages(pair: Pair
     sub.pushed = (reader,)
     sub.thread.start()
     try:
-        for msg in (message(0), message(1, age=30.0), message(2)):
+        for i, msg in enumerate((message(0), message(1, age=30.0), message(2))):
+            if i == 1 and pair.send_stale is not None:
+                pair.send_stale(message(1), 30.0)
+                continue
             prepared = pair.writer.prepare(msg)
             assert prepared is not None
             pair.writer.send(prepared)

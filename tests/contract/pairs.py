@@ -11,6 +11,7 @@ from __future__ import annotations
 import itertools
 import os
 import socket
+import time
 from typing import Any, Callable, Dict, List, Optional
 
 from geometry_msgs.msg import PointStamped
@@ -20,7 +21,7 @@ from micros_rt.transports.base import EndpointSpec, PushReader, TransportReader,
 
 from contract.checks import PROBE, Pair, message
 
-__all__ = ["dds_pair", "fake_pair", "mcu_pair", "mqtt_pair", "tcpros_pair"]
+__all__ = ["dds_pair", "fake_pair", "mcu_pair", "mqtt_pair", "shm_pair", "tcpros_pair"]
 
 _n = itertools.count()
 
@@ -169,3 +170,39 @@ def tcpros_pair(topic: Optional[str] = None) -> Pair:
 
     return Pair("tcpros", writer, reader, matched=lambda: writer.links() > 0 and bool(sub.transports()),
                 lonely_writer=lonely, corrupt=corrupt)
+
+
+def shm_pair() -> Pair:
+    """Shared memory: a publication's writer with a channel for one subscriber, and that subscriber's link
+    feeding a pushed reader (what a subscription makes of it), in this process."""
+    from micros_rt.transports.shm import channel as shm
+    from micros_rt.transports.shm import host
+
+    was = os.environ.get("MICROS_RT_DISABLE_SHM")
+    os.environ["MICROS_RT_DISABLE_SHM"] = "0"  # the suite keeps SHM off for its other nodes (tests/harness.py)
+    try:
+        host.shm_node()
+    finally:
+        if was is None:
+            os.environ.pop("MICROS_RT_DISABLE_SHM", None)
+        else:
+            os.environ["MICROS_RT_DISABLE_SHM"] = was
+    topic = _topic("shm")
+    writer = shm.ShmWriter(topic, lossless=False, latch=False)
+    channel = writer.open_channel("/contract_subscriber")
+    reader = PushReader("SHM", 100, lambda: None, blocking=True)
+    header = {"callerid": "/contract", "topic": topic, "type": PointStamped._type, "md5sum": PointStamped._md5sum,
+              "transport": "SHM"}
+    link = shm.ShmLink(topic, channel.name, PointStamped, header=header, qos=None, put=reader.put,
+                       on_drop=lambda n: None, on_gone=lambda _link: None)
+
+    def cleanup() -> None:
+        link.close()
+
+    def send_stale(msg: PointStamped, age: float) -> None:
+        body = writer.prepare(msg)
+        assert body is not None and channel.try_send(body, source_ns=time.time_ns() - int(age * 1e9))
+
+    return Pair("shm", writer, reader, matched=channel.attached, send_stale=send_stale,
+                lonely_writer=lambda: shm.ShmWriter(_topic("shm_lonely"), lossless=False, latch=False),
+                corrupt=lambda: shm.decode_frame(PointStamped, b"\x01" * 16 + b"\x05\x00"), cleanup=cleanup)

@@ -1,6 +1,6 @@
 """The transport contract (:mod:`contract.checks`) against every transport that runs in this process: the fake
 in-memory transport, DDS (loopback, this run's domain), the microcontroller UDP link (loopback) and MQTT through
-a real mosquitto. TCPROS needs a master and a node: ``test_contract_tcpros.py`` runs the same checks there."""
+a real mosquitto, shared memory (iceoryx2, in this process). TCPROS needs a master and a node: ``test_contract_tcpros.py`` runs the same checks there."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from typing import Any, Callable, Dict, Iterator
 import pytest
 
 from contract.checks import CHECKS, Pair
-from contract.pairs import dds_pair, fake_pair, mcu_pair, mqtt_pair
+from contract.pairs import dds_pair, fake_pair, mcu_pair, mqtt_pair, shm_pair
 
 
 @pytest.fixture(scope="module")
@@ -29,6 +29,7 @@ MAKERS: Dict[str, Callable[[Any], Pair]] = {
     "dds": lambda _request: dds_pair(),
     "mcu": lambda _request: mcu_pair(),
     "mqtt": lambda request: mqtt_pair(request.getfixturevalue("mosquitto")),
+    "shm": lambda _request: shm_pair(),
 }
 
 

@@ -24,7 +24,7 @@ from contract.fake_transport import FakeBus, FakeWriter
 from micros_rt.qos import AdvertiseQoSOptions, SubscribeQoSOptions
 from micros_rt.transports.base import PROFILE_BACKENDS, EndpointSpec, profile_backends
 
-SHM = "SHM"
+SHM = "TOY_SHM"  # not the real SHM transport (micros_rt.transports.shm), whose pushed reader every subscription has
 
 
 class _ToyFeed:
@@ -103,7 +103,7 @@ def test_a_toy_shared_memory_transport_runs_end_to_end_through_publication_and_s
     pub.start()
     try:
         assert [w.protocol for w in pub.writers] == ["TCPROS", SHM]
-        assert [r.protocol for r in sub.pushed] == ["TCPROS", SHM]
+        assert [r.protocol for r in sub.pushed] == ["TCPROS", "SHM", SHM]
         for i in range(5):
             pub.publish(String(data=f"m{i}"))  # one burst: the subscription's time filter lets the first through
         wait_until(lambda: sub.statistics().received == 5, 10, "five messages over the toy transport")

@@ -31,13 +31,14 @@ from typing import Any, Callable, Dict, Optional, Tuple, Type
 
 import genpy
 
-from ...exceptions import PublishTimeoutError, TransportError
+from ...exceptions import MicrosRtError, PublishTimeoutError, TransportError
 from ...log import nonblocking_logger
 from ...negotiation.protocol import SHM
 from ..base import send_with_backoff
 from .host import cleanup_dead_nodes, iceoryx2, shm_node
 
-__all__ = ["ShmChannel", "ShmLink", "ShmWriter", "TRANSIT_DEPTH", "PUBLISH_BLOCK_TIMEOUT"]
+__all__ = ["MalformedFrameError", "ShmChannel", "ShmLink", "ShmWriter", "TRANSIT_DEPTH", "PUBLISH_BLOCK_TIMEOUT",
+           "decode_frame"]
 
 _log = nonblocking_logger("rosout.micros_rt.shm")
 
@@ -52,6 +53,25 @@ PUBLISH_BLOCK_TIMEOUT = 10.0
 _POLL = 0.5
 
 _ids = itertools.count(1)
+
+
+class MalformedFrameError(MicrosRtError, ValueError):
+    """A shared-memory sample that is not a micros_rt frame of the expected message type."""
+
+
+def decode_frame(data_class: Type[genpy.Message], frame: bytes) -> Tuple[int, int, Any]:
+    """(sequence number, source time ns, message) of one channel sample; MalformedFrameError in words."""
+    if len(frame) < 16:
+        raise MalformedFrameError(f"a shared-memory sample of {len(frame)} bytes is shorter than micros_rt's "
+                                  f"16-byte frame header")
+    seq, source_ns = _HEAD.unpack_from(frame, 0)
+    msg = data_class()
+    try:
+        msg.deserialize(frame[16:])
+    except (genpy.DeserializationError, struct.error, ValueError, TypeError, UnicodeError, IndexError) as exc:
+        raise MalformedFrameError(f"a shared-memory sample does not decode as {data_class._type} ({exc}); "
+                                  f"is the publisher's type really {data_class._type}?") from exc
+    return seq, source_ns, msg
 
 
 def _channel_name() -> str:
@@ -97,14 +117,14 @@ class ShmChannel:
             self.seen = True
         return attached
 
-    def try_send(self, body: bytes) -> bool:
-        """Put one message into the channel; False when it was not taken (a lossless channel full, or no
-        subscriber attached: then a latched channel keeps it as history)."""
+    def try_send(self, body: bytes, source_ns: int = 0) -> bool:
+        """Put one message into the channel, stamped now (or ``source_ns``); False when it was not taken (a
+        lossless channel full, or no subscriber attached: then a latched channel keeps it as history)."""
         n = len(body)
         sample = self._publisher.loan_slice_uninit(n + 16)
         ptr = sample.payload_ptr
         seq = self._seq + 1
-        ctypes.memmove(ptr, _HEAD.pack(seq, time.time_ns()), 16)
+        ctypes.memmove(ptr, _HEAD.pack(seq, source_ns or time.time_ns()), 16)
         ctypes.memmove(ptr + 16, body, n)
         if not sample.assume_init().send():
             return False
@@ -209,6 +229,9 @@ class ShmWriter:
         return buff.getvalue()
 
     def send(self, body: bytes) -> None:
+        if self.closed:
+            raise TransportError(f"topic {self.topic}: its shared-memory writer is closed (the publication was "
+                                 f"unregistered); nothing was sent")
         if self.latch:
             self._last = body
         if len(body) + 16 > self._largest:
@@ -286,7 +309,6 @@ class ShmLink:
         wait = self._listener.timed_wait
         timeout = iox2.Duration.from_secs_f64(_POLL) if hasattr(iox2.Duration, "from_secs_f64") \
             else iox2.Duration.from_millis(int(_POLL * 1000))
-        unpack = _HEAD.unpack_from
         data_class, header, put = self._data_class, self._header, self._put
         last = 0
         try:
@@ -296,20 +318,16 @@ class ShmLink:
                     if not wait(timeout) and not self.closed and self._publisher_gone():
                         break
                     continue
-                view = sample.payload().as_memory_view()
-                seq, source_ns = unpack(view, 0)
-                body = bytes(view[16:])
-                del view
+                frame = bytes(sample.payload().as_memory_view())
                 sample.delete()
+                try:
+                    seq, source_ns, msg = decode_frame(data_class, frame)
+                except MalformedFrameError as exc:
+                    self._malformed(exc)
+                    continue
                 if last and seq > last + 1:
                     self._on_drop(seq - last - 1)  # overwritten in a KEEP_LAST channel: counted, never silent
                 last = seq
-                try:
-                    msg = data_class()
-                    msg.deserialize(body)
-                except (genpy.DeserializationError, struct.error, ValueError, TypeError, UnicodeError) as exc:
-                    self._malformed(exc)
-                    continue
                 msg._connection_header = header
                 put(msg, source_ns, self)
         except Exception as exc:
@@ -327,9 +345,8 @@ class ShmLink:
     def _malformed(self, exc: Exception) -> None:
         self.malformed += 1
         if self.malformed == 1:
-            _log.warning("micros_rt: topic %s: dropped a malformed shared-memory sample from %s (%s); is its type "
-                         "really %s? Further ones are counted, not logged", self.topic, self._header.get("callerid"),
-                         str(exc)[:200], self._data_class._type)
+            _log.warning("micros_rt: topic %s: dropped a malformed shared-memory sample from %s: %s. Further ones "
+                         "are counted, not logged", self.topic, self._header.get("callerid"), str(exc)[:300])
 
     def close(self) -> None:
         """Stop the thread (within its poll) and release the ports; harmless twice."""

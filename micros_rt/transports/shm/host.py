@@ -56,18 +56,17 @@ def iceoryx2() -> Any:
 
 def unavailable_reason() -> Optional[str]:
     """None when this process can use shared memory, else why not, in words (checked once)."""
-    global _reason, _module
+    global _reason
+    if os.environ.get("MICROS_RT_DISABLE_SHM", "") not in ("", "0"):
+        return "turned off by MICROS_RT_DISABLE_SHM"
     with _lock:
-        if _reason != "":
-            return _reason
-        _reason = _check()
+        if _reason == "":
+            _reason = _check()
         return _reason
 
 
 def _check() -> Optional[str]:
     global _module
-    if os.environ.get("MICROS_RT_DISABLE_SHM", "") not in ("", "0"):
-        return "turned off by MICROS_RT_DISABLE_SHM"
     try:
         st = os.statvfs("/dev/shm")
     except OSError as exc:
@@ -94,6 +93,8 @@ def shm_node() -> Any:
     """This process's iceoryx2 node (created on first use; one per process). Raises ``RuntimeError`` when
     shared memory is unavailable."""
     global _node
+    if _node is not None:
+        return _node
     reason = unavailable_reason()
     if reason is not None:
         raise RuntimeError(reason)
