@@ -29,7 +29,7 @@ def test_1x_bridge_and_2x_bridge_read_each_other_with_latencies(
     qos1 = {"ros": {"queue_size": 100}, "mqtt": {"qos": 1}}
     with MosquittoBroker(tmp_path / "broker") as broker:
         broker_params = {"host": broker.host, "port": broker.port}
-        # bridge A writes mqtt_client 1.x (flag byte), bridge B the default, 2.x (no flag byte, stamped field)
+        # bridge A writes mqtt_client 1.x (flag byte), bridge B 2.x (no flag byte, stamped field)
         params_a = write_params(tmp_path / "a.yaml", {"broker": broker_params, "bridge": {
             "mqtt_client_version": 1,
             "ros2mqtt": [
@@ -42,6 +42,7 @@ def test_1x_bridge_and_2x_bridge_read_each_other_with_latencies(
             ],
         }})
         params_b = write_params(tmp_path / "b.yaml", {"broker": broker_params, "bridge": {
+            "mqtt_client_version": 2,       # fixed: unset, it would follow A's 1.x announcements (issue 37)
             "ros2mqtt": [
                 {"ros_topic": "/gen/b_text", "mqtt_topic": "gen/b2a_text", "inject_timestamp": True, "advanced": qos1},
                 {"ros_topic": "/gen/b_pose", "mqtt_topic": "gen/b2a_pose", "advanced": qos1},

@@ -165,6 +165,7 @@ class FakeConnection:
     def __init__(self) -> None:
         self.subscribed: Dict[str, Any] = {}
         self.published: List[Tuple[str, bytes, bool]] = []
+        self.can_send = self.is_live = True
 
     def subscribe(self, topic: str, qos: int, callback: Any) -> None:
         self.subscribed[topic] = callback

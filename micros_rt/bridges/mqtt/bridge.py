@@ -25,6 +25,7 @@ import collections
 import io
 import threading
 import time
+import uuid
 from typing import Any, Callable, Deque, Dict, Optional, Tuple, Type
 
 import genmsg  # type: ignore[import-untyped]
@@ -42,6 +43,7 @@ from ...log import nonblocking_logger
 from ...ratelimit import RateLimitedLog
 from ...transports.mqtt import codec
 from ...transports.mqtt.client import MqttConnection
+from ...transports.mqtt.generations import ANNOUNCEMENTS, PeerGenerations
 from ...transports.mqtt.params import Mqtt2RosParams, MqttParams, Ros2MqttParams
 
 __all__ = ["MqttBridge", "PENDING_LIMIT", "is_connected_service_class"]
@@ -54,17 +56,39 @@ PENDING_LIMIT = 100
 RESOLVE_INTERVAL = 0.3
 #: How long a new ROS publisher waits for the subscribers the master knows (seconds).
 SUBSCRIBER_WAIT = 3.0
+#: How long a topic's first message after a connect waits for the broker's retained type announcements
+#: (which say the peers' generation), seconds.
+PEER_SCAN_WAIT = 2.0
 
 
 #: The package of mqtt_client's ``IsConnected`` service in each generation (2.x moved it).
 IS_CONNECTED_PACKAGE = {codec.WireGeneration.V1: "mqtt_client", codec.WireGeneration.V2: "mqtt_client_interfaces"}
+#: ``IsConnected``'s md5 (empty request, ``bool connected``): the same in both generations.
+IS_CONNECTED_MD5 = "e0cdaf65159c7f3563426650fb8d3f64"
 
 
-def is_connected_service_class(wire: codec.WireGeneration = codec.WireGeneration.V2) -> Type[Any]:
+def installed_is_connected_package(preferred: codec.WireGeneration = codec.WireGeneration.V2) -> Optional[str]:
+    """The package whose ``IsConnected`` service type is installed here (what ``rosservice`` can load):
+    ``mqtt_client_interfaces`` (mqtt_client 2.x) or ``mqtt_client`` (1.x); the ``preferred`` generation's
+    when both are; None when neither is."""
+    found = []
+    for wire in (preferred, *(w for w in codec.WireGeneration if w is not preferred)):
+        pkg = IS_CONNECTED_PACKAGE[wire]
+        try:
+            cls = roslib.message.get_service_class(f"{pkg}/IsConnected")
+        except Exception:   # a broken package on the path counts as not installed
+            cls = None
+        if cls is not None and getattr(cls, "_md5sum", "") == IS_CONNECTED_MD5:
+            found.append(pkg)
+    return found[0] if found else None
+
+
+def is_connected_service_class(wire: codec.WireGeneration = codec.WireGeneration.V2, *,
+                               package: Optional[str] = None) -> Type[Any]:
     """mqtt_client's ``IsConnected`` service (empty request, ``bool connected``), built at run time with
-    mqtt_client's md5 so that its own clients can call this node. The type is
-    ``mqtt_client_interfaces/IsConnected`` in 2.x, ``mqtt_client/IsConnected`` in 1.x (same md5)."""
-    pkg = IS_CONNECTED_PACKAGE[wire]
+    mqtt_client's md5 so that its own clients can call this node. The type is ``<package>/IsConnected``:
+    ``mqtt_client_interfaces`` in 2.x, ``mqtt_client`` in 1.x (same md5); ``package`` when given."""
+    pkg = package or IS_CONNECTED_PACKAGE[wire]
     ctx = genmsg.MsgContext.create_default()
     spec = genmsg.msg_loader.load_srv_from_string(ctx, "---\nbool connected\n", f"{pkg}/IsConnected")
     request = genpy.dynamic.generate_dynamic(f"{pkg}/IsConnectedRequest", "")[f"{pkg}/IsConnectedRequest"]
@@ -95,16 +119,30 @@ class _Problems:
 
 
 class _Ros2Mqtt:
-    """One ROS topic sent to the broker."""
+    """One ROS topic sent to the broker.
+
+    Its type announcement (retained, ``mqtt_client/ros_msg_type/<mqtt_topic>``) is published when the type
+    is first known, after every (re)connect and when the generation written changes; it counts as sent only
+    when the connection took it (sent, or kept in the disk buffer), else the next message tries again."""
 
     def __init__(self, bridge: "MqttBridge", p: Ros2MqttParams) -> None:
         self.bridge, self.p = bridge, p
         self.subscriber: Optional[micros_rt.Subscriber] = None
         self.raw_subscriber: Optional[rospy.Subscriber] = None
         self.data_class: Optional[Type[genpy.Message]] = None
-        self.announced_md5 = ""        # reset on reconnect: the retained announcement may be gone
+        self.framed = not (p.primitive or p.json)   # mqtt_client framing: a type announcement, a generation
+        self.wire, self.why = bridge.generations.decide(p.mqtt_topic)
+        self._lock = threading.Lock()
+        self._type: Optional[codec.RosMsgType] = None          # the type last sent
+        self._announcement: Tuple[Any, bytes] = (None, b"")    # ((md5, wire), its bytes) cached
+        self.announced: Optional[bytes] = None   # the announcement the current connection took (None: none yet)
         self._built: Dict[str, Type[genpy.Message]] = {}
         self.sent = 0
+
+    @property
+    def announced_md5(self) -> str:
+        """The md5 of the announcement the current connection took ('' when none)."""
+        return self._type.md5 if self._type is not None and self.announced is not None else ""
 
     def attach(self, data_class: Type[genpy.Message]) -> None:
         self.data_class = data_class
@@ -121,7 +159,10 @@ class _Ros2Mqtt:
 
     def on_raw(self, raw: Any) -> None:
         header = getattr(raw, "_connection_header", None) or {}
-        t = codec.RosMsgType(header.get("md5sum", ""), header.get("type", ""), header.get("message_definition", ""))
+        t = self._type
+        if t is None or t.md5 != header.get("md5sum", ""):
+            t = codec.RosMsgType(header.get("md5sum", ""), header.get("type", ""),
+                                 header.get("message_definition", ""))
         msg = None
         if self.p.primitive or self.p.json:
             try:
@@ -136,7 +177,50 @@ class _Ros2Mqtt:
         self._send(t, raw._buff, msg)
 
     def on_ros(self, msg: genpy.Message) -> None:
-        self._send(codec.RosMsgType.of(type(msg)), None, msg)
+        t = self._type
+        if t is None or t.md5 != msg._md5sum:
+            t = codec.RosMsgType.of(type(msg))
+        self._send(t, None, msg)
+
+    # -- the type announcement
+
+    def _announcement_bytes(self, t: codec.RosMsgType, wire: codec.WireGeneration) -> bytes:
+        key, raw = self._announcement
+        if key != (t.md5, wire):
+            raw = codec.encode_msg_type(t.for_wire(wire, stamped=self.p.inject_timestamp))
+            self._announcement = ((t.md5, wire), raw)
+        return raw
+
+    def announce(self, *, force: bool = False) -> None:
+        """Publish the type announcement (retained) in the generation written now, unless the current
+        connection already took this one (``force``: even so, after a reconnect or a change)."""
+        with self._lock:
+            t = self._type
+            if t is None or not self.framed:
+                return
+            if not self.bridge.connection.can_send:
+                self.announced = None   # dropped if tried now: sent once the connection is up (on_live)
+                return
+            raw = self._announcement_bytes(t, self.wire)
+            if raw == self.announced and not force:
+                return
+            self.bridge.generations.published(self.p.mqtt_topic, raw)
+            if self.bridge.connection.publish(codec.ROS_MSG_TYPE_PREFIX + self.p.mqtt_topic, raw, qos=self.p.qos,
+                                              retain=True):
+                self.announced = raw
+            else:
+                self.announced = None   # not sent (not connected yet, buffer full): the next message retries
+
+    def redecide(self) -> None:
+        """Follow the peers on the broker: a new generation is logged and announced at once."""
+        wire, why = self.bridge.generations.decide(self.p.mqtt_topic)
+        with self._lock:
+            changed = wire is not self.wire
+            self.wire, self.why = wire, why
+        if changed and self.framed:
+            _log.info("micros_rt mqtt: MQTT topic '%s': now writing mqtt_client %s (%s)", self.p.mqtt_topic,
+                      wire.label, why)
+            self.announce()
 
     def _send(self, t: codec.RosMsgType, serialized: Optional[bytes], msg: Optional[genpy.Message]) -> None:
         p = self.p
@@ -146,19 +230,18 @@ class _Ros2Mqtt:
         elif p.json and msg is not None:
             payload = codec.msg_to_json(msg).encode("utf-8")
         else:
-            wire = self.bridge.params.wire
-            if self.announced_md5 != t.md5:
-                announcement = t.for_wire(wire, stamped=p.inject_timestamp)
-                conn.publish(codec.ROS_MSG_TYPE_PREFIX + p.mqtt_topic, codec.encode_msg_type(announcement),
-                             qos=p.qos, retain=True)
-                self.announced_md5 = t.md5
+            if self.announced is None or t is not self._type:
+                self.bridge.await_peer_scan()       # the generation may still be learned from the broker
+                with self._lock:
+                    self._type = t
+                self.announce()
             if serialized is None:
                 assert msg is not None
                 buf = io.BytesIO()
                 msg.serialize(buf)
                 serialized = buf.getvalue()
             stamp = genpy.Time.from_sec(time.time()) if p.inject_timestamp else None
-            payload = codec.encode_ros_payload(serialized, wire=wire, stamp=stamp)
+            payload = codec.encode_ros_payload(serialized, wire=self.wire, stamp=stamp)
         try:
             if conn.publish(p.mqtt_topic, payload, qos=p.qos, retain=p.retained):
                 self.sent += 1
@@ -240,6 +323,7 @@ class _Mqtt2Ros:
         self.md5 = ""
         self.announced = False               # a type announcement was accepted: the payload form is known
         self.stamped: Optional[bool] = None  # its stamped field (None: 1.x, payloads carry a flag byte)
+        self.type_fed = b""                  # the announcement last handed to the worker (paho's thread only)
         self.pending: Deque[bytes] = collections.deque()
         self.latency_pub: Optional[micros_rt.Publisher] = None
         self.delivered = 0
@@ -278,6 +362,9 @@ class _Mqtt2Ros:
     # -- MQTT side: paho's network thread hands over (never waits), the worker handles in order
 
     def feed_type(self, topic: str, payload: bytes, properties: Any = None) -> None:
+        if payload == self.type_fed:
+            return    # mqtt_client repeats its announcement with every message: the same one changes nothing
+        self.type_fed = payload
         self.worker.put(self.on_type, topic, payload, droppable=False)
 
     def feed_data(self, topic: str, payload: bytes, properties: Any = None) -> None:
@@ -413,9 +500,23 @@ class MqttBridge:
         self.nh = micros_rt.NodeHandle()
         self.problems = _Problems()
         self._closed = threading.Event()
-        self.connection = MqttConnection(params, on_fatal=on_fatal, on_connection_change=self._connection_changed)
+        self.generations = PeerGenerations(
+            fixed=params.wire if params.wire_set else None, default=params.wire,
+            fixed_topics={p.mqtt_topic: p.wire for p in params.ros2mqtt if p.wire is not None},
+            written=[p.mqtt_topic for p in params.ros2mqtt if not (p.primitive or p.json)])
+        self.connection = MqttConnection(params, on_fatal=on_fatal, on_connection_change=self._connection_changed,
+                                         on_live=self._on_live)
         self.ros2mqtt = [_Ros2Mqtt(self, p) for p in params.ros2mqtt]
         self.mqtt2ros = [_Mqtt2Ros(self, p) for p in params.mqtt2ros]
+        # the peers' generations are read from their announcements: all of them, with one subscription (it
+        # also feeds the mqtt2ros topics' announcements), when some topic written follows the peers
+        self.follows_peers = any(r.framed and r.p.wire is None for r in self.ros2mqtt) and \
+            self.generations.follows_peers
+        self._type_readers: Dict[str, _Mqtt2Ros] = {}
+        self._scan_topic = f"micros_rt/scan/{uuid.uuid4().hex}"
+        self._scanned = threading.Event()     # the broker's retained announcements have arrived (this connection)
+        if not self.follows_peers:
+            self._scanned.set()
         for r in self.ros2mqtt:
             kind = "primitive " if r.p.primitive else "JSON " if r.p.json else ""
             _log.info("Bridging %sROS topic '%s' to MQTT topic '%s'", kind, r.p.ros_topic, r.p.mqtt_topic)
@@ -424,10 +525,21 @@ class MqttBridge:
             _log.info("Bridging MQTT topic '%s' to %sROS topic '%s'", m.p.mqtt_topic, kind, m.p.ros_topic)
             self.connection.subscribe(m.p.mqtt_topic, m.p.qos, m.feed_data)
             if not (m.p.primitive or m.p.json):
-                self.connection.subscribe(codec.ROS_MSG_TYPE_PREFIX + m.p.mqtt_topic, m.p.qos, m.feed_type)
-        _log.info("micros_rt mqtt: writing mqtt_client %s payloads and type announcements "
-                  "(bridge/mqtt_client_version: %d); reading 1.x and 2.x", params.wire.label, int(params.wire))
-        self._service_class = is_connected_service_class(params.wire)
+                self._type_readers[codec.ROS_MSG_TYPE_PREFIX + m.p.mqtt_topic] = m
+                if not self.follows_peers:
+                    self.connection.subscribe(codec.ROS_MSG_TYPE_PREFIX + m.p.mqtt_topic, m.p.qos, m.feed_type)
+        if self.follows_peers:
+            qos = max([m.p.qos for m in self._type_readers.values()], default=0)
+            self.connection.subscribe(ANNOUNCEMENTS, qos, self._on_announcement)
+            self.connection.subscribe(self._scan_topic, 0, self._on_scan)
+            _log.info("micros_rt mqtt: writing each MQTT topic in the mqtt_client generation its peers announce "
+                      "on the broker (%s until one does; bridge/mqtt_client_version fixes it); reading 1.x and 2.x",
+                      params.wire.label)
+        else:
+            _log.info("micros_rt mqtt: writing mqtt_client %s payloads and type announcements "
+                      "(bridge/mqtt_client_version: %d); reading 1.x and 2.x", params.wire.label, int(params.wire))
+        package = installed_is_connected_package(params.wire) or IS_CONNECTED_PACKAGE[params.wire]
+        self._service_class = is_connected_service_class(params.wire, package=package)
         self._service = rospy.Service("~is_connected", self._service_class, self._is_connected)
         self._resolver = threading.Thread(target=self._resolve_loop, name="micros_rt mqtt types", daemon=True)
 
@@ -441,8 +553,44 @@ class MqttBridge:
 
     def _connection_changed(self, connected: bool) -> None:
         if connected:
+            if self.follows_peers:
+                self._scanned.clear()
             for r in self.ros2mqtt:
-                r.announced_md5 = ""    # the retained announcement may be gone with a restarted broker
+                r.announced = None     # the retained announcement may be gone with a restarted broker
+
+    def _on_live(self) -> None:
+        """Sending is enabled (after each connect): ask the broker to show its announcements first (they
+        arrive before the scan message, sent after the subscriptions), else announce now."""
+        if self.follows_peers:
+            self.connection.publish(self._scan_topic, b"", qos=0)
+        else:
+            self._announce_all()
+
+    def _on_scan(self, topic: str, payload: bytes, properties: Any = None) -> None:
+        self._scanned.set()
+        self._announce_all()
+
+    def _announce_all(self) -> None:
+        for r in self.ros2mqtt:
+            r.redecide()
+            r.announce(force=True)
+
+    def await_peer_scan(self) -> None:
+        """Before a topic's first message on a connection: wait (bounded) for the broker's retained
+        announcements, so that the first payload is already in the peers' generation."""
+        if not self._scanned.is_set() and self.connection.is_live:
+            self._scanned.wait(PEER_SCAN_WAIT)
+
+    def _on_announcement(self, topic: str, payload: bytes, properties: Any = None) -> None:
+        """Every ``mqtt_client/ros_msg_type/...`` message (paho's thread): a peer's generation, and the
+        announcement of an mqtt2ros topic."""
+        reader = self._type_readers.get(topic)
+        if reader is not None:
+            reader.feed_type(topic, payload)
+        if self.generations.observe(topic, payload):
+            for r in self.ros2mqtt:
+                if r.framed:
+                    r.redecide()
 
     def _resolve_loop(self) -> None:
         while not self._closed.wait(RESOLVE_INTERVAL):

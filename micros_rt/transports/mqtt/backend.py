@@ -34,6 +34,7 @@ import math
 import re
 import collections
 import threading
+import weakref
 from typing import Any, Callable, Deque, Dict, List, Optional, Pattern, Tuple
 
 import genpy
@@ -168,7 +169,9 @@ class MqttBackend:
         self.generation = 0          # connections so far: type announcements are re-sent on each
         self._priorities: List[TransportPriority] = []
         self._lock = threading.Lock()
-        self.connection = MqttConnection(settings.params, mqtt5=True, on_connection_change=self._changed)
+        self._writers: "weakref.WeakSet[MqttTopicWriter]" = weakref.WeakSet()
+        self.connection = MqttConnection(settings.params, mqtt5=True, on_connection_change=self._changed,
+                                         on_live=self._on_live)
         self.connection.start()
         # the first messages of a process's topics must not be dropped for a connection still being made
         if not self.connection.wait_connected(CONNECT_WAIT):
@@ -179,6 +182,14 @@ class MqttBackend:
         if connected:
             self.generation += 1
 
+    def _on_live(self) -> None:
+        """Sending is enabled after a connect: every writer's type announcement goes (again) to the broker,
+        which may have lost its retained copy (a restarted broker) or never got it (sent too early)."""
+        with self._lock:
+            writers = list(self._writers)
+        for w in writers:
+            w.announce()
+
     def open_writer(self, spec: EndpointSpec, options: AdvertiseQoSOptions) -> "Optional[MqttTopicWriter]":
         rule = self.settings.rule_for(spec.topic, "out")
         if rule is None:
@@ -188,7 +199,10 @@ class MqttBackend:
             top = max(self._priorities, key=int)
         if top != TransportPriority.NORMAL:
             self.connection.set_tos(priority_tos(top), priority_socket_priority(top))
-        return MqttTopicWriter(self, rule, spec, options)
+        writer = MqttTopicWriter(self, rule, spec, options)
+        with self._lock:
+            self._writers.add(writer)
+        return writer
 
     def open_feed(self, spec: EndpointSpec, options: Optional[SubscribeQoSOptions],
                   deliver: Callable[[Any], None]) -> "Optional[MqttTopicReader]":
@@ -214,7 +228,9 @@ class MqttTopicWriter:
         self.retain = rule.retained if rule.retained is not None else spec.latch
         period = options.msg_valid_period
         self.expiry = int(math.ceil(period)) if math.isfinite(period) and period > 0 else None
-        self._announced = -1
+        self._announced = -1              # the connection (backend.generation) that took the announcement
+        self._msg_class: Any = None       # the type announced (ros1 codec), once known
+        self._announce_lock = threading.Lock()
         self.sent = 0
         self.closed = False
         _log.info("micros_rt: topic %s is mirrored to MQTT topic '%s' (%s, QoS %d%s)", spec.topic, self.mqtt_topic,
@@ -247,18 +263,29 @@ class MqttTopicWriter:
                                  f"unregistered); nothing was sent to '{self.mqtt_topic}'")
         payload, msg_class = prepared
         conn = self.backend.connection
-        if msg_class is not None and self._announced != self.backend.generation:
-            self._announced = self.backend.generation  # mqtt_client's type announcement, once per connection
-            conn.publish(codec.ROS_MSG_TYPE_PREFIX + self.mqtt_topic,
-                         codec.encode_msg_type(codec.RosMsgType.of(msg_class).for_wire(self.backend.settings.wire,
-                                                                                       stamped=False)),
-                         qos=self.qos, retain=True)
+        if msg_class is not None and (self._announced != self.backend.generation or msg_class is not self._msg_class):
+            self._msg_class = msg_class
+            self.announce()
         try:
             if conn.publish(self.mqtt_topic, payload, qos=self.qos, retain=self.retain, properties=self._properties()):
                 self.sent += 1
         except ValueError as exc:
             _problems.warning((self.spec.topic, "too_large"), f"topic {self.spec.topic}: a {len(payload)}-byte "
                               f"message cannot go to MQTT topic '{self.mqtt_topic}': {exc}")
+
+    def announce(self) -> None:
+        """mqtt_client's type announcement (retained), once per connection: marked sent only when the
+        connection took it (sent, or kept in the disk buffer); else the next message, or the connection
+        coming up, sends it."""
+        with self._announce_lock:
+            msg_class, generation = self._msg_class, self.backend.generation
+            if msg_class is None or self.closed or not self.backend.connection.can_send:
+                return
+            raw = codec.encode_msg_type(codec.RosMsgType.of(msg_class).for_wire(self.backend.settings.wire,
+                                                                               stamped=False))
+            if self.backend.connection.publish(codec.ROS_MSG_TYPE_PREFIX + self.mqtt_topic, raw, qos=self.qos,
+                                               retain=True):
+                self._announced = generation
 
     def close(self) -> None:
         """Refuse further sends; the connection is the process's, it stays."""

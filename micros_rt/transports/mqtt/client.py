@@ -172,13 +172,17 @@ class MqttConnection:
     """One MQTT client connection configured from mqtt_client's parameters.
 
     ``start()`` connects in the background and never raises for an unreachable broker: it is retried with
-    back-off (1 s doubling to 8 s) and each failure is logged. ``fatal`` is set (and ``on_fatal`` called)
+    back-off (1 s doubling to 8 s) and each failure is logged. ``on_connection_change(True)`` is called at
+    the broker's CONNACK, when sending is not enabled yet (the disk buffer is flushed first);
+    ``on_live()`` once sending is enabled, on the flush thread: what must be on the broker after every
+    connect (mqtt_client's retained type announcements) is published from there. ``fatal`` is set (and ``on_fatal`` called)
     when retrying cannot help: the broker's certificate fails verification against the configured CA, or
     the broker refuses the credentials.
     """
 
     def __init__(self, params: MqttParams, *, mqtt5: bool = False, on_fatal: Optional[Callable[[str], None]] = None,
-                 on_connection_change: Optional[Callable[[bool], None]] = None) -> None:
+                 on_connection_change: Optional[Callable[[bool], None]] = None,
+                 on_live: Optional[Callable[[], None]] = None) -> None:
         self.params = params
         self.uri = f"{'ssl' if params.broker.tls_enabled else 'tcp'}://{params.broker.host}:{params.broker.port}"
         self._lock = threading.RLock()
@@ -190,6 +194,7 @@ class MqttConnection:
         self.fatal: Optional[str] = None
         self._on_fatal = on_fatal
         self._on_connection_change = on_connection_change
+        self._on_live = on_live          # sending is enabled (after each connect): retained state is re-sent
         self._flush_wanted = threading.Event()
         self._live_event = threading.Event()
         self._last_failure = ""
@@ -283,6 +288,16 @@ class MqttConnection:
     def is_connected(self) -> bool:
         """True between the broker's CONNACK and the loss of the connection."""
         return self._connected
+
+    @property
+    def is_live(self) -> bool:
+        """True while messages go straight to the broker (connected, the disk buffer flushed)."""
+        return self._live
+
+    @property
+    def can_send(self) -> bool:
+        """True when :meth:`publish` would send or keep a message now (live, or a disk buffer)."""
+        return self._live or (self._buffer is not None and not self._closed)
 
     def counters(self) -> ConnectionCounters:
         """A copy of the counters."""
@@ -467,7 +482,7 @@ class MqttConnection:
                 if item is None:
                     self._live = True
                     self._live_event.set()
-                    return
+                    break
                 topic, payload, qos, retain, age, props = item
                 assert self._buffer is not None
                 if self._buffer.max_age > 0 and age > self._buffer.max_age:
@@ -483,3 +498,8 @@ class MqttConnection:
                     _log.warning("micros_rt mqtt: dropping a buffered message on '%s': %s", topic, exc)
                     continue
                 self._counters.flushed += 1
+        if self._on_live is not None:
+            try:
+                self._on_live()
+            except Exception:   # a bug in the callback must not stop the flush thread
+                _log.exception("micros_rt mqtt: re-sending after connecting to %s failed", self.uri)

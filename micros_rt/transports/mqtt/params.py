@@ -11,9 +11,11 @@ and counted instead of making the broker close the connection, as AimRT's ``max_
 (every field as JSON, for non-ROS clients) and ``bridge.mqtt2ros[].ros_type`` (fix the ROS type, as in
 mqtt_client's ROS 2 version).
 
-``bridge.mqtt_client_version`` (micros_rt; ``2``, the default, or ``1``) chooses the wire the bridge writes:
-mqtt_client 2.x (2.0-2.3 for ROS 1: no flag byte, ``RosMsgType.stamped``) or 1.x (a flag byte, a
-three-string ``RosMsgType``). Both are read whatever it says. mqtt_client itself ignores the key.
+``bridge.mqtt_client_version`` (micros_rt; ``2`` or ``1``) fixes the wire the bridge writes: mqtt_client 2.x
+(2.0-2.3 for ROS 1: no flag byte, ``RosMsgType.stamped``) or 1.x (a flag byte, a three-string
+``RosMsgType``); ``bridge.ros2mqtt[].mqtt_client_version`` fixes one topic's. Unset, each topic is written
+in the generation the peers' type announcements on the broker speak (2.x when none are there; see
+:mod:`~micros_rt.transports.mqtt.generations`). Both are read whatever it says. mqtt_client ignores the keys.
 
 >>> params, warnings = parse_params({"bridge": {"mqtt2ros": [{"mqtt_topic": "a", "ros_topic": "/a"}]}})
 >>> params.broker.port, warnings[0]
@@ -99,6 +101,9 @@ class Ros2MqttParams:
     queue_size: int = 1
     qos: int = 0
     retained: bool = False
+    #: ``mqtt_client_version`` of this entry (micros_rt): the generation written on this topic, whatever
+    #: the peers on the broker speak; None: ``bridge/mqtt_client_version``, else the peers' (see generations)
+    wire: Optional[WireGeneration] = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -123,8 +128,11 @@ class MqttParams:
     client: ClientParams
     ros2mqtt: Tuple[Ros2MqttParams, ...]
     mqtt2ros: Tuple[Mqtt2RosParams, ...]
-    #: the mqtt_client wire written (``bridge/mqtt_client_version``); both are read
+    #: the mqtt_client wire written (``bridge/mqtt_client_version``) when the peers on the broker do not say;
+    #: both are read
     wire: WireGeneration = WireGeneration.V2
+    #: ``bridge/mqtt_client_version`` was set: it overrides what the peers on the broker speak
+    wire_set: bool = False
 
 
 class _Reader:
@@ -272,6 +280,7 @@ def parse_params(data: Any, *, source: str = "params") -> Tuple[MqttParams, List
     bridge = r.section(data, "bridge", "bridge")
     r.check_keys(bridge, ("ros2mqtt", "mqtt2ros", "mqtt_client_version"), "bridge")
     wire = parse_wire(r, bridge, "bridge/mqtt_client_version")
+    wire_set = bridge.get("mqtt_client_version") is not None
     ros2mqtt = tuple(_ros2mqtt(r, e, k) for k, e in enumerate(_entries(r, bridge, "ros2mqtt")))
     mqtt2ros = tuple(_mqtt2ros(r, e, k) for k, e in enumerate(_entries(r, bridge, "mqtt2ros")))
     if not ros2mqtt and not mqtt2ros:
@@ -279,7 +288,7 @@ def parse_params(data: Any, *, source: str = "params") -> Tuple[MqttParams, List
                           "(give 'bridge/ros2mqtt' or 'bridge/mqtt2ros' entries)")
     _no_duplicates(r, [e.ros_topic for e in ros2mqtt], "bridge/ros2mqtt", "ros_topic")
     _no_duplicates(r, [e.mqtt_topic for e in mqtt2ros], "bridge/mqtt2ros", "mqtt_topic")
-    return MqttParams(broker, client, ros2mqtt, mqtt2ros, wire), r.warnings
+    return MqttParams(broker, client, ros2mqtt, mqtt2ros, wire, wire_set), r.warnings
 
 
 def parse_wire(r: "_Reader", data: Mapping[str, Any], name: str) -> WireGeneration:
@@ -327,7 +336,8 @@ def _advanced(r: _Reader, e: Mapping[str, Any], name: str, ros_keys: Sequence[st
 
 def _ros2mqtt(r: _Reader, e: Mapping[str, Any], k: int) -> Ros2MqttParams:
     name = f"bridge/ros2mqtt[{k}]"
-    r.check_keys(e, ("ros_topic", "mqtt_topic", "primitive", "json", "inject_timestamp", "advanced"), name)
+    r.check_keys(e, ("ros_topic", "mqtt_topic", "primitive", "json", "inject_timestamp", "advanced",
+                     "mqtt_client_version"), name)
     ros, mqtt = _advanced(r, e, name, ("queue_size",), ("qos", "retained"))
     entry = Ros2MqttParams(
         ros_topic=_topic(r, e, "ros_topic", name),
@@ -338,6 +348,8 @@ def _ros2mqtt(r: _Reader, e: Mapping[str, Any], k: int) -> Ros2MqttParams:
         queue_size=r.get(ros, "queue_size", f"{name}/advanced/ros/queue_size", int, 1, warn=False, lo=1, hi=1e6),
         qos=_qos(r, mqtt, f"{name}/advanced/mqtt/qos"),
         retained=r.get(mqtt, "retained", f"{name}/advanced/mqtt/retained", bool, False, warn=False),
+        wire=(parse_wire(r, e, f"{name}/mqtt_client_version") if e.get("mqtt_client_version") is not None
+              else None),
     )
     if entry.primitive and entry.json:
         raise r.fail(f"{name}/json", "and 'primitive' cannot both be true: choose one payload format")
