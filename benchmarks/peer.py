@@ -3,7 +3,8 @@
 
     python peer.py IMPL ROLE [options]
 
-IMPL:  mrt_dds (micros_rt, DDS link, .venv/bin/python), mrt_tcpros (micros_rt, subscriber asks TransportHints().tcp()),
+IMPL:  mrt_shm (micros_rt's default: shared memory between two micros_rt nodes of one host),
+       mrt_dds (micros_rt, DDS link, .venv/bin/python), mrt_tcpros (micros_rt, subscriber asks TransportHints().tcp()),
        rospy (stock rospy TCPROS, /usr/bin/python3), cyclone (raw cyclonedds-python, .venv/bin/python),
        rclpy (ROS 2 Jazzy, Fast DDS, .venv-ros2/bin/python)
 ROLE:  echo | ping | send | recv | talker | listener | graph
@@ -560,7 +561,7 @@ def role_graph(a, tr, msgs):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("impl", choices=("mrt_dds", "mrt_budget", "mrt_tcpros", "rospy", "cyclone", "rclpy"))
+    ap.add_argument("impl", choices=("mrt_shm", "mrt_dds", "mrt_budget", "mrt_tcpros", "rospy", "cyclone", "rclpy"))
     ap.add_argument("role", choices=("echo", "ping", "send", "recv", "talker", "listener", "graph"))
     ap.add_argument("--topic", default="/bench")
     ap.add_argument("--kind", default="bytes", choices=KINDS)

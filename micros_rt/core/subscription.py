@@ -24,7 +24,7 @@ from .delivery import Inbox
 from .registry import EndpointRegistry
 from .stats import LatencyStats, SubscriberStatistics
 from .writers import DELIVER, HOLD, Accepted, WriterState, WriterTable
-from ..transports.base import TIME_FILTER, EndpointSpec, Feed, ProfileBackend, PushReader, TransportReader
+from ..transports.base import TIME_FILTER, EndpointSpec, Feed, ProfileBackend, PushInfo, PushReader, TransportReader
 from ..exceptions import MicrosRtError
 from ..negotiation import DDS, SHM, TCPROS, DDSAnswer, DDSOffer, ShmAnswer, ShmOffer, TransportHints
 from ..qos import (
@@ -254,6 +254,8 @@ class _Subscription:
             self.shm_links[pub_uri] = link
         if old is not None:
             old.close()
+        if not self.inbox.attach_shm(link):
+            link.start_thread()  # the delivery thread waits on Cyclone's wait set: the link wakes it
         if answer.qos is not None and (self.priority is None or answer.qos.transport_priority > self.priority):
             self.priority = TransportPriority(answer.qos.transport_priority)
         if not compat.add_pseudo_connection(self.topic, conn, publisher=False):
@@ -351,6 +353,9 @@ class _Subscription:
                     self._deliver_dds(data, info, state)
                     if bounded and time.monotonic() - last_take > _RETAKE_SECONDS:
                         break  # take again: the newest queue_size are what ROS delivers
+            for link in self.inbox.links:  # shared-memory links the delivery thread waits on itself
+                if link.drain(self._deliver_shm, _TAKE_BATCH) >= _TAKE_BATCH:
+                    more = True
             for inlet in pushed:
                 batch = inlet.take(_TAKE_BATCH)
                 if batch:
@@ -440,6 +445,9 @@ class _Subscription:
         if not self._admit_enforced(reader, source_ns or 0, qos):
             return
         self._deliver(msg, source_ns, qos.latency_budget if qos is not None else 0.0)
+
+    def _deliver_shm(self, msg: Any, source_ns: int, link: Any) -> None:
+        self._deliver_pushed(self.shm_in, msg, PushInfo(source_ns, link))
 
     def _deliver_dds(self, data: bytes, info: Any, state: WriterState) -> None:
         qos = state.qos
@@ -541,7 +549,11 @@ class _Subscription:
                 _log.exception("micros_rt: topic %s: deadline_cb raised (continuing)", self.topic)
 
     def _housekeeping(self, now: float) -> None:
-        """Drop links of DDS publishers that vanished (a restart then reconnects) and their state."""
+        """Drop links of DDS and shared-memory publishers that vanished (a restart then reconnects) and their
+        state."""
+        for link in list(self.inbox.links):  # threaded links watch their publisher themselves
+            if not link.closed and link.publisher_gone():
+                link.notify_gone()
         if not self.readers:
             return
         matched: Set[str] = set()

@@ -195,6 +195,7 @@ def shm_pair() -> Pair:
               "transport": "SHM"}
     link = shm.ShmLink(topic, channel.name, PointStamped, header=header, qos=None, put=reader.put,
                        on_drop=lambda n: None, on_gone=lambda _link: None)
+    link.start_thread()  # pushed, as beside a DDS reader (a subscription without one polls it: integration tests)
 
     def cleanup() -> None:
         link.close()

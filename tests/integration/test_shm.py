@@ -23,8 +23,19 @@ pytestmark = pytest.mark.integration
 T = 60.0
 
 
-def shm_env(master: harness.RosMaster) -> Dict[str, str]:
-    return {**master.env, "MICROS_RT_DISABLE_SHM": "0"}
+def shm_env(master: harness.RosMaster, mode: str = "beside_dds") -> Dict[str, str]:
+    """SHM on. ``beside_dds``: each node has DDS too, so a subscription's delivery thread waits on Cyclone's
+    wait set and each SHM link wakes it from a thread of its own; ``alone``: no DDS, the delivery thread waits
+    on the links itself (iceoryx2's wait set)."""
+    env = {**master.env, "MICROS_RT_DISABLE_SHM": "0"}
+    if mode == "alone":
+        env["MICROS_RT_DISABLE_DDS"] = "1"
+    return env
+
+
+@pytest.fixture(params=["beside_dds", "alone"])
+def mode(request: pytest.FixtureRequest) -> str:
+    return str(request.param)
 
 
 def iox_entries() -> List[str]:
@@ -59,8 +70,8 @@ def test_shm_tcpros_and_dds_on_one_topic_each_message_once(ros_master: harness.R
 
 
 def test_a_killed_publisher_is_noticed_and_its_restart_reconnects_over_shm(ros_master: harness.RosMaster,
-                                                                         spawn: harness.Spawner) -> None:
-    env = shm_env(ros_master)
+                                                                         spawn: harness.Spawner, mode: str) -> None:
+    env = shm_env(ros_master, mode)
     topic = "/shm/restart"
     listener = spawn(mrt("listen", "--topic", topic, "--duration", T), env, name="mrt_listener")
     listener.wait_for("ready", T)
@@ -87,8 +98,8 @@ def test_a_killed_publisher_is_noticed_and_its_restart_reconnects_over_shm(ros_m
 
 
 def test_latched_message_reaches_a_late_shm_subscriber(ros_master: harness.RosMaster,
-                                                        spawn: harness.Spawner) -> None:
-    env = shm_env(ros_master)
+                                                        spawn: harness.Spawner, mode: str) -> None:
+    env = shm_env(ros_master, mode)
     topic = "/shm/latched"
     talker = spawn(mrt("talk", "--topic", topic, "--count", 3, "--rate", 50, "--latch", "--linger", T), env,
                    name="latched_talker")
@@ -102,8 +113,8 @@ def test_latched_message_reaches_a_late_shm_subscriber(ros_master: harness.RosMa
 
 
 def test_lossless_burst_to_a_slow_shm_subscriber_loses_nothing(ros_master: harness.RosMaster,
-                                                               spawn: harness.Spawner) -> None:
-    env = shm_env(ros_master)
+                                                               spawn: harness.Spawner, mode: str) -> None:
+    env = shm_env(ros_master, mode)
     topic = "/shm/lossless"
     n = 3000
     listener = spawn(mrt("listen", "--topic", topic, "--queue-size", 0, "--exit-after", n, "--duration", T,
@@ -119,8 +130,8 @@ def test_lossless_burst_to_a_slow_shm_subscriber_loses_nothing(ros_master: harne
     talker.wait_for("done", T)
 
 
-def test_keep_last_drops_are_counted_on_shm(ros_master: harness.RosMaster, spawn: harness.Spawner) -> None:
-    env = shm_env(ros_master)
+def test_keep_last_drops_are_counted_on_shm(ros_master: harness.RosMaster, spawn: harness.Spawner, mode: str) -> None:
+    env = shm_env(ros_master, mode)
     topic = "/shm/keep_last"
     n = 2000
     listener = spawn(mrt("listen", "--topic", topic, "--queue-size", 1, "--duration", 8,

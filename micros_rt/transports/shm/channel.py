@@ -43,10 +43,11 @@ __all__ = ["MalformedFrameError", "ShmChannel", "ShmLink", "ShmWriter", "TRANSIT
 _log = nonblocking_logger("rosout.micros_rt.shm")
 
 _HEAD = struct.Struct("<QQ")
-#: Samples a channel holds between the publisher and the subscriber's link thread, which moves them at once
-#: into the subscription's queue (``queue_size`` applies there). Each holds the largest message sent so far,
-#: so this bounds the shared memory a channel of 6 MB images takes.
-TRANSIT_DEPTH = 16
+#: Most samples a channel holds for its subscriber: a lossless one's (the publisher waits beyond it), and a
+#: KEEP_LAST one's when the publisher's ``queue_size`` is larger. Only the slots in use take memory (iceoryx2
+#: reuses the last freed slot first: 300 MB sent 1 MB at a time to a subscriber that keeps up took 1 MB of
+#: /dev/shm); a subscriber that stops holds at most this many messages, as a TCP socket buffer would.
+TRANSIT_DEPTH = 64
 #: How long a lossless (``queue_size=None``) publish() waits for a subscriber that does not keep up.
 PUBLISH_BLOCK_TIMEOUT = 10.0
 #: The link thread's wait between looks at whether its publisher is still there.
@@ -78,7 +79,8 @@ def _channel_name() -> str:
     return f"micros_rt/{os.getpid():08x}{next(_ids):08x}{binascii.hexlify(os.urandom(4)).decode()}"
 
 
-def _services(name: str, *, create: bool, lossless: bool = False, latch: bool = False) -> Tuple[Any, Any]:
+def _services(name: str, *, create: bool, lossless: bool = False, latch: bool = False,
+              depth: int = TRANSIT_DEPTH) -> Tuple[Any, Any]:
     iox2 = iceoryx2()
     node = shm_node()
     service_name = iox2.ServiceName.new(name)
@@ -87,7 +89,7 @@ def _services(name: str, *, create: bool, lossless: bool = False, latch: bool = 
     if not create:
         return pubsub.open(), events.open()
     pubsub = (pubsub.max_publishers(1).max_subscribers(1).max_nodes(4)
-              .subscriber_max_buffer_size(TRANSIT_DEPTH).history_size(1 if latch else 0)
+              .subscriber_max_buffer_size(depth).history_size(1 if latch else 0)
               .enable_safe_overflow(not lossless))
     return pubsub.create(), events.create()
 
@@ -95,14 +97,15 @@ def _services(name: str, *, create: bool, lossless: bool = False, latch: bool = 
 class ShmChannel:
     """The publisher's end of one channel."""
 
-    def __init__(self, subscriber: str, *, lossless: bool, latch: bool, initial_len: int) -> None:
+    def __init__(self, subscriber: str, *, lossless: bool, latch: bool, initial_len: int,
+                 depth: int = TRANSIT_DEPTH) -> None:
         iox2 = iceoryx2()
         self.subscriber = subscriber
         self.name = _channel_name()
         self.closed = False
         self.seen = False           # the subscriber's port attached at least once
         self.created = time.monotonic()
-        self._service, events = _services(self.name, create=True, lossless=lossless, latch=latch)
+        self._service, events = _services(self.name, create=True, lossless=lossless, latch=latch, depth=depth)
         self._publisher = (self._service.publisher_builder().initial_max_slice_len(max(initial_len, 64))
                            .allocation_strategy(iox2.AllocationStrategy.PowerOfTwo)
                            .backpressure_strategy(iox2.BackpressureStrategy.DiscardData).create())
@@ -154,9 +157,11 @@ class ShmWriter:
 
     protocol = SHM
 
-    def __init__(self, topic: str, *, lossless: bool, latch: bool) -> None:
+    def __init__(self, topic: str, *, lossless: bool, latch: bool, queue_size: Optional[int] = None) -> None:
         self.topic = topic
         self.lossless = lossless
+        #: the newest this many are kept for a subscriber that falls behind (lossless: the publisher waits)
+        self.depth = TRANSIT_DEPTH if lossless or not queue_size else max(1, min(queue_size, TRANSIT_DEPTH))
         self.latch = latch
         self.closed = False
         #: why this publication stopped offering SHM (a channel could not be made or written), or None
@@ -178,7 +183,8 @@ class ShmWriter:
     def open_channel(self, subscriber: str) -> ShmChannel:
         """A new channel for ``subscriber`` (replacing its old one); raises TransportError in words."""
         try:
-            channel = ShmChannel(subscriber, lossless=self.lossless, latch=self.latch, initial_len=self._largest)
+            channel = ShmChannel(subscriber, lossless=self.lossless, latch=self.latch, initial_len=self._largest,
+                                 depth=self.depth)
         except Exception as exc:
             raise TransportError(f"topic {self.topic}: cannot create a shared-memory channel ({exc}); is /dev/shm "
                                  f"full, or iceoryx2's limits reached?") from exc
@@ -276,9 +282,15 @@ class ShmWriter:
 
 
 class ShmLink:
-    """The subscriber's end of one channel: a thread of its own (as rospy's receive thread per TCPROS
-    connection) that decodes each message and hands it to ``put(msg, source_ns, link)``, which may wait for
-    room in the subscription's queue: back-pressure to this publisher only."""
+    """The subscriber's end of one channel. Its messages reach the subscription one of two ways:
+
+    - *polled* (:meth:`drain`), by the subscription's delivery thread, which waits on this link's
+      ``listener`` itself (:class:`micros_rt.core.delivery.Inbox` with no DDS wait set): one thread wake per
+      message, as rospy's receive thread that runs the callbacks;
+    - *threaded* (:meth:`start_thread`), where the delivery thread waits on Cyclone's wait set: a thread of
+      the link's own (as rospy's per TCPROS connection) decodes and hands each message to ``put``, which may
+      wait for room in the subscription's queue (back-pressure to this publisher only).
+    """
 
     def __init__(self, topic: str, channel: str, data_class: Type[genpy.Message], *, header: Dict[str, str],
                  qos: Any, put: Callable[[Any, int, Any], None], on_drop: Callable[[int], None],
@@ -287,49 +299,65 @@ class ShmLink:
         self.channel = channel
         self.qos = qos                # the publisher's QoS (lifespan, latency budget), from its answer
         self.closed = False
+        self.released = False
         self.malformed = 0
         self._data_class = data_class
         self._header = header
         self._put = put
         self._on_drop = on_drop
         self._on_gone = on_gone
+        self._last = 0
         try:
             self._service, events = _services(channel, create=False)
             self._subscriber = self._service.subscriber_builder().create()
-            self._listener = events.listener_builder().create()
+            self.listener = events.listener_builder().create()
         except Exception as exc:
             raise TransportError(f"topic {topic}: cannot open shared-memory channel {channel} ({exc})") from exc
         self._events = events
-        self._thread = threading.Thread(target=self._run, name=f"micros_rt SHM {topic}", daemon=True)
+        self._thread: Optional[threading.Thread] = None
+
+    def start_thread(self) -> None:
+        self._thread = threading.Thread(target=self._run, name=f"micros_rt SHM {self.topic}", daemon=True)
         self._thread.start()
+
+    def drain(self, put: Callable[[Any, int, Any], None], limit: int) -> int:
+        """Decode and hand over up to ``limit`` waiting messages (any wake-up events are consumed first, so a
+        message sent after the last ``receive`` wakes the waiter again). Returns how many were taken."""
+        self.listener.try_wait()
+        receive = self._subscriber.receive
+        data_class, header = self._data_class, self._header
+        n = 0
+        while n < limit and not self.closed:
+            sample = receive()
+            if sample is None:
+                break
+            n += 1
+            frame = bytes(sample.payload().as_memory_view())
+            sample.delete()
+            try:
+                seq, source_ns, msg = decode_frame(data_class, frame)
+            except MalformedFrameError as exc:
+                self._malformed(exc)
+                continue
+            last = self._last
+            if seq > last + 1:  # sequence numbers start at 1 for the first sample this channel took
+                self._on_drop(seq - last - 1)  # overwritten in a KEEP_LAST channel: counted, never silent
+            self._last = seq
+            msg._connection_header = header
+            put(msg, source_ns, self)
+        return n
 
     def _run(self) -> None:
         iox2 = iceoryx2()
-        receive = self._subscriber.receive
-        wait = self._listener.timed_wait
-        timeout = iox2.Duration.from_secs_f64(_POLL) if hasattr(iox2.Duration, "from_secs_f64") \
-            else iox2.Duration.from_millis(int(_POLL * 1000))
-        data_class, header, put = self._data_class, self._header, self._put
-        last = 0
+        wait = self.listener.timed_wait
+        timeout = iox2.Duration.from_secs_f64(_POLL)
+        put = self._put
         try:
             while not self.closed:
-                sample = receive()
-                if sample is None:
-                    if not wait(timeout) and not self.closed and self._publisher_gone():
-                        break
+                if self.drain(put, 256):
                     continue
-                frame = bytes(sample.payload().as_memory_view())
-                sample.delete()
-                try:
-                    seq, source_ns, msg = decode_frame(data_class, frame)
-                except MalformedFrameError as exc:
-                    self._malformed(exc)
-                    continue
-                if last and seq > last + 1:
-                    self._on_drop(seq - last - 1)  # overwritten in a KEEP_LAST channel: counted, never silent
-                last = seq
-                msg._connection_header = header
-                put(msg, source_ns, self)
+                if not wait(timeout) and not self.closed and self.publisher_gone():
+                    break
         except Exception as exc:
             if not self.closed:
                 _log.warning("micros_rt: topic %s: shared-memory link %s failed (%s); connecting again",
@@ -338,9 +366,15 @@ class ShmLink:
             if not self.closed:
                 self._on_gone(self)
 
-    def _publisher_gone(self) -> bool:
+    def publisher_gone(self) -> bool:
+        """The publisher's port is gone (unregistered, or its SIGKILLed process cleaned up)."""
         cleanup_dead_nodes()
         return bool(self._service.dynamic_config.number_of_publishers == 0)
+
+    def notify_gone(self) -> None:
+        """Tell the subscription this link's publisher went (it drops the connection)."""
+        if not self.closed:
+            self._on_gone(self)
 
     def _malformed(self, exc: Exception) -> None:
         self.malformed += 1
@@ -349,14 +383,32 @@ class ShmLink:
                          "are counted, not logged", self.topic, self._header.get("callerid"), str(exc)[:300])
 
     def close(self) -> None:
-        """Stop the thread (within its poll) and release the ports; harmless twice."""
+        """Stop taking (a threaded link's thread ends within its poll and releases the ports; a polled one's
+        are released by the inbox that waits on it, after it stopped waiting); harmless twice."""
         if self.closed:
             return
         self.closed = True
-        if threading.current_thread() is not self._thread:
-            self._thread.join(_POLL * 4)
-        for port in (self._listener, self._subscriber):
+        thread = self._thread
+        if thread is not None:
+            if threading.current_thread() is not thread:
+                thread.join(_POLL * 4)
+            self.release()
+
+    def release(self) -> None:
+        """Delete the ports (once no wait set holds the listener)."""
+        if self.released:
+            return
+        self.released = True
+        for port in (self.listener, self._subscriber):
             try:
                 port.delete()
             except Exception:
                 pass
+
+
+def wake_events() -> Tuple[Any, Any]:
+    """A (listener, notifier) pair of an event service of its own: how other threads wake a delivery thread
+    that waits on an iceoryx2 wait set."""
+    iox2 = iceoryx2()
+    events = shm_node().service_builder(iox2.ServiceName.new(_channel_name() + "w")).event().create()
+    return events.listener_builder().create(), events.notifier_builder().create()

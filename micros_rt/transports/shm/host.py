@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import threading
+import time
 from typing import Any, Optional
 
 __all__ = ["MIN_FREE_BYTES", "cleanup_dead_nodes", "host_identity", "iceoryx2", "shm_node", "unavailable_reason"]
@@ -50,7 +51,14 @@ def host_identity() -> str:
 
 
 def iceoryx2() -> Any:
-    """The iceoryx2 module (after :func:`unavailable_reason` returned None)."""
+    """The iceoryx2 module (raises RuntimeError, in words, where it cannot be used)."""
+    global _reason
+    if _module is None:
+        with _lock:
+            if _reason == "":
+                _reason = _check()
+        if _module is None:
+            raise RuntimeError(_reason or "iceoryx2 is not loaded")
     return _module
 
 
@@ -109,12 +117,22 @@ def shm_node() -> Any:
         return _node
 
 
+_last_cleanup = 0.0
+#: At most one clean-up per this many seconds per process (every link and channel asks every 0.5 s).
+CLEANUP_INTERVAL = 0.5
+
+
 def cleanup_dead_nodes() -> None:
     """Reclaim what SIGKILLed iceoryx2 processes left (their shared memory and their ports in our services),
     so a dead peer's channel reads as unconnected."""
+    global _last_cleanup
     node = _node
     if node is None:
         return
+    now = time.monotonic()
+    if now - _last_cleanup < CLEANUP_INTERVAL:
+        return
+    _last_cleanup = now
     try:
         node.try_cleanup_dead_nodes()
     except Exception:  # another process cleaning at the same moment; the next round will
