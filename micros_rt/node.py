@@ -24,7 +24,8 @@ import rospy
 from .core import introspection as _introspection
 from .core import rospy_compat as compat
 from .core.publication import Publisher, _Publication
-from .core.runtime import _graph_id, _log, _node, _require_node, dds_backend, start_dds_early, wait_dds_started
+from .core.runtime import (_graph_id, _log, _node, _require_node, dds_backend, ros2_visible, start_dds_early,
+                           wait_dds_started)
 from .core.reader_subscription import OpenReader, ReaderSubscription
 from .core.registry import EndpointRegistry
 from .core.subscription import DeadlineMissed, Subscriber, _Subscription
@@ -74,7 +75,7 @@ def init_node(name: str, argv: Optional[List[str]] = None, anonymous: bool = Fal
     path = qos_profile or os.environ.get("MICROS_RT_QOS_PROFILE") or None
     profile = QoSProfile.load(path) if path else None
     _tune_malloc()
-    start_dds_early()
+    start_dds_early(profile)
     with compat.prompt_registration_poll():
         rospy.init_node(name, argv=argv, anonymous=anonymous, **kwargs)
     with _node.lock:
@@ -275,10 +276,13 @@ class NodeHandle:
                        f"{', '.join(served)} only (transport_hints), not shared memory")
 
         def create() -> _Publication:
+            eager = ros2_visible(_node.profile)
             pub = _Publication(resolved, data_class, queue_size, latch, effective,
-                               dds=None if off_dds else dds_backend(), tag=_tag(), extra=_profile_backends(),
-                               pacer=_node.pacer, off_dds=off_dds)
+                               dds=dds_backend() if eager and not off_dds else None, tag=_tag(),
+                               extra=_profile_backends(), pacer=_node.pacer, off_dds=off_dds)
             pub.off_shm = off_shm
+            if not eager and not off_dds:
+                pub.lazy_dds = dds_backend  # the DDS writer comes with the first subscriber that takes DDS
             return pub
 
         pub = _node.publications.acquire(resolved, create, reuse)
@@ -356,8 +360,12 @@ class NodeHandle:
         created: List[_Subscription] = []
 
         def create() -> _Subscription:
-            new = _Subscription(resolved, data_class, queue_size, effective, hints, dds=dds_backend(), tag=_tag(),
+            eager = ros2_visible(_node.profile)
+            new = _Subscription(resolved, data_class, queue_size, effective, hints,
+                                dds=dds_backend() if eager and hints.allows_dds else None, tag=_tag(),
                                 graph=_node.graph, extra=_profile_backends())
+            if not eager and hints.allows_dds:
+                new.lazy_dds = dds_backend  # the DDS reader comes with the first publisher that takes DDS
             new.lifespan = lifespan
             new.callbacks = ((callback, callback_args),)  # before start(): a latched message may come at once
             created.append(new)

@@ -8,7 +8,7 @@ import dataclasses
 import struct
 import threading
 import time
-from typing import TYPE_CHECKING, Any, Callable, Dict, Optional, Set, Tuple, Type
+from typing import TYPE_CHECKING, Any, Callable, Dict, Optional, Set, Tuple, Type, Union
 
 import genpy
 import rospy
@@ -32,6 +32,7 @@ from ..negotiation import (
     decide_shm,
     DDSAnswer,
     DDSOffer,
+    DDSOpenFirst,
     NegotiatedTransport,
     PublicationFacts,
     RateLimitedLog,
@@ -104,22 +105,19 @@ class _Publication:
         self.off_shm: Optional[str] = None
         self.dds: "Optional[DDSTopicWriter]" = None
         self._dds_backend = dds
+        self._tag = tag
+        #: with ROS 2 visibility off: opens the process's DDS back end when a first subscriber takes DDS
+        self.lazy_dds: "Optional[Callable[[], Optional[DDSBackend]]]" = None
+        self._dds_opening = threading.Lock()
         if dds is not None:
-            try:
-                self.dds = dds.open_writer(EndpointSpec(topic, data_class, queue_size, latch, tag), options)
-            except MicrosRtError as exc:
-                _log.warning("micros_rt: topic %s will use TCPROS only: %s", topic, exc)
+            self._open_dds_writer(dds)
         # writers of the transports the YAML profile attaches to this topic (MQTT): every message is mirrored
         spec = EndpointSpec(topic, data_class, queue_size, latch, tag)
         self.mirrors: Tuple[TransportWriter, ...] = tuple(
             w for w in (b.open_writer(spec, options) for b in extra) if w is not None)
-        # the DDS writer, then the mirrors, each behind a lane when it can say "no room now" (DDS): one topic's
-        # back-pressure never holds another topic's publish(), and a KEEP_LAST publish() never waits (as rospy's)
-        depth = None if is_lossless(queue_size) else queue_size
-        self.senders: Tuple[TransportWriter, ...] = tuple(
-            Lane(w, topic=topic, depth=depth, max_age=max_age_for(options)) if isinstance(w, BackPressuredWriter) else w
-            for w in ((self.dds,) if self.dds is not None else ()) + self.mirrors)
-        self.lanes = tuple(s for s in self.senders if isinstance(s, Lane))
+        self.senders: Tuple[TransportWriter, ...] = ()
+        self.lanes: Tuple[Lane, ...] = ()
+        self._build_senders()
         #: every writer of the topic, in sending order: TCPROS first (rospy serializes inside its send and
         #: raises before writing), then the senders
         self.writers: Tuple[TransportWriter, ...] = ()
@@ -127,6 +125,40 @@ class _Publication:
         # (caller ids) served by them, not by this publication's own DDS writer
         self._foreign: Optional[Tuple[ForeignSource, ReaderAlive]] = None
         self.delegated: Set[str] = set()
+
+    def _open_dds_writer(self, backend: "DDSBackend") -> None:
+        try:
+            self.dds = backend.open_writer(EndpointSpec(self.topic, self.data_class, self.queue_size, self.latch,
+                                                        self._tag), self.options)
+        except MicrosRtError as exc:
+            _log.warning("micros_rt: topic %s will use TCPROS only: %s", self.topic, exc)
+
+    def _build_senders(self) -> None:
+        """The DDS writer, then the mirrors, each behind a lane when it can say "no room now" (DDS): one topic's
+        back-pressure never holds another topic's publish(), and a KEEP_LAST publish() never waits (as rospy's)."""
+        depth = None if is_lossless(self.queue_size) else self.queue_size
+        self.senders = tuple(
+            Lane(w, topic=self.topic, depth=depth, max_age=max_age_for(self.options))
+            if isinstance(w, BackPressuredWriter) else w
+            for w in ((self.dds,) if self.dds is not None else ()) + self.mirrors)
+        self.lanes = tuple(s for s in self.senders if isinstance(s, Lane))
+
+    def _ensure_dds(self) -> None:
+        """With ROS 2 visibility off: the DDS writer, made when a first subscriber would take DDS (XML-RPC thread)."""
+        with self._dds_opening:  # two subscribers asking at once: one writer, and both wait for it
+            opener = self.lazy_dds
+            if opener is None or self.dds is not None:
+                return
+            backend = opener()
+            self.lazy_dds = None
+            if backend is None:
+                return  # DDS cannot start here: said once by the participant; the subscriber gets TCPROS
+            self._dds_backend = backend
+            self._open_dds_writer(backend)
+            if self.dds is not None:
+                _log.info("micros_rt: topic %s: DDS writer made for a subscriber that takes DDS", self.topic)
+                self._build_senders()
+                self._refresh_writers()
 
     def start(self) -> None:
         self.tcpros = compat.TcprosWriter(self.topic, self.data_class, self.queue_size, self.latch,
@@ -220,8 +252,8 @@ class _Publication:
             if self.shm is None:
                 from ..transports.shm.channel import ShmWriter
 
-                self.shm = ShmWriter(self.topic, latch=self.latch, lossless=is_lossless(self.queue_size)
-                                     and not self.options.using_best_effort_protocol)
+                self.shm = ShmWriter(self.topic, latch=self.latch, queue_size=self.queue_size,
+                                     lossless=is_lossless(self.queue_size) and not self.options.using_best_effort_protocol)
                 last = self.tcpros.latched() if self.latch and self.tcpros is not None else None
                 if last is not None:
                     self.shm.keep_latched(last)  # published before the first SHM subscriber came
@@ -250,8 +282,17 @@ class _Publication:
             compat.remove_pseudo_connection(self.topic, conn, publisher=True)
             conn.close()
 
-    def judge(self, offer: DDSOffer, subscriber: str) -> Tuple[Verdict, Optional[DDSAnswer]]:
+    def judge(self, offer: DDSOffer, subscriber: str) -> Tuple[Verdict, Optional[Union[DDSAnswer, DDSOpenFirst]]]:
+        if self.dds is None and self.lazy_dds is not None:
+            self._ensure_dds()
         facts = self.facts()
+        if offer.lazy:
+            # a subscriber with no DDS reader yet: say whether DDS would do; it opens its reader and asks again
+            full = dataclasses.replace(offer, topic=facts.dds_topic, type_name=facts.type_name)
+            verdict = decide(full, facts, subscriber=short(subscriber))
+            with self.lock:
+                remember_verdict(self.verdicts, short(subscriber, 256), verdict)
+            return verdict, DDSOpenFirst() if verdict.accepted else None
         foreign = self._foreign[0]() if self._foreign is not None and facts.domain is not None else None
         if foreign is not None and (foreign.topic == self.topic or offer.follow):
             # the other graph's writers first: no hop through this process when the subscriber can take them

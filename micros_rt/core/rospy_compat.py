@@ -40,8 +40,8 @@ import rospy.impl.registration
 import rospy.names
 import rospy.topics
 import rosgraph
-from ..negotiation import (DDS, SHM, TCPROS, DDSAnswer, DDSOffer, MalformedNegotiationError, RateLimitedLog, ShmAnswer,
-                           Verdict)
+from ..negotiation import (DDS, SHM, TCPROS, DDSAnswer, DDSOffer, DDSOpenFirst, MalformedNegotiationError,
+                           RateLimitedLog, ShmAnswer, Verdict)
 from ..negotiation import NegotiatedTransport, choose_protocol
 from rospy.impl.registration import (
     RegManager,
@@ -104,6 +104,9 @@ class SubscriptionHook(Protocol):
 
     def connect_shm(self, pub_uri: str, answer: ShmAnswer) -> Tuple[int, str, int]:
         """Open the shared-memory link (and its pseudo-connection) after the publisher accepted SHM."""
+
+    def open_dds(self) -> bool:
+        """Open the DDS reader a lazy offer left out (a publisher answered DDSOpenFirst)."""
 
 
 _find_publication: Callable[[str], Optional[PublicationHook]] = lambda topic: None
@@ -368,6 +371,14 @@ def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
         if not protocols:
             return 0, "ERROR: no protocol allowed by the TransportHints", 0
         code, msg, result = _request_topic(pub_uri, topic, protocols)
+        if code > 0 and DDSOpenFirst.is_one(result):
+            # the publisher would take DDS and this subscription has no DDS reader yet (ROS 2 visibility off):
+            # open it and ask again; without one, ask for the rest
+            hook.open_dds()
+            protocols = hook.offered_protocols()
+            code, msg, result = _request_topic(pub_uri, topic, protocols)
+            if code > 0 and DDSOpenFirst.is_one(result):
+                return 0, "DDS reader could not be opened", 0
         if code <= 0:
             offered = [p[0] for p in protocols]
             if TCPROS not in offered:

@@ -55,6 +55,25 @@ def _graph_id() -> str:
     return f"{run_id}@{uri}".replace(";", "_").replace("=", "_")[:200]
 
 
+_OFF = ("0", "off", "false", "no")
+_ON = ("1", "on", "true", "yes")
+
+
+def ros2_visible(profile: Optional[QoSProfile] = None) -> bool:
+    """Whether this node's topics are ROS 2 topics from the start (a DDS participant, writers and readers made
+    with each topic, as an rclpy node's): ``MICROS_RT_ROS2`` (on/off), else the profile's ``ros2:``, else on.
+    Off, a node makes DDS entities only when a peer needs them (a micros_rt node on another host): a robot
+    with no ROS 2 node pays nothing for DDS."""
+    raw = os.environ.get("MICROS_RT_ROS2", "").strip().lower()
+    if raw in _OFF:
+        return False
+    if raw and raw not in _ON:
+        _log.warning("micros_rt: MICROS_RT_ROS2=%r is not on or off; ROS 2 visibility stays on", raw)
+    if not raw and profile is not None and profile.ros2 is not None:
+        return profile.ros2
+    return True
+
+
 def _require_node() -> None:
     """The node is ready for a topic: initialised, and the DDS import that ``init_node`` started finished."""
     if not _node.initialized:
@@ -65,7 +84,7 @@ def _require_node() -> None:
     wait_dds_started()
 
 
-def start_dds_early() -> None:
+def start_dds_early(profile: Optional[QoSProfile] = None) -> None:
     """Import the DDS back end on a background thread while rospy registers the node with the master.
 
     Importing cyclonedds and micros_rt's DDS modules takes 80-200 ms of a node's start, and the node's
@@ -74,8 +93,8 @@ def start_dds_early() -> None:
     rospy's logging is set up, so a DDS that cannot start is reported as before. rospy's ``init_node``
     imports only configparser and encodings.idna meanwhile, and the first topic waits for this thread
     (:func:`_require_node`), so no two threads import cyclonedds at once."""
-    if os.environ.get("MICROS_RT_DISABLE_DDS", "") not in ("", "0"):
-        return
+    if os.environ.get("MICROS_RT_DISABLE_DDS", "") not in ("", "0") or not ros2_visible(profile):
+        return  # no DDS, or DDS only when a peer needs it: no import now
 
     def start() -> None:
         try:

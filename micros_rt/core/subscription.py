@@ -91,6 +91,9 @@ class _Subscription:
         self._thread_priority: Optional[TransportPriority] = None
         self._high_entered = False
         self._dds = dds if hints.allows_dds else None
+        #: with ROS 2 visibility off: opens the process's DDS back end when a first publisher would take DDS
+        self.lazy_dds: "Optional[Callable[[], Optional[DDSBackend]]]" = None
+        self._dds_opening = threading.Lock()
         self.inbox = Inbox(self._dds.participant if self._dds is not None else None)
         self.readers: Tuple[DDSTopicReader, ...] = ()
         self.reader: Optional[DDSTopicReader] = None
@@ -146,7 +149,9 @@ class _Subscription:
         the delivery thread."""
         assert self._dds is not None
         spec = EndpointSpec(topic or self.topic, self.data_class, self.queue_size, latched, self.tag)
-        reader = self._dds.open_reader(spec, self.options, self._matches_changed, self._incompatible)
+        # a delivery thread that waits on no Cyclone wait set (a reader opened later) is woken per sample
+        reader = self._dds.open_reader(spec, self.options, self._matches_changed, self._incompatible,
+                                       wake_on_data=self.inbox.waitset is None)
         self.inbox.attach(reader)
         self.readers = self.readers + (reader,)
         return reader
@@ -175,6 +180,12 @@ class _Subscription:
                 if shm.unavailable_reason() is None:
                     out.append(ShmOffer(host=shm.host_identity(), md5=self.data_class._md5sum,
                                         type_name=self.data_class._type, qos=self.effective).to_xmlrpc())
+            elif proto == DDS and reader is None and self.lazy_dds is not None:
+                from ..transports.dds.participant import domain_id_from_env
+
+                out.append(DDSOffer(domain=domain_id_from_env(), topic="", type_name="", md5=self.data_class._md5sum,
+                                    qos=self.effective, reader="", participant="", graph=self.writers.graph,
+                                    lazy=True).to_xmlrpc())
             elif proto == DDS and reader is not None and dds is not None:
                 out.append(DDSOffer(domain=dds.domain_id, topic=reader.dds_topic, type_name=reader.dds_type.type_name,
                                     md5=self.data_class._md5sum, qos=self.effective, reader=reader.guid,
@@ -183,6 +194,22 @@ class _Subscription:
             elif proto == TCPROS:
                 out.append([TCPROS])
         return out
+
+    def open_dds(self) -> bool:
+        """With ROS 2 visibility off: open this subscription's DDS reader now (a publisher would take DDS; rospy's
+        connect thread). True when there is one."""
+        with self._dds_opening:
+            if self.reader is None and self.lazy_dds is not None and not self.closed:
+                backend = self.lazy_dds()
+                self.lazy_dds = None
+                if backend is not None:
+                    self._dds = backend
+                    try:
+                        self.reader = self._open_reader(latched=False)
+                        _log.info("micros_rt: topic %s: DDS reader made for a publisher that takes DDS", self.topic)
+                    except MicrosRtError as exc:
+                        _log.warning("micros_rt: topic %s will use TCPROS only: %s", self.topic, exc)
+        return self.reader is not None
 
     def connect_dds(self, pub_uri: str, answer: DDSAnswer) -> Tuple[int, str, int]:
         if self.closed:

@@ -5,7 +5,7 @@ protocol-order loop. Pure: nothing here touches rospy or creates DDS entities
 from .choose import Choice, NegotiatedTransport, choose_protocol, dds_transport
 from .decide import MAX_VERDICTS, PublicationFacts, Verdict, decide, decide_shm, remember_verdict
 from .hints import TransportHints
-from .messages import DDSAnswer, DDSOffer, MalformedNegotiationError, ShmAnswer, ShmOffer, is_guid
+from .messages import DDSAnswer, DDSOffer, DDSOpenFirst, MalformedNegotiationError, ShmAnswer, ShmOffer, is_guid
 from .protocol import (
     DDS,
     DEFAULT_PROTOCOLS,
@@ -34,6 +34,7 @@ __all__ = [
     "Choice",
     "DDSAnswer",
     "DDSOffer",
+    "DDSOpenFirst",
     "MalformedNegotiationError",
     "NegotiatedTransport",
     "PublicationFacts",

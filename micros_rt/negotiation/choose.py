@@ -18,8 +18,8 @@ from .protocol import DDS, NEGOTIATED_PROTOCOLS
 
 __all__ = ["Choice", "NegotiatedTransport", "choose_protocol", "dds_transport"]
 
-#: Judges one offer: (verdict, answer when accepted).
-JudgeDDS = Callable[[DDSOffer], Tuple[Verdict, Optional[DDSAnswer]]]
+#: Judges one offer: (verdict, answer when accepted: a DDSAnswer, or DDSOpenFirst for a lazy offer).
+JudgeDDS = Callable[[DDSOffer], Tuple[Verdict, Any]]
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ from ..exceptions import MicrosRtError, QoSTypeError, QoSValueError
 from ..qos import AdvertiseQoSOptions, SubscribeQoSOptions
 from .protocol import DDS, MAX_FIELD_CHARS, SHM
 
-__all__ = ["DDSOffer", "DDSAnswer", "MalformedNegotiationError", "ShmAnswer", "ShmOffer", "is_guid"]
+__all__ = ["DDSOffer", "DDSAnswer", "DDSOpenFirst", "MalformedNegotiationError", "ShmAnswer", "ShmOffer", "is_guid"]
 
 _GUID = re.compile(r"^[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}$")
 _INT32 = (-(2 ** 31), 2 ** 31 - 1)
@@ -113,9 +113,16 @@ class DDSOffer:
     transient_local: bool = False
     #: The subscriber opens a reader on another DDS topic when an answer names one (``DDSAnswer.topic``).
     follow: bool = False
+    #: The subscriber has no DDS reader yet (it makes DDS entities only when a peer needs them): a publisher
+    #: that would take DDS answers :class:`DDSOpenFirst`, and the subscriber opens its reader and asks again.
+    #: ``topic``, ``type_name``, ``reader`` and ``participant`` are empty then.
+    lazy: bool = False
 
     def to_xmlrpc(self) -> List[Any]:
         """The protocol entry, ``['DDS', {...}]`` (roscpp needs every entry to be a list)."""
+        if self.lazy:
+            return [DDS, {"lazy": True, "domain": self.domain, "md5": self.md5, "qos": self.qos.to_dict(),
+                          "graph": self.graph}]
         return [DDS, {
             "domain": self.domain, "topic": self.topic, "type": self.type_name, "md5": self.md5,
             "qos": self.qos.to_dict(), "reader": self.reader, "participant": self.participant,
@@ -132,10 +139,27 @@ class DDSOffer:
             qos = SubscribeQoSOptions.from_dict(_qos_dict(d), source=source)
         except (QoSValueError, QoSTypeError) as exc:
             raise MalformedNegotiationError("qos", str(exc)[:300]) from exc
+        if _bool(d, "lazy"):
+            return cls(domain=domain, topic="", type_name="", md5=_str(d, "md5"), qos=qos, reader="",
+                       participant="", graph=_str(d, "graph"), lazy=True)
         return cls(domain=domain, topic=_str(d, "topic"), type_name=_str(d, "type"), md5=_str(d, "md5"),
                    qos=qos, reader=_str(d, "reader", guid=True),
                    participant=_str(d, "participant", guid=True), graph=_str(d, "graph"),
                    transient_local=_bool(d, "transient_local"), follow=_bool(d, "follow"))
+
+
+@dataclass(frozen=True)
+class DDSOpenFirst:
+    """A publisher's answer to a lazy DDS offer (:attr:`DDSOffer.lazy`): it would take DDS; the subscriber opens
+    its DDS reader and asks again with a full offer. ``['DDS', {'open_first': True}]``."""
+
+    def to_xmlrpc(self) -> List[Any]:
+        return [DDS, {"open_first": True}]
+
+    @staticmethod
+    def is_one(entry: object) -> bool:
+        return (isinstance(entry, list) and len(entry) == 2 and entry[0] == DDS and isinstance(entry[1], dict)
+                and entry[1].get("open_first") is True)
 
 
 @dataclass(frozen=True)

@@ -98,6 +98,9 @@ class QoSProfile:
         self.mqtt: Any = None
         #: the ``links`` section: links of limited bandwidth, in file order
         self.links: tuple[LinkSpec, ...] = ()
+        #: the ``ros2`` switch: False keeps the node invisible to ROS 2 (DDS only where a peer needs it);
+        #: None: not given (visible, unless MICROS_RT_ROS2 says otherwise)
+        self.ros2: bool | None = None
 
     def __repr__(self) -> str:
         return (
@@ -141,8 +144,17 @@ class QoSProfile:
         _expect_mapping(root, source, "the top level", "a mapping with 'publishers'/'subscribers'")
         mqtt: Any = None
         links: tuple[LinkSpec, ...] = ()
+        ros2: bool | None = None
         for section_node, body in _pairs(root, source, ""):
             section = section_node.value
+            if section == "ros2":
+                value = _construct(body)
+                if not isinstance(value, bool):
+                    raise ProfileError(f"{_where(source, body)}: ros2: expected true (micros_rt topics are ROS 2 "
+                                       f"topics too, the default) or false (no DDS until a peer on another host "
+                                       f"needs it), got {value!r}")
+                ros2 = value
+                continue
             if section == "mqtt":
                 mqtt = _construct(body)
                 continue
@@ -152,7 +164,7 @@ class QoSProfile:
             if section not in _SECTIONS:
                 raise ProfileError(
                     f"{_where(source, section_node)}: unknown section {section!r}; "
-                    f"expected {', '.join(repr(s) for s in (*_SECTIONS, 'links', 'mqtt'))}"
+                    f"expected {', '.join(repr(s) for s in (*_SECTIONS, 'links', 'mqtt', 'ros2'))}"
                 )
             if _is_null(body):
                 continue
@@ -182,6 +194,7 @@ class QoSProfile:
         profile._transports = transports
         profile.mqtt = mqtt
         profile.links = links
+        profile.ros2 = ros2
         return profile
 
     def advertise_options(self, topic: str) -> AdvertiseQoSOptions | None:

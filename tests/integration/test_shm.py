@@ -182,3 +182,47 @@ def test_another_unix_user_falls_back_to_dds_in_words(ros_master: harness.RosMas
     listener.wait_for_count("recv", 5, T)
     assert set(transports(listener)) == {"DDS"}
     talker.wait_for(lambda e: e.get("event") == "log" and "another Unix user" in e.get("text", ""), T)
+
+
+def _maps_ddsc(pid: int) -> bool:
+    """Whether process ``pid`` has Cyclone DDS's library loaded (a participant, or its import)."""
+    with open(f"/proc/{pid}/maps") as f:
+        return "libddsc" in f.read()
+
+
+def test_with_ros2_visibility_off_local_nodes_use_shm_and_load_no_dds(ros_master: harness.RosMaster,
+                                                                       spawn: harness.Spawner) -> None:
+    env = {**shm_env(ros_master), "MICROS_RT_ROS2": "off"}
+    topic = "/shm/no_ros2"
+    listener = spawn(mrt("listen", "--topic", topic, "--exit-after", 20, "--duration", T), env, name="listener")
+    listener.wait_for("ready", T)
+    talker = spawn(mrt("talk", "--topic", topic, "--count", 1000, "--rate", 50, "--linger", 5), env, name="talker")
+    listener.wait_for_count("recv", 20, T)
+    assert set(transports(listener)) == {"SHM"}
+    assert not _maps_ddsc(talker.proc.pid) and not _maps_ddsc(listener.proc.pid), \
+        "a node with ROS 2 visibility off and only local peers loaded Cyclone DDS"
+
+
+def test_with_ros2_visibility_off_a_peer_on_another_host_gets_dds_on_demand(dds_domain: int,
+                                                                           spawn: harness.Spawner) -> None:
+    from netns import Hosts
+
+    hosts = Hosts(2)
+    hosts.up()
+    try:
+        envs = [{**hosts.env(i), "MICROS_RT_DISABLE_SHM": "0", "MICROS_RT_ROS2": "off"} for i in range(2)]
+        topic = "/shm/other_host"
+        listener = spawn(hosts.run(1, mrt("listen", "--topic", topic, "--exit-after", 20, "--duration", T)),
+                         envs[1], name="listener_host1")
+        listener.wait_for("ready", T)
+        talker = spawn(hosts.run(0, mrt("talk", "--topic", topic, "--count", 1000, "--rate", 50, "--linger", 5)),
+                       envs[0], name="talker_host0")
+        got = listener.wait_for_count("recv", 20, T)
+        # another network namespace is another host: shared memory is declined, DDS made on demand on both sides
+        assert {e["transport"] for e in got} == {"DDS"}
+        # `ip netns exec` execs the node in its own process: the pids are the nodes'
+        assert _maps_ddsc(talker.proc.pid) and _maps_ddsc(listener.proc.pid)
+        talker.stop()
+        listener.stop()
+    finally:
+        hosts.down()

@@ -225,7 +225,7 @@ def test_data_centric_update_is_refused_with_its_reason() -> None:
 
 def test_unknown_section() -> None:
     message = error_of("publishers: {}\nservices:\n  /x: {}\n")
-    assert message == "qos.yaml:2: unknown section 'services'; expected 'publishers', 'subscribers', 'links', 'mqtt'"
+    assert message == "qos.yaml:2: unknown section 'services'; expected 'publishers', 'subscribers', 'links', 'mqtt', 'ros2'"
 
 
 def test_unknown_option_lists_known_ones() -> None:

@@ -131,7 +131,8 @@ class DDSTopicReader:
     enforces = frozenset({TIME_FILTER})
 
     def __init__(self, backend: "DDSBackend", spec: EndpointSpec, options: Optional[SubscribeQoSOptions],
-                 wake: Callable[[], None], on_incompatible: Callable[[int], None]) -> None:
+                 wake: Callable[[], None], on_incompatible: Callable[[int], None], *,
+                 wake_on_data: bool = False) -> None:
         self.dds_type = dds_type_for(spec.data_class)
         self.dds_topic = dds_topic_name(spec.topic)
         user_data = make_user_data(**spec.tag)
@@ -140,9 +141,12 @@ class DDSTopicReader:
             qos = plain_reader_qos(queue_size=depth, transient_local=spec.latch, user_data=user_data)
         else:
             qos = reader_qos(options, queue_size=depth, transient_local=spec.latch, user_data=user_data)
+        callbacks: Dict[str, Callable[..., None]] = {}
+        if wake_on_data:  # for a waiter with no Cyclone wait set to attach ``condition`` to (Cyclone's thread)
+            callbacks["on_data_available"] = lambda _r: wake()
         listener = Listener(  # type: ignore[no-untyped-call]
             on_requested_incompatible_qos=lambda _r, status: on_incompatible(int(status.last_policy_id)),
-            on_subscription_matched=lambda *_: wake())
+            on_subscription_matched=lambda *_: wake(), **callbacks)
         self._reader = DDSReader(backend.participant, self.dds_topic, self.dds_type, qos, listener)
         self._backend = backend
         self.condition = self._reader.condition
@@ -210,8 +214,9 @@ class DDSBackend:
         return _translated(lambda: DDSTopicWriter(self, spec, options), spec.topic, "writer")
 
     def open_reader(self, spec: EndpointSpec, options: Optional[SubscribeQoSOptions], wake: Callable[[], None],
-                    on_incompatible: Callable[[int], None]) -> DDSTopicReader:
-        return _translated(lambda: DDSTopicReader(self, spec, options, wake, on_incompatible), spec.topic, "reader")
+                    on_incompatible: Callable[[int], None], *, wake_on_data: bool = False) -> DDSTopicReader:
+        return _translated(lambda: DDSTopicReader(self, spec, options, wake, on_incompatible,
+                                                  wake_on_data=wake_on_data), spec.topic, "reader")
 
     def describe(self) -> List[str]:
         lines = [f"DDS domain {self.participant.domain_id}, participant {self.participant.guid}"]
