@@ -14,6 +14,8 @@ import os
 import re
 import socket
 import subprocess
+import threading
+import time
 import urllib.parse
 from dataclasses import dataclass
 from typing import Dict, List, Mapping, Optional, Tuple
@@ -79,7 +81,7 @@ def run_checks(env: Mapping[str, str]) -> List[Check]:
             check_cyclone(env) if not domain.failed else
             Check("Cyclone DDS", SKIP, "not started: ROS_DOMAIN_ID is invalid"),
             check_clocks(env) if not master.failed else Check("clocks", SKIP, "not checked: no ROS master"),
-            check_profile(env)]
+            check_shared_memory(env), check_ros2_visibility(env), check_profile(env)]
 
 
 # --------------------------------------------------------------------------- checks
@@ -266,6 +268,68 @@ def check_cyclone(env: Mapping[str, str]) -> Check:
     guid = p.guid
     p.close()
     return Check("Cyclone DDS", OK, f"a participant started on domain {domain} (guid {guid})")
+
+
+def check_shared_memory(env: Mapping[str, str]) -> Check:
+    """iceoryx2 and /dev/shm: a message through a shared-memory channel of this process, and what SIGKILLed
+    processes left behind, reclaimed."""
+    import platform
+
+    from ..transports.shm import host
+
+    if env.get("MICROS_RT_DISABLE_SHM", "") not in ("", "0"):
+        return Check("shared memory", SKIP, "turned off by MICROS_RT_DISABLE_SHM: micros_rt nodes of this host use "
+                                            "DDS between them")
+    reason = host.unavailable_reason(env)
+    if reason is not None:
+        if platform.machine() != "x86_64":
+            return Check("shared memory", SKIP, f"{reason}; iceoryx2 has no wheel for {platform.machine()}: nodes "
+                                                f"of this host use DDS between them")
+        return Check("shared memory", FAIL, reason, "pip install iceoryx2 (in the environment micros_rt runs in) "
+                     "and give /dev/shm room; until then nodes of this host use DDS between them")
+    from ..transports.shm.channel import ShmLink, ShmWriter
+    from std_msgs.msg import String
+
+    done = threading.Event()
+    try:
+        t0 = time.monotonic()
+        writer = ShmWriter("/micros_rt_doctor", lossless=False, latch=False, queue_size=1)
+        channel = writer.open_channel("/micros_rt_doctor")
+        link = ShmLink("/micros_rt_doctor", channel.name, String, header={}, qos=None,
+                       put=lambda _msg, _ns, _link: done.set(), on_drop=lambda n: None, on_gone=lambda _link: None)
+        link.start_thread()
+        body = writer.prepare(String(data="doctor"))
+        assert body is not None
+        writer.send(body)
+        crossed = done.wait(5.0)
+        took = time.monotonic() - t0
+        link.close()
+        writer.close()
+    except Exception as exc:
+        return Check("shared memory", FAIL, f"a shared-memory channel failed: {exc}",
+                     "check df -h /dev/shm and that this user may write there")
+    if not crossed:
+        return Check("shared memory", FAIL, "a message sent through a shared-memory channel did not arrive in 5 s",
+                     "report it with the output of micros-rt doctor -v")
+    free = os.statvfs("/dev/shm")
+    import importlib.metadata as metadata
+
+    return Check("shared memory", OK, f"iceoryx2 {metadata.version('iceoryx2')}; a message crossed a channel in "
+                                      f"{took * 1e3:.0f} ms; /dev/shm "
+                                      f"{free.f_bavail * free.f_frsize >> 20} MiB free")
+
+
+def check_ros2_visibility(env: Mapping[str, str]) -> Check:
+    """Whether this node's topics are ROS 2 topics from the start (MICROS_RT_ROS2, the profile's ros2:)."""
+    raw = env.get("MICROS_RT_ROS2", "").strip().lower()
+    if raw in ("0", "off", "false", "no"):
+        return Check("ROS 2 visibility", OK, "off (MICROS_RT_ROS2): no DDS until a micros_rt peer on another "
+                                             "host needs it; ROS 2 nodes do not see these nodes")
+    if raw and raw not in ("1", "on", "true", "yes"):
+        return Check("ROS 2 visibility", FAIL, f"MICROS_RT_ROS2={raw!r} is neither on nor off", "export "
+                     "MICROS_RT_ROS2=off (no ROS 2 nodes on this robot) or unset it")
+    return Check("ROS 2 visibility", OK, "on: every node has a DDS participant and its topics are ROS 2 topics "
+                                         "(MICROS_RT_ROS2=off or ros2: false in the profile turns it off)")
 
 
 def check_clocks(env: Mapping[str, str]) -> Check:

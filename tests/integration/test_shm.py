@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import os
 import pwd
+import re
 import shutil
+import subprocess
 import tempfile
 import time
 from typing import Dict, List
@@ -47,26 +49,31 @@ def test_shm_tcpros_and_dds_on_one_topic_each_message_once(ros_master: harness.R
     env = shm_env(ros_master)
     topic = "/shm/mixed"
     n = 100
-    shm_listener = spawn(mrt("listen", "--topic", topic, "--exit-after", n, "--duration", T), env,
-                         name="mrt_listener")
-    stock = spawn(stock_listener("--topic", topic, "--count", n, "--duration", T), name="stock_listener")
+    shm_listener = spawn(mrt("listen", "--topic", topic, "--duration", T), env, name="mrt_listener")
+    stock = spawn(stock_listener("--topic", topic, "--duration", T), name="stock_listener")
     ros2 = spawn(harness.ros2_peer_argv("listen", "--topic", topic, "--count", str(n), "--duration", str(T)),
                  name="rclpy_listener")
     for peer in (shm_listener, stock, ros2):
         peer.wait_for("ready", T)
     talker = spawn(mrt("talk", "--topic", topic, "--count", n, "--rate", 50, "--wait-subscribers", 2,
-                       "--wait-dds-readers", 1, "--start-delay", 1.5, "--linger", 1.0, "--queue-size", 0), env,
+                       "--wait-dds-readers", 1, "--start-delay", 1.5, "--linger", T, "--queue-size", 0), env,
                    name="mrt_talker")
     want = [f"hello {i}" for i in range(n)]
     shm_listener.wait_for_count("recv", n, T)
     stock.wait_for_count("recv", n, T)
     ros2.wait_for_count("recv", n, T)
-    talker.wait_for("done", T)
+    talker.wait_for(lambda e: e.get("event") == "sent" and e.get("seq") == n - 1, T)
     time.sleep(0.5)  # nothing may arrive twice: give a duplicate the time to show up
     assert received(shm_listener) == want
     assert set(transports(shm_listener)) == {"SHM"}
     assert [e["data"] for e in stock.events("recv")] == want
     assert sorted(e["data"] for e in ros2.events("recv")) == sorted(want)
+    # the tools show the link as what it is
+    info = subprocess.run([str(harness.REPO_ROOT / ".venv" / "bin" / "micros-rt"), "topic", "info", topic], env=env,
+                          capture_output=True, text=True, timeout=90)
+    assert info.returncode == 0, info.stderr
+    assert re.search(r"/mrt_\w+ -> /mrt_\w+: SHM", info.stdout), info.stdout
+    assert re.search(r"-> /stock_listener\w*: TCPROS", info.stdout), info.stdout
 
 
 def test_a_killed_publisher_is_noticed_and_its_restart_reconnects_over_shm(ros_master: harness.RosMaster,

@@ -145,3 +145,23 @@ def test_profile_check_offline(tmp_path: Path, capsys: pytest.CaptureFixture[str
     assert "valid (0 publisher rules, 0 subscriber rules, 1 link)" in text
     assert "link radio (interface wlan0, 20 Mbit/s, 25% kept for HIGH): topics below HIGH share 15 Mbit/s" in text
     assert "DDS writers below HIGH: a send buffer of 16,384 bytes" in text  # 20 Mbit/s: the 16 kB floor
+
+
+def test_shared_memory_check_sends_a_message_through_a_channel(monkeypatch: pytest.MonkeyPatch) -> None:
+    from micros_rt.cli.doctor import check_shared_memory
+
+    monkeypatch.setenv("MICROS_RT_DISABLE_SHM", "0")  # the suite keeps it off for its other nodes
+    check = check_shared_memory({"MICROS_RT_DISABLE_SHM": "0"})
+    assert check.status == "OK", check
+    assert "iceoryx2" in check.detail and "crossed a channel" in check.detail and "MiB free" in check.detail
+    off = check_shared_memory({"MICROS_RT_DISABLE_SHM": "1"})
+    assert off.status == "SKIP" and "MICROS_RT_DISABLE_SHM" in off.detail
+
+
+def test_ros2_visibility_check_says_which_and_refuses_nonsense() -> None:
+    from micros_rt.cli.doctor import check_ros2_visibility
+
+    assert check_ros2_visibility({}).detail.startswith("on")
+    assert check_ros2_visibility({"MICROS_RT_ROS2": "off"}).detail.startswith("off")
+    bad = check_ros2_visibility({"MICROS_RT_ROS2": "maybe"})
+    assert bad.failed and "MICROS_RT_ROS2=off" in bad.fix

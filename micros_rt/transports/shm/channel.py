@@ -363,7 +363,9 @@ class ShmLink:
                 _log.warning("micros_rt: topic %s: shared-memory link %s failed (%s); connecting again",
                              self.topic, self.channel, exc)
         finally:
-            if not self.closed:
+            if self.closed:
+                self.release()  # closed meanwhile: the ports are this thread's to let go
+            else:
                 self._on_gone(self)
 
     def publisher_gone(self) -> bool:
@@ -383,16 +385,14 @@ class ShmLink:
                          "are counted, not logged", self.topic, self._header.get("callerid"), str(exc)[:300])
 
     def close(self) -> None:
-        """Stop taking (a threaded link's thread ends within its poll and releases the ports; a polled one's
-        are released by the inbox that waits on it, after it stopped waiting); harmless twice."""
+        """Stop taking, without waiting: a threaded link's thread ends within its poll and releases the ports, a
+        polled link's are released by the inbox that waits on it, once it stopped waiting. Harmless twice."""
         if self.closed:
             return
         self.closed = True
         thread = self._thread
-        if thread is not None:
-            if threading.current_thread() is not thread:
-                thread.join(_POLL * 4)
-            self.release()
+        if thread is not None and not thread.is_alive():
+            self.release()  # else the thread releases the ports when it sees ``closed`` (within its poll)
 
     def release(self) -> None:
         """Delete the ports (once no wait set holds the listener)."""

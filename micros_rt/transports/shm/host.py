@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 import threading
 import time
-from typing import Any, Optional
+from typing import Any, Mapping, Optional
 
 __all__ = ["MIN_FREE_BYTES", "cleanup_dead_nodes", "host_identity", "iceoryx2", "shm_node", "unavailable_reason"]
 
@@ -62,10 +62,11 @@ def iceoryx2() -> Any:
     return _module
 
 
-def unavailable_reason() -> Optional[str]:
-    """None when this process can use shared memory, else why not, in words (checked once)."""
+def unavailable_reason(env: Mapping[str, str] = os.environ) -> Optional[str]:
+    """None when this process can use shared memory, else why not, in words (checked once; ``env``'s
+    MICROS_RT_DISABLE_SHM each time)."""
     global _reason
-    if os.environ.get("MICROS_RT_DISABLE_SHM", "") not in ("", "0"):
+    if env.get("MICROS_RT_DISABLE_SHM", "") not in ("", "0"):
         return "turned off by MICROS_RT_DISABLE_SHM"
     with _lock:
         if _reason == "":
