@@ -1,10 +1,13 @@
 """The bridge node: mqtt_client's behaviour (ROS 1) on micros_rt's publish/subscribe.
 
-ROS -> MQTT: each ``bridge.ros2mqtt`` topic is subscribed with micros_rt (DDS from micros_rt publishers,
-TCPROS from stock nodes) as soon as the master knows its type, and every message is sent to the broker
-in mqtt_client's framing (its type announced, retained, on ``mqtt_client/ros_msg_type/<mqtt_topic>``),
-as primitive text or as JSON. The framing is one mqtt_client generation, ``bridge/mqtt_client_version``
-(2.x by default: no flag byte, ``RosMsgType.stamped``; or 1.x: a flag byte), logged at start-up.
+ROS -> MQTT: each ``bridge.ros2mqtt`` topic is subscribed as soon as the master knows its type, and every
+message is sent to the broker in mqtt_client's framing (its type announced, retained, on
+``mqtt_client/ros_msg_type/<mqtt_topic>``), as primitive text or as JSON. A framed topic is taken as bytes
+(stock rospy's ``AnyMsg`` over TCPROS, from stock and micros_rt publishers alike, as mqtt_client's
+ShapeShifter): its bytes are the payload, nothing is deserialized. Primitive and JSON topics need the fields
+and are subscribed with micros_rt (DDS from micros_rt publishers, TCPROS from stock nodes). The framing
+is one mqtt_client generation per topic: the peers' on the broker, or ``bridge/mqtt_client_version``
+(see :mod:`micros_rt.transports.mqtt.generations`).
 
 MQTT -> ROS: each ``bridge.mqtt2ros`` topic is published with micros_rt once its type is known: from the
 announcement (an installed class when the md5 matches, else a class built from the announced
@@ -23,6 +26,7 @@ from __future__ import annotations
 
 import collections
 import io
+import queue
 import threading
 import time
 import uuid
@@ -265,7 +269,11 @@ class _TopicWorker:
     def __init__(self, name: str, on_overflow: Callable[[int], None]) -> None:
         self.name = name
         self._items: Deque[Tuple[Callable[..., None], Tuple[Any, ...], bool]] = collections.deque()
-        self._cond = threading.Condition()
+        self._lock = threading.Lock()
+        # the worker sleeps in SimpleQueue.get (C), woken by one token when it went idle: per message that is
+        # cheaper than a Condition, whose wait allocates a lock and whose notify runs in Python
+        self._wake: "queue.SimpleQueue[None]" = queue.SimpleQueue()
+        self._idle = False
         self._thread: Optional[threading.Thread] = None
         self._closed = False
         self._on_overflow = on_overflow
@@ -273,7 +281,7 @@ class _TopicWorker:
 
     def put(self, fn: Callable[..., None], *args: Any, droppable: bool = True) -> None:
         """From paho's thread: never waits. Beyond WORKER_BACKLOG the oldest droppable item goes, counted."""
-        with self._cond:
+        with self._lock:
             if self._closed:
                 return
             self._items.append((fn, args, droppable))
@@ -287,26 +295,36 @@ class _TopicWorker:
             if self._thread is None:
                 self._thread = threading.Thread(target=self._run, name=f"micros_rt mqtt {self.name}", daemon=True)
                 self._thread.start()
-            self._cond.notify()
+            wake, self._idle = self._idle, False
+        if wake:
+            self._wake.put(None)
 
     def _run(self) -> None:
         while True:
-            with self._cond:
-                while not self._items and not self._closed:
-                    self._cond.wait()
+            with self._lock:
                 if self._closed:
                     return
-                fn, args, _ = self._items.popleft()
+                if not self._items:
+                    self._idle = True
+                    item = None
+                else:
+                    item = self._items.popleft()
+            if item is None:
+                self._wake.get()
+                continue
+            fn, args, _ = item
             try:
                 fn(*args)
             except Exception:
                 _log.exception("micros_rt mqtt: handling a message of MQTT topic '%s' failed (continuing)", self.name)
 
     def close(self) -> None:
-        with self._cond:
+        with self._lock:
             self._closed = True
             self._items.clear()
-            self._cond.notify()
+            wake, self._idle = self._idle, False
+        if wake:
+            self._wake.put(None)
         thread = self._thread
         if thread is not None and thread is not threading.current_thread():
             thread.join(2.0)
@@ -608,7 +626,7 @@ class MqttBridge:
                 if type_name is None:
                     continue
                 cls = roslib.message.get_message_class(type_name)
-                if cls is None:
+                if cls is None or r.framed:   # framed: bytes over TCPROS, as mqtt_client's ShapeShifter
                     r.attach_raw(type_name)
                 else:
                     r.attach(cls)
