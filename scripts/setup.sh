@@ -63,6 +63,9 @@ venv_ok() {
     env -u PYTHONPATH "$VENV/bin/python" - "$REPO_ROOT" <<'PY' >/dev/null 2>&1
 import os, sys
 import micros_rt, cyclonedds, yaml, pytest, mypy, rospy, paho.mqtt, msgpack  # noqa: F401
+import platform
+if platform.machine() == "x86_64":
+    import iceoryx2  # noqa: F401  (shared memory on one host; no wheel elsewhere: micros_rt uses DDS there)
 # editable install must point at this checkout (micros_rt may still be a namespace package)
 want = os.path.join(os.path.realpath(sys.argv[1]), "micros_rt")
 assert want in [os.path.realpath(p) for p in micros_rt.__path__], micros_rt.__path__
