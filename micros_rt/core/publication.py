@@ -332,6 +332,7 @@ class _Publication:
                 self.delegated.discard(subscriber)
             else:
                 self.delegated.add(subscriber)
+        dds.want(True)  # a subscriber served over DDS now: write (housekeeping keeps deciding)
         self._refresh_writers()
         if old is not None:
             compat.remove_pseudo_connection(self.topic, old, publisher=True)
@@ -376,12 +377,31 @@ class _Publication:
             matched |= {c.peer_guid for c in conns if c.endpoint_id in self.delegated and alive(c.peer_guid)}
         return matched
 
+    def _gate_dds(self) -> None:
+        """Write to DDS only when a matched reader wants it: a ROS 2 (untagged) reader, or a micros_rt reader this
+        publication serves over DDS. A micros_rt reader of this graph served over shared memory or TCPROS (its
+        reader exists for ROS 2's sake) drops DDS samples of a writer its node did not negotiate with: without
+        this, every message to a local SHM subscriber was also encoded and sent over loopback DDS, for nothing."""
+        dds = self.dds
+        if dds is None:
+            return
+        if self.latch or self._foreign is not None:
+            dds.want(True)
+            return
+        with self.lock:
+            served = {c.peer_guid for c in self.connections.values()}
+        graph = self._tag.get("graph")
+        readers = dds.matched_readers()
+        dds.want(any(tag is None or guid in served or tag.get("graph") != graph or "relay" in tag
+                     or "relay_import" in tag for guid, tag in readers.items()))
+
     def housekeeping(self, now: float) -> None:
         """Drop DDS links whose reader went away, or that discovery never matched in time
         (an offer nobody follows up must not stay a connection forever), and SHM channels whose subscriber
-        left (a SIGKILLed one's ports are reclaimed first)."""
+        left (a SIGKILLed one's ports are reclaimed first); decide whether DDS readers want the samples."""
         if self.shm is not None:
             self.shm.housekeeping(now, self._shm_channel_gone)
+        self._gate_dds()
         dds = self.dds
         with self.lock:
             conns = list(self.connections.values())

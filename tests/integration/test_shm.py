@@ -233,3 +233,21 @@ def test_with_ros2_visibility_off_a_peer_on_another_host_gets_dds_on_demand(dds_
         listener.stop()
     finally:
         hosts.down()
+
+
+def test_a_local_shm_subscriber_costs_its_publisher_no_dds_writes(ros_master: harness.RosMaster,
+                                                                spawn: harness.Spawner) -> None:
+    """With ROS 2 visibility on, the subscriber has a DDS reader and the publisher a DDS writer, and Cyclone
+    matches them; the publisher stops writing to DDS once it knows that reader is served over SHM."""
+    env = shm_env(ros_master)
+    topic = "/shm/no_double_send"
+    listener = spawn(mrt("listen", "--topic", topic, "--duration", T), env, name="listener")
+    listener.wait_for("ready", T)
+    talker = spawn(mrt("talk", "--topic", topic, "--count", 150, "--rate", 50, "--wait-subscribers", 1,
+                       "--wait-dds-readers", 1, "--linger", 1.0), env, name="talker")
+    matched = talker.wait_for("dds_matched", T)
+    assert matched["n"] >= 1  # the listener's DDS reader is matched with the talker's writer
+    done = talker.wait_for("done", T)
+    assert done["dds_wanted"] is False, done
+    listener.wait_for_count("recv", 150, T)
+    assert set(transports(listener)) == {"SHM"}

@@ -262,7 +262,9 @@ def main() -> int:
         end = time.monotonic() + args.linger
         while time.monotonic() < end and not micros_rt.is_shutdown():
             time.sleep(0.02)
-        emit("done", connections=pub.get_num_connections())
+        dds_writer = getattr(getattr(pub, "_pub", None), "dds", None)
+        emit("done", connections=pub.get_num_connections(),
+             dds_wanted=None if dds_writer is None else bool(dds_writer._writer.wanted))
     else:
         hints = None
         if args.hints:

@@ -72,11 +72,21 @@ class DDSTopicWriter:
         return self._writer.matched_count
 
     def prepare(self, msg: Any) -> Optional[bytes]:
-        """CDR of ``msg``, or None while no reader is matched (a latched topic always encodes: Cyclone
+        """CDR of ``msg``, or None while no matched reader wants it (a latched topic always encodes: Cyclone
         keeps the last sample for late joiners)."""
-        if self._writer._matched or self._latch:
+        writer = self._writer
+        if (writer._matched and writer.wanted) or self._latch:
             return self._encode(msg)
         return None
+
+    def want(self, wanted: bool) -> None:
+        """Whether the matched readers want the samples (the publication decides from :meth:`matched_readers`:
+        micros_rt readers of its graph that it serves over shared memory or TCPROS drop them unread)."""
+        self._writer.wanted = wanted
+
+    def matched_readers(self) -> Dict[str, Optional[Dict[str, str]]]:
+        """Matched readers: GUID -> micros_rt tag (None: a foreign reader, e.g. ROS 2)."""
+        return self._writer.matched_readers()
 
     def try_send(self, prepared: bytes) -> bool:
         """Write at once, or return False when Cyclone has no room (more unacknowledged data than the

@@ -79,6 +79,16 @@ def matched_handles(get: Callable[[], List[int]]) -> List[int]:
     return list(get())  # matches changing faster than this for eight rounds: say so
 
 
+def _user_data_tag(data: Any) -> Optional[Dict[str, str]]:
+    """The micros_rt tag in a discovered endpoint's USER_DATA (None: none, a foreign endpoint)."""
+    from cyclonedds.qos import Policy
+
+    try:
+        return parse_user_data(data.qos[Policy.Userdata].data)
+    except (KeyError, AttributeError):
+        return None
+
+
 def matched_data(get: Callable[[int], Any], handle: int) -> Any:
     """``get(handle)`` (a writer's ``get_matched_subscription_data``, a reader's
     ``get_matched_publication_data``), or None when that match has ended meanwhile: the binding says so with
@@ -99,7 +109,7 @@ class DDSWriter:
         self.dds_type = dds_type
         self._matched = 0
         self._on_matched = on_matched
-        self._reader_guids: Dict[int, str] = {}  # matched reader's instance handle -> its GUID
+        self._reader_guids: Dict[int, Tuple[str, Optional[Dict[str, str]]]] = {}  # handle -> (GUID, tag)
         self._guids_lock = threading.Lock()
         self._participant = participant
         topic = participant.topic(topic_name, dds_type.idl_class)
@@ -119,8 +129,12 @@ class DDSWriter:
 
     def _matched_changed(self, _writer: Any, status: Any) -> None:
         self._matched = status.current_count
+        self.wanted = True  # a new reader may be one that wants the data: send until the publication decides
         if self._on_matched is not None:
             self._on_matched(status.current_count)
+
+    #: whether a matched reader wants the samples (the publication decides, :meth:`matched_readers`)
+    wanted = True
 
     @property
     def matched_count(self) -> int:
@@ -128,8 +142,13 @@ class DDSWriter:
         return self._matched
 
     def matched_reader_guids(self) -> List[str]:
-        """GUIDs of the matched readers. A match's instance handle stays its own while it lasts, so each
-        reader's data (its whole QoS, parsed: ~40 us) is read once, not at every housekeeping round."""
+        """GUIDs of the matched readers."""
+        return list(self.matched_readers())
+
+    def matched_readers(self) -> Dict[str, Optional[Dict[str, str]]]:
+        """The matched readers: GUID -> micros_rt tag (None: a foreign reader, e.g. ROS 2). A match's instance
+        handle stays its own while it lasts, so each reader's data (its whole QoS, parsed: ~40 us) is read once,
+        not at every housekeeping round."""
         handles = matched_handles(self._writer.get_matched_subscriptions)
         with self._guids_lock:  # housekeeping, get_num_connections() and a publish timeout may ask at once
             known = self._reader_guids
@@ -137,12 +156,12 @@ class DDSWriter:
                 if handle not in known:
                     data = matched_data(self._writer.get_matched_subscription_data, handle)
                     if data is not None:  # None: unmatched meanwhile
-                        known[handle] = str(data.key)
+                        known[handle] = (str(data.key), _user_data_tag(data))
             if len(known) > len(handles):
                 live = set(handles)
                 for handle in [h for h in known if h not in live]:
                     del known[handle]
-            return [known[h] for h in handles if h in known]
+            return dict(known[h] for h in handles if h in known)
 
     #: ``write_serialized(data) -> int``: write one serialized sample (from the type's codec) and send
     #: it now, with the rest of a burst, or within the batch window of its ``latency_budget``; Cyclone's return code (< 0:
