@@ -94,7 +94,12 @@ class _Subscription:
         #: with ROS 2 visibility off: opens the process's DDS back end when a first publisher would take DDS
         self.lazy_dds: "Optional[Callable[[], Optional[DDSBackend]]]" = None
         self._dds_opening = threading.Lock()
-        self.inbox = Inbox(self._dds.participant if self._dds is not None else None)
+        # With shared memory, the delivery thread waits on an iceoryx2 wait set (its SHM links' listeners: one
+        # thread wake per message), and DDS readers wake it per sample from Cyclone's thread; else on Cyclone's.
+        from ..transports import shm
+
+        self.inbox = Inbox(None if self._dds is None or (hints.allows_shm and shm.unavailable_reason() is None)
+                           else self._dds.participant)
         self.readers: Tuple[DDSTopicReader, ...] = ()
         self.reader: Optional[DDSTopicReader] = None
         self.tl_reader: Optional[DDSTopicReader] = None

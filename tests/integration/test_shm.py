@@ -26,9 +26,8 @@ T = 60.0
 
 
 def shm_env(master: harness.RosMaster, mode: str = "beside_dds") -> Dict[str, str]:
-    """SHM on. ``beside_dds``: each node has DDS too, so a subscription's delivery thread waits on Cyclone's
-    wait set and each SHM link wakes it from a thread of its own; ``alone``: no DDS, the delivery thread waits
-    on the links itself (iceoryx2's wait set)."""
+    """SHM on; the delivery thread waits on its links itself (iceoryx2's wait set). ``beside_dds``: each node
+    has DDS too (ROS 2 visibility), whose readers wake that thread from Cyclone's thread; ``alone``: no DDS."""
     env = {**master.env, "MICROS_RT_DISABLE_SHM": "0"}
     if mode == "alone":
         env["MICROS_RT_DISABLE_DDS"] = "1"
