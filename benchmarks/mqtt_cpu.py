@@ -35,7 +35,7 @@ from typing import Any, Dict, List, Optional
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 STOCK_PYTHON = "/usr/bin/python3"
-MRT_PYTHON = str(ROOT / ".venv" / "bin" / "python")
+MRT_PYTHON = sys.executable          # the project's venv, which runs this script
 MOSQUITTO = "/usr/sbin/mosquitto"
 ROSMASTER = "/usr/bin/rosmaster"
 ROSPARAM = "/usr/bin/rosparam"
@@ -230,8 +230,10 @@ def run_case(name: str, stack: str, args: argparse.Namespace, work: Path) -> Dic
         profiler = None
         if args.profile and stack == "micros_rt":
             Path(args.profile).mkdir(parents=True, exist_ok=True)
-            profiler = subprocess.Popen([str(ROOT / ".venv" / "bin" / "py-spy"), "record", "--pid", str(bridge.pid),
-                                         "--duration", str(int(args.duration)), "--format", "raw", "--threads", "--gil", "--rate", "1000",
+            py_spy = str(Path(sys.executable).parent / "py-spy")
+            profiler = subprocess.Popen([py_spy, "record", "--pid", str(bridge.pid), "--duration",
+                                         str(int(args.duration)), "--format", "raw", "--threads", "--gil",
+                                         "--rate", "1000",
                                          "--output", str(Path(args.profile) / f"{name}.txt"), "--nonblocking"],
                                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         time.sleep(args.duration)
@@ -298,7 +300,8 @@ def main(argv: List[str]) -> int:
         for name in args.cases.split(","):
             a, b = summary.get(f"{name}/micros_rt"), summary.get(f"{name}/mqtt_client")
             if a and b:
-                print(f"{name}: micros_rt / mqtt_client = {a['us_per_message_median'] / b['us_per_message_median']:.2f}x")
+                ratio = a["us_per_message_median"] / b["us_per_message_median"]
+                print(f"{name}: micros_rt / mqtt_client = {ratio:.2f}x")
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps({"when": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                                           "host_cpus": os.cpu_count(), "real_client": args.real_client or None,

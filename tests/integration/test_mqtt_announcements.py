@@ -144,7 +144,8 @@ def test_bridge_writes_in_the_generation_the_peer_announces(
         assert peer_payload[:len(peer_payload) - 6] == (b"\x00" if real is REAL_110 else b"")   # 'hi': 6 bytes
         # the peer's own topic is read in its generation too (the captured data payload, via the broker)
         publish_raw(broker, "peer/status", peer_payload, retain=False)
-        harness.wait_until(lambda: counter(bridge, "delivered", "/gen/peer_status") >= 1, 30, message=f"the peer's payload was not delivered:\n{bridge.stderr_tail()}")
+        harness.wait_until(lambda: counter(bridge, "delivered", "/gen/peer_status") >= 1, 30,
+                           message=f"the peer's payload was not delivered:\n{bridge.stderr_tail()}")
         assert last_counters(bridge).get("bad_input") == {} and bridge.alive()
         print(f"peer {real['version']} ({real['commit'][:7]}), setting {setting}: bridge wrote {expect.label} "
               f"(announcement {'three strings' if written.stamped is None else 'with stamped'}, payload "

@@ -438,8 +438,9 @@ class _Mqtt2Ros:
         try:
             stamp, body = codec.decode_ros_payload(payload, stamped=stamped)
             msg = cls()
-            msg.deserialize(bytes(body))
-            _check_length(msg, body)
+            raw = bytes(body)
+            msg.deserialize(raw)
+            _check_length(msg, raw)
         except Exception as exc:  # genpy raises struct.error, DeserializationError, UnicodeDecodeError...
             self.bridge.problems.report(topic, "malformed",
                                         f"MQTT topic '{topic}': a {len(payload)}-byte payload does not decode as "
@@ -475,12 +476,13 @@ class _Mqtt2Ros:
         self._publish(msg)
 
 
-def _check_length(msg: genpy.Message, body: memoryview) -> None:
+def _check_length(msg: genpy.Message, body: bytes) -> None:
     """genpy trusts length prefixes: a string or array claiming more bytes than the buffer holds is read
-    short without complaint. A payload is well-formed only when its message serializes back to it."""
+    short without complaint. A payload is well-formed only when its message serializes back to it.
+    Compared as bytes (memcmp): a memoryview compares item by item, 4.7 ms for a 640x480 rgb8 image."""
     buf = io.BytesIO()
     msg.serialize(buf)
-    if buf.tell() != len(body) or buf.getbuffer() != body:
+    if buf.tell() != len(body) or buf.getvalue() != body:
         raise ValueError(f"its {len(body)}-byte body does not re-encode to the same bytes (a length prefix "
                          f"does not match the data, or trailing bytes)")
 

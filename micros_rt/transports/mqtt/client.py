@@ -175,9 +175,9 @@ class MqttConnection:
     back-off (1 s doubling to 8 s) and each failure is logged. ``on_connection_change(True)`` is called at
     the broker's CONNACK, when sending is not enabled yet (the disk buffer is flushed first);
     ``on_live()`` once sending is enabled, on the flush thread: what must be on the broker after every
-    connect (mqtt_client's retained type announcements) is published from there. ``fatal`` is set (and ``on_fatal`` called)
-    when retrying cannot help: the broker's certificate fails verification against the configured CA, or
-    the broker refuses the credentials.
+    connect (mqtt_client's retained type announcements) is published from there. ``fatal`` is set (and
+    ``on_fatal`` called) when retrying cannot help: the broker's certificate fails verification against the
+    configured CA, or the broker refuses the credentials.
     """
 
     def __init__(self, params: MqttParams, *, mqtt5: bool = False, on_fatal: Optional[Callable[[str], None]] = None,

@@ -109,7 +109,8 @@ class PeerGenerations:
     def decide(self, topic: str) -> Decision:
         """The generation to write on ``topic`` and why (see the module docstring)."""
         if topic in self.fixed_topics:
-            return self.fixed_topics[topic], f"set for this topic (mqtt_client_version: {int(self.fixed_topics[topic])})"
+            wire = self.fixed_topics[topic]
+            return wire, f"set for this topic (mqtt_client_version: {int(wire)})"
         if self.fixed is not None:
             return self.fixed, f"set (mqtt_client_version: {int(self.fixed)})"
         with self._lock:
