@@ -394,34 +394,27 @@ def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
             _log.warning("micros_rt: publisher %s answered requestTopic for %s with %s; ignoring it",
                          pub_uri, topic, short(repr(result)))
             return 0, "ERROR: publisher returned invalid protocol choice", 0
-        if result[0] == SHM:
+        # a negotiated transport's answer: (how it is read, the peer id it names, how the subscription connects)
+        negotiated: Dict[str, Tuple[Any, Callable[[Any], str], Callable[[str, Any], Tuple[int, str, int]], str]] = {
+            SHM: (ShmAnswer, lambda a: a.channel, hook.connect_shm, "shared memory"),
+            DDS: (DDSAnswer, lambda a: a.writer, hook.connect_dds, "DDS"),
+        }
+        if result[0] in negotiated:
+            answer_class, peer_of, connect, words = negotiated[result[0]]
             try:
-                shm = ShmAnswer.from_xmlrpc(result[1] if len(result) > 1 else None, source=f"publisher {pub_uri}")
+                answer = answer_class.from_xmlrpc(result[1] if len(result) > 1 else None, source=f"publisher {pub_uri}")
             except MalformedNegotiationError as exc:
-                _log.warning("micros_rt: topic %s: publisher %s accepted shared memory with a malformed answer (%s); "
-                             "not connected to it", topic, pub_uri, exc)
-                return 0, "malformed SHM answer", 0
+                _log.warning("micros_rt: topic %s: publisher %s accepted %s with a malformed answer (%s); "
+                             "not connected to it", topic, pub_uri, words, exc)
+                return 0, f"malformed {result[0]} answer", 0
             if existing is not None:
-                if existing.peer_guid == shm.channel:
+                if existing.peer_guid == peer_of(answer):
                     return 1, already, 0
                 remove_pseudo_connection(topic, existing, publisher=False)
                 existing.close()
-            return hook.connect_shm(pub_uri, shm)
-        if result[0] == DDS:
-            try:
-                answer = DDSAnswer.from_xmlrpc(result[1] if len(result) > 1 else None, source=f"publisher {pub_uri}")
-            except MalformedNegotiationError as exc:
-                _log.warning("micros_rt: topic %s: publisher %s accepted DDS with a malformed answer (%s); "
-                             "not connected to it", topic, pub_uri, exc)
-                return 0, "malformed DDS answer", 0
-            if existing is not None:
-                if existing.peer_guid == answer.writer:
-                    return 1, already, 0
-                remove_pseudo_connection(topic, existing, publisher=False)
-                existing.close()
-            return hook.connect_dds(pub_uri, answer)
+            return connect(pub_uri, answer)
         if existing is not None:
-            return 1, already, 0  # keep the DDS link; a TCPROS answer now would be a second link
+            return 1, already, 0  # keep the DDS or SHM link; a TCPROS answer now would be a second link
         for h in self.protocol_handlers:
             if h.supports(result[0]):
                 return h.create_transport(topic, pub_uri, result)

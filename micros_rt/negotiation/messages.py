@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Any, Dict, List, Mapping
+from typing import Any, Dict, List, Mapping, Type, TypeVar
 
 from ..exceptions import MicrosRtError, QoSTypeError, QoSValueError
 from ..qos import AdvertiseQoSOptions, SubscribeQoSOptions
@@ -86,6 +86,17 @@ def _bool(d: Mapping[str, Any], key: str) -> bool:
     return value
 
 
+Q = TypeVar("Q", SubscribeQoSOptions, AdvertiseQoSOptions)
+
+
+def _qos(cls: Type[Q], d: Mapping[str, Any], source: str) -> Q:
+    """The ``qos`` struct of an offer or answer as ``cls`` (MalformedNegotiationError naming the field)."""
+    try:
+        return cls.from_dict(_qos_dict(d), source=source)
+    except (QoSValueError, QoSTypeError) as exc:
+        raise MalformedNegotiationError("qos", str(exc)[:300]) from exc
+
+
 def _qos_dict(d: Mapping[str, Any]) -> Mapping[str, Any]:
     qos = d.get("qos", {})
     if not isinstance(qos, dict) or len(qos) > 16:
@@ -135,10 +146,7 @@ class DDSOffer:
         domain = d.get("domain")
         if isinstance(domain, bool) or not isinstance(domain, int) or not _INT32[0] <= domain <= _INT32[1]:
             raise MalformedNegotiationError("domain", f"expected an integer DDS domain id, got {_short(domain)}")
-        try:
-            qos = SubscribeQoSOptions.from_dict(_qos_dict(d), source=source)
-        except (QoSValueError, QoSTypeError) as exc:
-            raise MalformedNegotiationError("qos", str(exc)[:300]) from exc
+        qos = _qos(SubscribeQoSOptions, d, source)
         if _bool(d, "lazy"):
             return cls(domain=domain, topic="", type_name="", md5=_str(d, "md5"), qos=qos, reader="",
                        participant="", graph=_str(d, "graph"), lazy=True)
@@ -194,10 +202,7 @@ class DDSAnswer:
     @classmethod
     def from_xmlrpc(cls, params: object, *, source: str = "a publisher") -> "DDSAnswer":
         d = _mapping(params, "DDS answer")
-        try:
-            qos = AdvertiseQoSOptions.from_dict(_qos_dict(d), source=source)
-        except (QoSValueError, QoSTypeError) as exc:
-            raise MalformedNegotiationError("qos", str(exc)[:300]) from exc
+        qos = _qos(AdvertiseQoSOptions, d, source)
         return cls(writer=_str(d, "writer", guid=True), participant=_str(d, "participant", guid=True),
                    latch=_bool(d, "latch"), qos=qos, node=_str(d, "node", required=False),
                    via=_str(d, "via", required=False), topic=_topic_name(d, "topic"))
@@ -227,10 +232,7 @@ class ShmOffer:
     @classmethod
     def from_xmlrpc(cls, params: object, *, source: str = "a subscriber") -> "ShmOffer":
         d = _mapping(params, "SHM offer")
-        try:
-            qos = SubscribeQoSOptions.from_dict(_qos_dict(d), source=source)
-        except (QoSValueError, QoSTypeError) as exc:
-            raise MalformedNegotiationError("qos", str(exc)[:300]) from exc
+        qos = _qos(SubscribeQoSOptions, d, source)
         return cls(host=_str(d, "host"), md5=_str(d, "md5"), type_name=_str(d, "type"), qos=qos,
                    transient_local=_bool(d, "transient_local"))
 
@@ -251,10 +253,7 @@ class ShmAnswer:
     @classmethod
     def from_xmlrpc(cls, params: object, *, source: str = "a publisher") -> "ShmAnswer":
         d = _mapping(params, "SHM answer")
-        try:
-            qos = AdvertiseQoSOptions.from_dict(_qos_dict(d), source=source)
-        except (QoSValueError, QoSTypeError) as exc:
-            raise MalformedNegotiationError("qos", str(exc)[:300]) from exc
+        qos = _qos(AdvertiseQoSOptions, d, source)
         channel = _str(d, "channel")
         if not _CHANNEL.fullmatch(channel):
             raise MalformedNegotiationError("channel", f"{_short(channel)} is not a micros_rt shared-memory channel")
