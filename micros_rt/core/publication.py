@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import os
 import struct
 import threading
 import time
@@ -223,7 +224,7 @@ class _Publication:
                              subscriber=who)
         if verdict.accepted:
             try:
-                channel = self._shm_writer().open_channel(subscriber)
+                channel = self._shm_writer().open_channel(subscriber, offer.pid)
             except MicrosRtError as exc:
                 verdict = Verdict(False, "shm-unavailable", f"{exc}; serving {who} otherwise")
         with self.lock:
@@ -245,7 +246,8 @@ class _Publication:
             conn.close()
             return Verdict(False, "closing", f"topic {self.topic}: no rospy publisher to attach the SHM link of "
                                              f"{who} to (unregistered); using the next protocol"), None
-        return verdict, ShmAnswer(channel=channel.name, latch=self.latch, qos=self.options, node=compat.caller_id())
+        return verdict, ShmAnswer(channel=channel.name, latch=self.latch, qos=self.options, node=compat.caller_id(),
+                                  pid=os.getpid())
 
     def _shm_writer(self) -> "ShmWriter":
         with self.lock:

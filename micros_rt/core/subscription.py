@@ -11,6 +11,7 @@ from __future__ import annotations
 import collections
 import logging
 import math
+import os
 import threading
 import time
 from typing import TYPE_CHECKING, Any, Callable, Deque, Dict, List, Optional, Set, Tuple, Type
@@ -184,7 +185,8 @@ class _Subscription:
 
                 if shm.unavailable_reason() is None:
                     out.append(ShmOffer(host=shm.host_identity(), md5=self.data_class._md5sum,
-                                        type_name=self.data_class._type, qos=self.effective).to_xmlrpc())
+                                        type_name=self.data_class._type, qos=self.effective,
+                                        pid=os.getpid()).to_xmlrpc())
             elif proto == DDS and reader is None and self.lazy_dds is not None:
                 from ..transports.dds.participant import domain_id_from_env
 
@@ -277,7 +279,7 @@ class _Subscription:
 
         try:
             link = ShmLink(self.topic, answer.channel, self.data_class, header=header, qos=answer.qos, put=put,
-                           on_drop=dropped, on_gone=lambda _link: self._shm_link_gone(conn))
+                           on_drop=dropped, on_gone=lambda _link: self._shm_link_gone(conn), peer_pid=answer.pid)
         except MicrosRtError as exc:
             _log.warning("micros_rt: %s; the publisher %s is asked again", exc, pub_uri)
             return 0, str(exc), 0

@@ -224,17 +224,26 @@ class ShmOffer:
     qos: SubscribeQoSOptions
     #: the subscriber wants the latched message
     transient_local: bool = False
+    #: the subscriber's process id (same host): the publisher notices a SIGKILLed subscriber by it
+    pid: int = 0
 
     def to_xmlrpc(self) -> List[Any]:
         return [SHM, {"host": self.host, "md5": self.md5, "type": self.type_name, "qos": self.qos.to_dict(),
-                      "transient_local": self.transient_local}]
+                      "transient_local": self.transient_local, "pid": self.pid}]
 
     @classmethod
     def from_xmlrpc(cls, params: object, *, source: str = "a subscriber") -> "ShmOffer":
         d = _mapping(params, "SHM offer")
         qos = _qos(SubscribeQoSOptions, d, source)
         return cls(host=_str(d, "host"), md5=_str(d, "md5"), type_name=_str(d, "type"), qos=qos,
-                   transient_local=_bool(d, "transient_local"))
+                   transient_local=_bool(d, "transient_local"), pid=_pid(d))
+
+
+def _pid(d: Mapping[str, Any]) -> int:
+    value = d.get("pid", 0)
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= _INT32[1]:
+        raise MalformedNegotiationError("pid", f"expected a process id, got {_short(value)}")
+    return value
 
 
 @dataclass(frozen=True)
@@ -246,9 +255,12 @@ class ShmAnswer:
     latch: bool
     qos: AdvertiseQoSOptions
     node: str = ""
+    #: the publisher's process id (same host): the subscriber notices a SIGKILLed publisher by it
+    pid: int = 0
 
     def to_xmlrpc(self) -> List[Any]:
-        return [SHM, {"channel": self.channel, "latch": self.latch, "qos": self.qos.to_dict(), "node": self.node}]
+        return [SHM, {"channel": self.channel, "latch": self.latch, "qos": self.qos.to_dict(), "node": self.node,
+                      "pid": self.pid}]
 
     @classmethod
     def from_xmlrpc(cls, params: object, *, source: str = "a publisher") -> "ShmAnswer":
@@ -257,4 +269,5 @@ class ShmAnswer:
         channel = _str(d, "channel")
         if not _CHANNEL.fullmatch(channel):
             raise MalformedNegotiationError("channel", f"{_short(channel)} is not a micros_rt shared-memory channel")
-        return cls(channel=channel, latch=_bool(d, "latch"), qos=qos, node=_str(d, "node", required=False))
+        return cls(channel=channel, latch=_bool(d, "latch"), qos=qos, node=_str(d, "node", required=False),
+                   pid=_pid(d))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -26,11 +27,11 @@ def offer(**kw: object) -> ShmOffer:
 
 
 def test_offer_and_answer_round_trip() -> None:
-    o = offer(transient_local=True)
+    o = offer(transient_local=True, pid=77)
     entry = o.to_xmlrpc()
     assert entry[0] == SHM and ShmOffer.from_xmlrpc(entry[1]) == o
     a = ShmAnswer(channel="micros_rt/0000abcd00000001deadbeef", latch=True,
-                  qos=AdvertiseQoSOptions(msg_valid_period=2.0), node="/talker")
+                  qos=AdvertiseQoSOptions(msg_valid_period=2.0), node="/talker", pid=4242)
     assert ShmAnswer.from_xmlrpc(a.to_xmlrpc()[1]) == a
 
 
@@ -40,6 +41,8 @@ def test_offer_and_answer_round_trip() -> None:
     ({"channel": "micros_rt/0000abcd00000001", "latch": "yes", "qos": {}}, "latch"),
     ({"channel": "micros_rt/0000abcd00000001", "latch": False, "qos": {"deadline": "soon"}}, "qos"),
     ([], "SHM answer"),
+    ({"channel": "micros_rt/0000abcd00000001", "latch": False, "qos": {}, "pid": -4}, "pid"),
+    ({"channel": "micros_rt/0000abcd00000001", "latch": False, "qos": {}, "pid": "1234"}, "pid"),
 ])
 def test_malformed_answers_are_refused_naming_the_field(params: object, field: str) -> None:
     with pytest.raises(MalformedNegotiationError) as err:
@@ -130,3 +133,16 @@ def test_unavailable_reason_in_words_when_turned_off() -> None:
                           "print(u())"], capture_output=True, text=True, timeout=60,
                          env={**os.environ, "MICROS_RT_DISABLE_SHM": "0"})
     assert out.stdout.strip() == "None", out.stdout + out.stderr
+
+
+def test_a_dead_or_unreaped_peer_process_is_dead() -> None:
+    from micros_rt.transports.shm.host import process_alive
+
+    assert process_alive(os.getpid()) and process_alive(0)
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    deadline = time.monotonic() + 30
+    while process_alive(child.pid):  # a zombie until reaped: dead for the channel's peer check
+        assert time.monotonic() < deadline, "an exited, unreaped child still reads as alive"
+        time.sleep(0.01)
+    child.wait()
+    assert not process_alive(child.pid)

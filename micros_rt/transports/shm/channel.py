@@ -35,7 +35,7 @@ from ...exceptions import MicrosRtError, PublishTimeoutError, TransportError
 from ...log import nonblocking_logger
 from ...negotiation.protocol import SHM
 from ..base import send_with_backoff
-from .host import cleanup_dead_nodes, iceoryx2, shm_node
+from .host import cleanup_dead_nodes, iceoryx2, process_alive, shm_node
 
 __all__ = ["MalformedFrameError", "ShmChannel", "ShmLink", "ShmWriter", "TRANSIT_DEPTH", "PUBLISH_BLOCK_TIMEOUT",
            "decode_frame"]
@@ -52,6 +52,8 @@ TRANSIT_DEPTH = 64
 PUBLISH_BLOCK_TIMEOUT = 10.0
 #: The link thread's wait between looks at whether its publisher is still there.
 _POLL = 0.5
+#: How long a channel waits for its subscriber's port (a 60-node graph starting on 2 cores took more than 10 s).
+ATTACH_TIMEOUT = 60.0
 
 _ids = itertools.count(1)
 
@@ -98,9 +100,12 @@ class ShmChannel:
     """The publisher's end of one channel."""
 
     def __init__(self, subscriber: str, *, lossless: bool, latch: bool, initial_len: int,
-                 depth: int = TRANSIT_DEPTH) -> None:
+                 depth: int = TRANSIT_DEPTH, peer_pid: int = 0) -> None:
         iox2 = iceoryx2()
         self.subscriber = subscriber
+        self.peer_pid = peer_pid    # the subscriber's process (0: unknown)
+        # held while a port is used or deleted: iceoryx2 aborts the process on a deleted port's use
+        self._lock = threading.Lock()
         self.name = _channel_name()
         self.closed = False
         self.seen = False           # the subscriber's port attached at least once
@@ -115,7 +120,10 @@ class ShmChannel:
 
     def attached(self) -> bool:
         """The subscriber's port is there now (a SIGKILLed one only after its node was cleaned up)."""
-        attached = bool(self._service.dynamic_config.number_of_subscribers > 0)
+        service = self._service
+        if service is None:
+            return False
+        attached = bool(service.dynamic_config.number_of_subscribers > 0)
         if attached:
             self.seen = True
         return attached
@@ -124,30 +132,40 @@ class ShmChannel:
         """Put one message into the channel, stamped now (or ``source_ns``); False when it was not taken (a
         lossless channel full, or no subscriber attached: then a latched channel keeps it as history)."""
         n = len(body)
-        sample = self._publisher.loan_slice_uninit(n + 16)
-        ptr = sample.payload_ptr
-        seq = self._seq + 1
-        ctypes.memmove(ptr, _HEAD.pack(seq, source_ns or time.time_ns()), 16)
-        ctypes.memmove(ptr + 16, body, n)
-        if not sample.assume_init().send():
-            return False
-        self._seq = seq
-        self._notifier.notify()
-        return True
+        with self._lock:
+            if self.closed:
+                return False
+            sample = self._publisher.loan_slice_uninit(n + 16)
+            ptr = sample.payload_ptr
+            seq = self._seq + 1
+            ctypes.memmove(ptr, _HEAD.pack(seq, source_ns or time.time_ns()), 16)
+            ctypes.memmove(ptr + 16, body, n)
+            if not sample.assume_init().send():
+                return False
+            self._seq = seq
+            self._notifier.notify()
+            return True
 
     def update_connections(self) -> None:
         """Hand a newly attached subscriber the history (a latched topic's last message)."""
-        self._publisher.update_connections()
+        with self._lock:
+            if not self.closed:
+                self._publisher.update_connections()
+
+    def subscriber_dead(self) -> bool:
+        """The subscriber's process is gone (SIGKILLed: its port stays in the service until cleaned up)."""
+        return not process_alive(self.peer_pid)
 
     def close(self) -> None:
-        if self.closed:
-            return
-        self.closed = True
-        for port in (self._notifier, self._publisher):
-            try:
-                port.delete()
-            except Exception:
-                pass
+        with self._lock:
+            if self.closed:
+                return
+            self.closed = True
+            for port in (self._notifier, self._publisher):
+                try:
+                    port.delete()
+                except Exception:
+                    pass
         self._service = self._events = None
 
 
@@ -180,11 +198,11 @@ class ShmWriter:
             self._last = body
 
     # -- channels (negotiation and housekeeping threads) -------------------------------------------------
-    def open_channel(self, subscriber: str) -> ShmChannel:
+    def open_channel(self, subscriber: str, peer_pid: int = 0) -> ShmChannel:
         """A new channel for ``subscriber`` (replacing its old one); raises TransportError in words."""
         try:
             channel = ShmChannel(subscriber, lossless=self.lossless, latch=self.latch, initial_len=self._largest,
-                                 depth=self.depth)
+                                 depth=self.depth, peer_pid=peer_pid)
         except Exception as exc:
             raise TransportError(f"topic {self.topic}: cannot create a shared-memory channel ({exc}); is /dev/shm "
                                  f"full, or iceoryx2's limits reached?") from exc
@@ -213,16 +231,19 @@ class ShmWriter:
         return sum(1 for ch in self._active if ch.seen or ch.attached())
 
     def housekeeping(self, now: float, gone: Callable[[ShmChannel], None]) -> None:
-        """Close channels whose subscriber left (or never attached within 10 s): ``gone(channel)`` first."""
+        """Close channels whose subscriber left (its process died, it unsubscribed, or it never attached within
+        :data:`ATTACH_TIMEOUT`): ``gone(channel)`` first."""
         if not self._active:
             return
-        cleanup_dead_nodes()
         for ch in self._active:
-            if ch.attached():
+            dead = ch.subscriber_dead()
+            if dead:
+                cleanup_dead_nodes()  # reclaim its memory and its port in our service
+            elif ch.attached():
                 if self.latch:
                     ch.update_connections()
                 continue
-            if ch.seen or now - ch.created > 10.0:
+            if dead or ch.seen or now - ch.created > ATTACH_TIMEOUT:
                 gone(ch)
                 self.close_channel(ch)
 
@@ -294,8 +315,9 @@ class ShmLink:
 
     def __init__(self, topic: str, channel: str, data_class: Type[genpy.Message], *, header: Dict[str, str],
                  qos: Any, put: Callable[[Any, int, Any], None], on_drop: Callable[[int], None],
-                 on_gone: Callable[["ShmLink"], None]) -> None:
+                 on_gone: Callable[["ShmLink"], None], peer_pid: int = 0) -> None:
         self.topic = topic
+        self.peer_pid = peer_pid      # the publisher's process (0: unknown)
         self.channel = channel
         self.qos = qos                # the publisher's QoS (lifespan, latency budget), from its answer
         self.closed = False
@@ -369,8 +391,10 @@ class ShmLink:
                 self._on_gone(self)
 
     def publisher_gone(self) -> bool:
-        """The publisher's port is gone (unregistered, or its SIGKILLed process cleaned up)."""
-        cleanup_dead_nodes()
+        """The publisher's process died (its memory is reclaimed then), or its port is gone (it unregistered)."""
+        if not process_alive(self.peer_pid):
+            cleanup_dead_nodes()
+            return True
         return bool(self._service.dynamic_config.number_of_publishers == 0)
 
     def notify_gone(self) -> None:
