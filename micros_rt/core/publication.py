@@ -334,7 +334,7 @@ class _Publication:
                 self.delegated.discard(subscriber)
             else:
                 self.delegated.add(subscriber)
-        dds.want(True)  # a subscriber served over DDS now: write (housekeeping keeps deciding)
+            dds.want(True)  # a subscriber served over DDS now: write (housekeeping keeps deciding)
         self._refresh_writers()
         if old is not None:
             compat.remove_pseudo_connection(self.topic, old, publisher=True)
@@ -390,12 +390,15 @@ class _Publication:
         if self.latch or self._foreign is not None:
             dds.want(True)
             return
-        with self.lock:
-            served = {c.peer_guid for c in self.connections.values()}
         graph = self._tag.get("graph")
-        readers = dds.matched_readers()
-        dds.want(any(tag is None or guid in served or tag.get("graph") != graph or "relay" in tag
-                     or "relay_import" in tag for guid, tag in readers.items()))
+        # under the lock a DDS link is added with (_link): a decision never undoes a link made meanwhile; and it
+        # stands only if no reader matched while it was made (the writer counts match changes)
+        with self.lock:
+            generation = dds.match_generation()
+            served = {c.peer_guid for c in self.connections.values()}
+            readers = dds.matched_readers()
+            dds.want(any(tag is None or guid in served or tag.get("graph") != graph or "relay" in tag
+                         or "relay_import" in tag for guid, tag in readers.items()), generation)
 
     def housekeeping(self, now: float) -> None:
         """Drop DDS links whose reader went away, or that discovery never matched in time

@@ -79,10 +79,16 @@ class DDSTopicWriter:
             return self._encode(msg)
         return None
 
-    def want(self, wanted: bool) -> None:
+    def want(self, wanted: bool, generation: Optional[int] = None) -> None:
         """Whether the matched readers want the samples (the publication decides from :meth:`matched_readers`:
-        micros_rt readers of its graph that it serves over shared memory or TCPROS drop them unread)."""
-        self._writer.wanted = wanted
+        micros_rt readers of its graph that it serves over shared memory or TCPROS drop them unread). Writing is
+        switched off only when no match changed since ``generation`` (:meth:`match_generation`) was read."""
+        writer = self._writer
+        if wanted or generation is None or generation == writer.match_generation:
+            writer.wanted = wanted
+
+    def match_generation(self) -> int:
+        return self._writer.match_generation
 
     def matched_readers(self) -> Dict[str, Optional[Dict[str, str]]]:
         """Matched readers: GUID -> micros_rt tag (None: a foreign reader, e.g. ROS 2)."""

@@ -129,12 +129,15 @@ class DDSWriter:
 
     def _matched_changed(self, _writer: Any, status: Any) -> None:
         self._matched = status.current_count
+        self.match_generation += 1
         self.wanted = True  # a new reader may be one that wants the data: send until the publication decides
         if self._on_matched is not None:
             self._on_matched(status.current_count)
 
     #: whether a matched reader wants the samples (the publication decides, :meth:`matched_readers`)
     wanted = True
+    #: counts match changes: a decision made from an older list of readers must not switch writing off
+    match_generation = 0
 
     @property
     def matched_count(self) -> int:
