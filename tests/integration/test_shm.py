@@ -104,8 +104,8 @@ def test_a_killed_publisher_is_noticed_and_its_restart_reconnects_over_shm(ros_m
 
 
 def test_latched_message_reaches_a_late_shm_subscriber(ros_master: harness.RosMaster,
-                                                        spawn: harness.Spawner, mode: str) -> None:
-    env = shm_env(ros_master, mode)
+                                                        spawn: harness.Spawner) -> None:
+    env = shm_env(ros_master)
     topic = "/shm/latched"
     talker = spawn(mrt("talk", "--topic", topic, "--count", 3, "--rate", 50, "--latch", "--linger", T), env,
                    name="latched_talker")
@@ -119,8 +119,8 @@ def test_latched_message_reaches_a_late_shm_subscriber(ros_master: harness.RosMa
 
 
 def test_lossless_burst_to_a_slow_shm_subscriber_loses_nothing(ros_master: harness.RosMaster,
-                                                               spawn: harness.Spawner, mode: str) -> None:
-    env = shm_env(ros_master, mode)
+                                                               spawn: harness.Spawner) -> None:
+    env = shm_env(ros_master)
     topic = "/shm/lossless"
     n = 3000
     listener = spawn(mrt("listen", "--topic", topic, "--queue-size", 0, "--exit-after", n, "--duration", T,
@@ -136,8 +136,8 @@ def test_lossless_burst_to_a_slow_shm_subscriber_loses_nothing(ros_master: harne
     talker.wait_for("done", T)
 
 
-def test_keep_last_drops_are_counted_on_shm(ros_master: harness.RosMaster, spawn: harness.Spawner, mode: str) -> None:
-    env = shm_env(ros_master, mode)
+def test_keep_last_drops_are_counted_on_shm(ros_master: harness.RosMaster, spawn: harness.Spawner) -> None:
+    env = shm_env(ros_master)
     topic = "/shm/keep_last"
     n = 2000
     listener = spawn(mrt("listen", "--topic", topic, "--queue-size", 1, "--duration", 8,
