@@ -239,15 +239,24 @@ class _Publication:
         with self.lock:
             old = self.shm_links.get(subscriber)
             self.shm_links[subscriber] = conn
+        refused = self._attach_link(old, conn, what="SHM", subscriber=who, fallback="the next protocol")
+        if refused is not None:
+            return refused, None
+        return verdict, ShmAnswer(channel=channel.name, latch=self.latch, qos=self.options, node=compat.caller_id(),
+                                  pid=os.getpid())
+
+    def _attach_link(self, old: Optional[compat.DDSConnection], conn: compat.DDSConnection, *, what: str,
+                     subscriber: str, fallback: str) -> Optional[Verdict]:
+        """Put a subscriber's new DDS or SHM link into rospy's connection list in place of ``old``; a Verdict
+        in words when rospy has no publisher left to attach it to (the link is closed then)."""
         if old is not None:
             compat.remove_pseudo_connection(self.topic, old, publisher=True)
             old.close()
-        if not compat.add_pseudo_connection(self.topic, conn, publisher=True):
-            conn.close()
-            return Verdict(False, "closing", f"topic {self.topic}: no rospy publisher to attach the SHM link of "
-                                             f"{who} to (unregistered); using the next protocol"), None
-        return verdict, ShmAnswer(channel=channel.name, latch=self.latch, qos=self.options, node=compat.caller_id(),
-                                  pid=os.getpid())
+        if compat.add_pseudo_connection(self.topic, conn, publisher=True):
+            return None
+        conn.close()
+        return Verdict(False, "closing", f"topic {self.topic}: no rospy publisher to attach the {what} link of "
+                                         f"{subscriber} to (unregistered); using {fallback}")
 
     def _shm_writer(self) -> "ShmWriter":
         with self.lock:
@@ -336,13 +345,9 @@ class _Publication:
                 self.delegated.add(subscriber)
             dds.want(True)  # a subscriber served over DDS now: write (housekeeping keeps deciding)
         self._refresh_writers()
-        if old is not None:
-            compat.remove_pseudo_connection(self.topic, old, publisher=True)
-            old.close()
-        if not compat.add_pseudo_connection(self.topic, conn, publisher=True):
-            conn.close()
-            return Verdict(False, "closing", f"topic {self.topic}: no rospy publisher to attach the DDS link of "
-                                             f"{short(subscriber)} to (unregistered); using TCPROS"), None
+        refused = self._attach_link(old, conn, what="DDS", subscriber=short(subscriber), fallback="TCPROS")
+        if refused is not None:
+            return refused, None
         assert self._dds_backend is not None
         if foreign is not None:
             return verdict, DDSAnswer(writer=foreign.writer, participant=foreign.participant, latch=foreign.latch,

@@ -46,6 +46,16 @@ class Verdict:
         return self.accepted
 
 
+def _qos_mismatch(requested: SubscribeQoSOptions, transient_local: bool, facts: PublicationFacts,
+                  words: str) -> Optional[Verdict]:
+    """The verdict on a subscriber's requested QoS against the publication's (None: compatible)."""
+    verdict = check_compatibility(facts.options, requested, topic=facts.topic, offered_latch=facts.latch,
+                                  requested_transient_local=transient_local)
+    if verdict.compatible:
+        return None
+    return Verdict(False, f"qos:{verdict.option}", f"{words}: {verdict.reason}")
+
+
 def decide(offer: DDSOffer, facts: PublicationFacts, *, subscriber: str) -> Verdict:
     """Accept ``offer`` for DDS, or say why not (the subscriber then gets its next protocol).
 
@@ -75,11 +85,10 @@ def decide(offer: DDSOffer, facts: PublicationFacts, *, subscriber: str) -> Verd
         return Verdict(False, "topic",
                        f"topic {topic}: subscriber {subscriber} offered DDS topic {offer.topic}, this publisher "
                        f"writes {facts.dds_topic}; not using DDS")
-    verdict = check_compatibility(facts.options, offer.qos, topic=topic, offered_latch=facts.latch,
-                                  requested_transient_local=offer.transient_local)
-    if not verdict.compatible:
-        return Verdict(False, f"qos:{verdict.option}",
-                       f"DDS QoS mismatch with subscriber {subscriber}, falling back to TCPROS: {verdict.reason}")
+    mismatch = _qos_mismatch(offer.qos, offer.transient_local, facts,
+                             f"DDS QoS mismatch with subscriber {subscriber}, falling back to TCPROS")
+    if mismatch is not None:
+        return mismatch
     if facts.pending >= MAX_PENDING_DDS_OFFERS:
         return Verdict(False, "pending-limit",
                        f"topic {topic}: {facts.pending} DDS subscribers accepted but not yet discovered (limit "
@@ -114,11 +123,10 @@ def decide_shm(offer: ShmOffer, facts: PublicationFacts, *, host: str, unavailab
     if offer.md5 not in ("*", facts.md5):
         return Verdict(False, "md5", f"topic {topic}: message type mismatch with {subscriber} (md5 {offer.md5} vs "
                                      f"{facts.md5}); not using shared memory")
-    verdict = check_compatibility(facts.options, offer.qos, topic=topic, offered_latch=facts.latch,
-                                  requested_transient_local=offer.transient_local)
-    if not verdict.compatible:
-        return Verdict(False, f"qos:{verdict.option}",
-                       f"QoS mismatch with subscriber {subscriber}, not using shared memory: {verdict.reason}")
+    mismatch = _qos_mismatch(offer.qos, offer.transient_local, facts,
+                             f"QoS mismatch with subscriber {subscriber}, not using shared memory")
+    if mismatch is not None:
+        return mismatch
     return Verdict(True, "accepted", f"topic {topic}: shared memory accepted for subscriber {subscriber}")
 
 
