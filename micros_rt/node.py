@@ -33,6 +33,7 @@ from .log import flush as flush_logs
 from .transports.base import ProfileBackend, close_profile_backends, profile_backends
 from .transports.pacing import LinkPacer
 from .transports.dds.participant import close_participant
+from .transports.shm.host import close_node as close_shm_node
 from .exceptions import NodeNotInitializedError, QoSTypeError
 from .negotiation.hints import TransportHints
 from .negotiation.protocol import DDS, SHM, TCPROS
@@ -189,6 +190,7 @@ def _close_all() -> None:
     if dds is not None:
         dds.close()
     close_participant()
+    close_shm_node()  # after every channel and link: iceoryx2's files go with the node
     flush_logs()
 
 

@@ -126,7 +126,15 @@ class Inbox:
             links += self._pending
             self._pending = []
         self._notify = None
-        self._iox = None
+        iox, self._iox = self._iox, None
         for link in links:
             link.close()
             link.release()
+        if iox is not None:
+            waitset, listener, notifier, guard, _duration = iox
+            del guard, waitset  # detached before the listener goes
+            for port in (listener, notifier):
+                try:
+                    port.delete()
+                except Exception:
+                    pass

@@ -395,7 +395,8 @@ class ShmLink:
         if not process_alive(self.peer_pid):
             cleanup_dead_nodes()
             return True
-        return bool(self._service.dynamic_config.number_of_publishers == 0)
+        service = self._service
+        return service is None or bool(service.dynamic_config.number_of_publishers == 0)
 
     def notify_gone(self) -> None:
         """Tell the subscription this link's publisher went (it drops the connection)."""
@@ -428,6 +429,7 @@ class ShmLink:
                 port.delete()
             except Exception:
                 pass
+        self._service = self._events = None  # the service factories hold the process's iceoryx2 node
 
 
 def wake_events() -> Tuple[Any, Any]:

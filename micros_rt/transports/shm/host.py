@@ -13,7 +13,7 @@ import os
 import threading
 from typing import Any, Mapping, Optional
 
-__all__ = ["MIN_FREE_BYTES", "cleanup_dead_nodes", "process_alive", "host_identity", "iceoryx2", "shm_node", "unavailable_reason"]
+__all__ = ["MIN_FREE_BYTES", "cleanup_dead_nodes", "close_node", "process_alive", "host_identity", "iceoryx2", "shm_node", "unavailable_reason"]
 
 #: ``/dev/shm`` with less room than this is not used (a full tmpfs makes iceoryx2 fail mid-stream).
 MIN_FREE_BYTES = 64 << 20
@@ -145,3 +145,15 @@ def cleanup_dead_nodes() -> None:
         node.try_cleanup_dead_nodes()
     except Exception:  # another process cleaning at the same moment; the next round will
         pass
+
+
+def close_node() -> None:
+    """Let go of this process's iceoryx2 node at shutdown (after every channel and link was closed): its
+    files in /dev/shm and /tmp/iceoryx2 go with it, as they would not at interpreter exit."""
+    global _node
+    node, _node = _node, None
+    if node is not None:
+        del node
+        import gc
+
+        gc.collect()  # service factories and ports still referenced by cycles hold the node
