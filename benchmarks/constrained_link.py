@@ -274,6 +274,53 @@ def eth0_tx() -> Optional[int]:
         return None
 
 
+#: one colour per stack, the same in every round (stock rospy red and micros_rt's DDS blue, as in run.py's plots)
+STACK_COLOURS = {"rospy": "#d62728", "micros_rt": "#1f77b4", "micros_rt_link": "#17becf", "micros_rt_tcp": "#7f7f7f",
+                 "micros_rt_paced": "#2ca02c", "relay": "#9467bd", "relay_link": "#e377c2", "relay_capped": "#bcbd22",
+                 "relay_one_process": "#8c564b"}
+#: issue 19's targets for the control topic's p99 (ms; also at most 0.5x rospy's in the same run)
+TARGET_P99_MS = {"tbf": 10.0, "htb": 5.0, "loopback": 2.0}
+
+
+def plot(results: Dict[str, Dict[str, List[Dict[str, Any]]]], path: Path) -> None:
+    """The control topic's latency distribution per link: one colour and one legend entry per stack (a line per
+    round), issue 19's p99 target as a dashed line. ``results`` is ``latest.json["constrained_link"]["links"]``
+    (or relay_link.json's ``links``), so a plot is redrawn from committed results without re-running."""
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print("matplotlib missing: no plot")
+        return
+    fig, axes = plt.subplots(1, len(results), figsize=(6.5 * len(results), 4.4), squeeze=False)
+    for ax, (kind, stacks) in zip(axes[0], results.items()):
+        for i, (stack, runs) in enumerate(stacks.items()):
+            colour = STACK_COLOURS.get(stack, f"C{i % 10}")
+            labelled = False
+            for run in runs:
+                cdf = run.get("control_cdf_ms") or []
+                if cdf:
+                    label = None if labelled else f"{stack} ({len(runs)} rounds)" if len(runs) > 1 else stack
+                    ax.plot(cdf, [j / len(cdf) for j in range(len(cdf))], color=colour, label=label, alpha=0.85)
+                    labelled = True
+        target = TARGET_P99_MS.get(kind)
+        if target is not None:
+            ax.axvline(target, color="black", linestyle="--", linewidth=1,
+                       label=f"target: p99 <= {target:g} ms (issue 19)")
+            ax.axhline(0.99, color="grey", linestyle=":", linewidth=0.8, label="p99")
+        link = {"tbf": "40 Mbit/s FIFO (tbf)", "htb": "40 Mbit/s, DSCP honoured (htb)"}.get(kind, kind)
+        ax.set_title(f"{link}: 1 kHz control latency beside a camera\n(lower is better: lines further left)", fontsize=10)
+        ax.set_xlabel("control message latency, ms (log scale)")
+        ax.set_ylabel("fraction of control messages")
+        ax.set_xscale("log")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=10.0)
@@ -326,27 +373,7 @@ def main() -> int:
     (out / "constrained_link.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     print(f"eth0 tx packets during the run: {report['eth0_tx_packets_during_run']}")
-    try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        fig, axes = plt.subplots(1, len(results), figsize=(6 * len(results), 4), squeeze=False)
-        for ax, (kind, stacks) in zip(axes[0], results.items()):
-            for stack, runs in stacks.items():
-                for run in runs:
-                    cdf = run.get("control_cdf_ms") or []
-                    if cdf:
-                        ax.plot(cdf, [i / len(cdf) for i in range(len(cdf))], label=stack)
-            ax.set_title(f"{kind} 40 Mbit/s: 1 kHz control latency beside a camera")
-            ax.set_xlabel("ms")
-            ax.set_ylabel("fraction of control messages")
-            ax.set_xscale("log")
-            ax.legend()
-        fig.tight_layout()
-        fig.savefig(out / "constrained_link.png", dpi=90)
-    except ImportError:
-        print("matplotlib missing: no plot")
+    plot(results, out / "constrained_link.png")
     return 0
 
 

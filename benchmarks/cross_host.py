@@ -54,6 +54,8 @@ PY = {"mrt_dds": str(ROOT / ".venv" / "bin" / "python"), "mrt_tcpros": str(ROOT 
       "rospy": "/usr/bin/python3"}
 LABEL = {"mrt_dds": "micros_rt DDS", "mrt_tcpros": "micros_rt TCPROS fallback", "rospy": "stock rospy TCPROS"}
 BASE = "rospy"
+#: one colour per stack in the plot, as in run.py's plots (stock rospy red, micros_rt DDS blue, its TCPROS grey)
+COLOURS = {"mrt_dds": "#1f77b4", "mrt_tcpros": "#7f7f7f", "rospy": "#d62728"}
 IMAGE = 640 * 480 * 3
 # (tag, peer.py kind, size): the round-trip and one-way figures; each group is one pair of processes
 # (large messages alone, as benchmarks/run.py does, so no type runs on memory another left)
@@ -387,15 +389,21 @@ def plot(results: Dict[str, Any], out: Path) -> None:
                 for n, run in enumerate(res.get(kind, [])):
                     cdf = [x for x in run.get("cdf_ms", []) if x is not None]
                     if cdf:
-                        ax.plot(cdf, [i / len(cdf) for i in range(len(cdf))], label=LABEL[impl] if n == 0 else None,
-                                color={"mrt_dds": "C0", "mrt_tcpros": "C2", "rospy": "C1"}[impl])
+                        rounds = len(res.get(kind, []))
+                        label = (LABEL[impl] + (f" ({rounds} rounds)" if rounds > 1 else "")) if n == 0 else None
+                        ax.plot(cdf, [i / len(cdf) for i in range(len(cdf))], label=label, color=COLOURS[impl])
             hosts = "1 subscriber host" if kind == "stream" else "4 subscriber hosts"
-            ax.set_title(f"Image 640x480 30 Hz, {hosts}, MTU {mtu}".replace("@", " at "))
+            ax.set_title(f"Image 640x480 30 Hz, {hosts}, MTU {mtu}".replace("@", " at ") + "\n(lower is better)",
+                         fontsize=10)
             ax.set_xlabel("one-way latency, ms")
             ax.set_ylabel("fraction of messages")
-            ax.legend()
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=8, loc="lower right")
+    fig.suptitle("Between hosts: one-way latency of a 30 Hz camera stream (no target set; lines further left are "
+                 "better)")
     fig.tight_layout()
     fig.savefig(out / "cross_host.png", dpi=90)
+    plt.close(fig)
 
 
 def main() -> int:

@@ -672,7 +672,47 @@ def _fig_order(f):
     return (99, f)
 
 
-def plots(figs, samples, transports, outdir):
+#: one colour per stack in every plot (stock rospy red, micros_rt's DDS blue, SHM orange, its TCPROS grey;
+#: cross_host.py and constrained_link.py use the same for the stacks they share)
+COLOURS = {"micros_rt_shm": "#ff7f0e", "micros_rt_shm_local": "#ffbb78", "micros_rt_dds": "#1f77b4",
+           "micros_rt_dds_budget": "#17becf", "micros_rt_tcpros": "#7f7f7f", "rospy_tcpros": "#d62728",
+           "cyclonedds_python": "#2ca02c", "rclpy_fastdds": "#9467bd"}
+
+
+def targets_of(data):
+    """The targets a results file was measured against (``latest.json["targets"]``: "<= 0.8x rospy_tcpros"), as
+    :data:`TARGETS` holds them, so a plot redrawn from an older run shows that run's targets, not today's."""
+    out = {}
+    for fig, text in (data.get("targets") or {}).items():
+        op, ratio = text.split()[:2]
+        out[fig] = (float(ratio.rstrip("x")), op)
+    return out or dict(TARGETS)
+
+
+def _target_value(figs, targets, fig):
+    """(value, words) of the target line for ``fig``: the target ratio times rospy's figure in the same run."""
+    tg, base = targets.get(fig), figs.get(BASE, {}).get(fig)
+    if not tg or not base:
+        return None
+    lim, op = tg
+    return lim * base, f"target {'≤' if op == '<=' else '≥'} {lim:g}x rospy"
+
+
+def replot(results_json, outdir=None):
+    """Redraw a run's plots from its ``latest.json`` (no benchmark is run): the throughput, realistic-type and
+    scale plots. The latency distributions need the run's raw samples, which latest.json does not keep."""
+    import json as _json
+    path = Path(results_json)
+    data = _json.loads(path.read_text())
+    figs = data["figures"]
+    transports = [t for t in TRANSPORTS if t in figs]
+    return plots(figs, {}, transports, Path(outdir) if outdir else path.parent, targets=targets_of(data))
+
+
+def plots(figs, samples, transports, outdir, targets=None):
+    """The run's plots; each title says whether lower or higher is better, and each figure with a target (a ratio
+    to stock rospy in the same run, for the headline micros_rt stack) draws it as a dashed black line."""
+    targets = TARGETS if targets is None else targets
     try:
         import matplotlib
         matplotlib.use("Agg")
@@ -680,8 +720,8 @@ def plots(figs, samples, transports, outdir):
         import matplotlib.ticker
     except ImportError:
         return ["(matplotlib not installed: no plots; apt-get install python3-matplotlib)"]
-    colors = {"micros_rt_shm": "#ff7f0e", "micros_rt_shm_local": "#ffbb78", "micros_rt_dds": "#1f77b4", "micros_rt_dds_budget": "#17becf", "micros_rt_tcpros": "#aec7e8", "rospy_tcpros": "#d62728",
-              "cyclonedds_python": "#2ca02c", "rclpy_fastdds": "#9467bd"}
+    colors = COLOURS
+    head = headline(transports)
     made = []
     # latency distributions
     for tag, title in (("lat64", "64 B"), ("lat64k", "64 KiB")):
@@ -711,8 +751,12 @@ def plots(figs, samples, transports, outdir):
         ax.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
         ax.xaxis.set_major_formatter(ScalarFormatter())
         ax.xaxis.set_minor_formatter(plt.NullFormatter())
+        tv = _target_value(figs, targets, f"{tag}_p50_us")
+        if tv:
+            ax.axvline(tv[0], color="black", linestyle="--", linewidth=1, label=f"{tv[1]}'s p50 ({head}'s p50)")
+            ax.legend(fontsize=8, loc="upper left")
         ax.set_xlabel("round trip (µs, log scale); black ticks: p50 and p99 of this round; text: median over rounds")
-        ax.set_title(f"Round-trip latency, {title} std_msgs/UInt8MultiArray, loopback, last round")
+        ax.set_title(f"Round-trip latency, {title} std_msgs/UInt8MultiArray, loopback, last round (lower is better)")
         ax.grid(axis="x", which="both", alpha=0.3)
         fig.tight_layout()
         p = outdir / f"latency_{tag}.png"
@@ -720,9 +764,9 @@ def plots(figs, samples, transports, outdir):
         plt.close(fig)
         made.append(p.name)
     # throughput bars
-    groups = [("thr64_msgs_per_s", "64 B one-way\n(msg/s)", "thr64_lost"),
-              ("thr1m_MB_per_s", "1 MiB one-way\n(MB/s)", "thr1m_lost"),
-              ("fanout4_msgs_per_s", "fan-out 1→4, 64 B\n(aggregate msg/s)", "fanout4_lost")]
+    groups = [("thr64_msgs_per_s", "64 B one-way\n(msg/s, higher is better)", "thr64_lost"),
+              ("thr1m_MB_per_s", "1 MiB one-way\n(MB/s, higher is better)", "thr1m_lost"),
+              ("fanout4_msgs_per_s", "fan-out 1→4, 64 B\n(aggregate msg/s, higher is better)", "fanout4_lost")]
     groups = [g for g in groups if any(g[0] in figs.get(t, {}) for t in transports)]
     if groups:
         fig, axes = plt.subplots(1, len(groups), figsize=(4.2 * len(groups), 4.2), squeeze=False)
@@ -737,10 +781,17 @@ def plots(figs, samples, transports, outdir):
                         color="black" if not lost else "red")
             ax.set_xticks(range(len(ts)), [t.replace("_", "\n", 1) for t in ts], fontsize=7)
             ax.set_title(title, fontsize=10)
-            ax.set_ylim(0, max(vals + [1]) * 1.25)
+            top = max(vals + [1])
+            tv = _target_value(figs, targets, f)
+            if tv:
+                ax.axhline(tv[0], color="black", linestyle="--", linewidth=1, label=f"{tv[1]} ({head})")
+                ax.legend(fontsize=7, loc="upper right")
+                top = max(top, tv[0])
+            ax.set_ylim(0, top * 1.25)
             ax.yaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:,.0f}"))
             ax.grid(axis="y", alpha=0.3)
-        fig.suptitle("Throughput (median of rounds, measured at the receiver; lost = sent − received)")
+        fig.suptitle("Throughput, higher is better (median of rounds, measured at the receiver; "
+                     "lost = sent − received)")
         fig.tight_layout()
         p = outdir / "throughput.png"
         fig.savefig(p, dpi=110)
@@ -752,8 +803,8 @@ def plots(figs, samples, transports, outdir):
         fig, axes = plt.subplots(2, len(ks), figsize=(3.6 * len(ks), 6.5), squeeze=False)
         for j, k in enumerate(ks):
             ts = [t for t in transports if f"{k}_p50_us" in figs.get(t, {})]
-            for i, (f, yl) in enumerate(((f"{k}_p50_us", "round trip p50 (µs)"),
-                                         (f"{k}_msgs_per_s", "one-way msg/s"))):
+            for i, (f, yl) in enumerate(((f"{k}_p50_us", "round trip p50 (µs)\nlower is better"),
+                                         (f"{k}_msgs_per_s", "one-way msg/s\nhigher is better"))):
                 ax = axes[i][j]
                 vals = [figs[t].get(f) or 0 for t in ts]
                 bars = ax.bar(range(len(ts)), vals, color=[colors[t] for t in ts])
@@ -766,12 +817,20 @@ def plots(figs, samples, transports, outdir):
                             ha="center", va="bottom", fontsize=7)
                 ax.set_xticks(range(len(ts)), [t.split("_")[0] + ("\n" + t.split("_", 1)[1] if "_" in t else "")
                                                for t in ts], fontsize=6)
-                ax.set_ylim(0, max(vals + [1]) * 1.3)
+                top = max(vals + [1])
+                tv = _target_value(figs, targets, f)
+                if tv:
+                    ax.axhline(tv[0], color="black", linestyle="--", linewidth=1, label=tv[1])
+                    ax.legend(fontsize=6, loc="upper right")
+                    top = max(top, tv[0])
+                ax.set_ylim(0, top * 1.3)
                 ax.set_ylabel(yl, fontsize=8)
                 if i == 0:
                     ax.set_title(REALISTIC[k][0], fontsize=9)
                 ax.grid(axis="y", alpha=0.3)
-        fig.suptitle("Realistic message types (lower latency / higher rate is better)")
+        fig.suptitle("Realistic message types: round trip, lower is better (top); rate, higher is better (bottom)"
+                     + (f"; dashed: {head}'s target" if any(_target_value(figs, targets, f"{k}_p50_us") for k in ks)
+                        else ""))
         fig.tight_layout()
         p = outdir / "realistic.png"
         fig.savefig(p, dpi=110)
@@ -794,13 +853,95 @@ def plots(figs, samples, transports, outdir):
             ax.set_xticks(ns)
             ax.grid(alpha=0.3)
         axes[0].legend(fontsize=8)
-        fig.suptitle("A graph of N nodes on one host")
+        fig.suptitle("A graph of N nodes on one host (lower is better; no target set)")
         fig.tight_layout()
         p = outdir / "scale.png"
         fig.savefig(p, dpi=110)
         plt.close(fig)
         made.append(p.name)
     return made
+
+
+def summary_rows(results=RESULTS):
+    """The README's summary: micros_rt against stock rospy in the same run, one row per figure, read from the
+    committed results (nothing is measured): (section, words, stack, ratio, target ratio or None, lower is
+    better). One host: the SHM run (one_host/, one_host_scale/); between hosts: cross_host.py at 1 Gbit/s,
+    MTU 1500; a 40 Mbit/s link: constrained_link.py (control p99, medians of rounds; targets from issue 19)."""
+    import json as _json
+    rows = []
+    one = _json.loads((Path(results) / "one_host" / "latest.json").read_text())
+    figs, tg = one["figures"], targets_of(one)
+    shm, base = figs["micros_rt_shm"], figs[BASE]
+    for fig, words in (("lat64_p50_us", "round trip 64 B, p50"), ("lat64k_p50_us", "round trip 64 KiB, p50"),
+                       ("image_vga_p50_us", "round trip Image 640x480, p50"),
+                       ("image_hd_p50_us", "round trip Image 1920x1080, p50"),
+                       ("cloud_p50_us", "round trip PointCloud2 1 MiB, p50"),
+                       ("scan_p50_us", "round trip LaserScan, p50"), ("disc_ms", "spawn to first message"),
+                       ("thr64_msgs_per_s", "one-way 64 B, msg/s"), ("thr1m_MB_per_s", "one-way 1 MiB, MB/s"),
+                       ("fanout4_msgs_per_s", "fan-out 1 to 4, msg/s"),
+                       ("image_vga_msgs_per_s", "Image 640x480, msg/s")):
+        rows.append(("one host", words, "micros_rt_shm", shm[fig] / base[fig], tg.get(fig, (None,))[0],
+                     LOWER_BETTER(fig)))
+    scale = _json.loads((Path(results) / "one_host_scale" / "latest.json").read_text())["figures"]
+    rows.append(("one host", "60 nodes, CPU", "micros_rt_shm",
+                 scale["micros_rt_shm"]["scale60_cpu_pct"] / scale[BASE]["scale60_cpu_pct"], None, True))
+    latest = _json.loads((Path(results) / "latest.json").read_text())
+    cross = latest["cross_host"]["summary"]["1500@1gbit"]
+    for key, words in (("rtt_b64_p50_us", "round trip 64 B, p50"),
+                       ("fanout4_p99_ms", "Image 30 Hz to 4 hosts, p99")):
+        rows.append(("between hosts, 1 Gbit/s", words, "micros_rt_dds", cross["mrt_dds"][key] / cross["rospy"][key],
+                     None, True))
+    links = latest["constrained_link"]["links"]
+    for link, stack, words in (("tbf", "micros_rt_paced", "FIFO link: control p99 beside a camera"),
+                               ("htb", "micros_rt", "DSCP link: control p99 beside a camera")):
+        p99 = {st: statistics.median(r["control_p99_ms"] for r in links[link][st]) for st in (stack, "rospy")}
+        rows.append(("40 Mbit/s link", words, stack, p99[stack] / p99["rospy"], 0.5, True))
+    return rows
+
+
+def plot_summary(rows, path):
+    """One picture of :func:`summary_rows`: each figure's ratio to stock rospy (log scale), times on the left
+    (lower is better), rates on the right (higher is better), a black tick at the target where there is one."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import matplotlib.ticker
+    from matplotlib.patches import Patch
+    from matplotlib.lines import Line2D
+
+    colours = dict(COLOURS, micros_rt_paced="#2ca02c", micros_rt="#1f77b4")
+    names = {"micros_rt_shm": "micros_rt, shared memory (its default on one host)",
+             "micros_rt_dds": "micros_rt, DDS", "micros_rt_paced": "micros_rt, camera on paced TCPROS"}
+    sides = [[r for r in rows if r[5]], [r for r in rows if not r[5]]]
+    fig, axes = plt.subplots(2, 1, figsize=(10, 1.6 + 0.3 * len(rows)),
+                             gridspec_kw={"height_ratios": [len(sides[0]) + 1, len(sides[1]) + 1]})
+    allv = [v for r in rows for v in (r[3], r[4]) if v] + [1.0]
+    lo, hi = min(allv) / 2, max(allv) * 3
+    for ax, side, title in zip(axes, sides, ("times: ratio to stock rospy, lower is better",
+                                             "rates: ratio to stock rospy, higher is better")):
+        ys = list(range(len(side)))[::-1]
+        ax.barh(ys, [r[3] for r in side], color=[colours[r[2]] for r in side], height=0.7)
+        for y, r in zip(ys, side):
+            ax.text(r[3], y, f" {r[3]:.2g}x" if r[3] < 10 else f" {r[3]:.0f}x", va="center", fontsize=8)
+            if r[4] is not None:
+                ax.plot([r[4], r[4]], [y - 0.45, y + 0.45], color="black", linewidth=2.2)
+        ax.set_yticks(ys, [f"{r[0]}: {r[1]}" for r in side], fontsize=8)
+        ax.axvline(1.0, color="grey", linewidth=1)
+        ax.set_xscale("log")
+        ax.set_xlim(lo, hi)
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}x"))
+        ax.set_title(title, fontsize=10)
+        ax.grid(axis="x", which="major", alpha=0.3)
+    stacks = [st for st in names if any(colours[r[2]] == colours[st] for r in rows)]
+    handles = [Patch(color=colours[st], label=names[st]) for st in stacks]
+    handles += [Line2D([], [], color="black", linewidth=2.2, label="target"),
+                Line2D([], [], color="grey", linewidth=1, label="stock rospy (1x)")]
+    fig.legend(handles=handles, loc="lower center", ncol=3, fontsize=8, frameon=False)
+    fig.suptitle("micros_rt against stock rospy, each ratio measured in one run (benchmarks/results)")
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return Path(path).name
 
 
 # =========================================================================== main
