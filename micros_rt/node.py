@@ -380,6 +380,31 @@ class NodeHandle:
             sub.replay_latched(callback, callback_args)  # a new subscriber of a latched topic gets its message
         return Subscriber(sub, _node.subscriptions, callback, callback_args)
 
+    # services -------------------------------------------------------------
+    def advertise_service(self, service: str, srv_class: Any, handler: Callable[[Any], Any], *,
+                          ros2: bool = True) -> "ServiceServer":
+        """Like ``rospy.Service`` (roscpp's ``advertiseService``): ``handler(request)`` answers stock ROS 1 clients
+        over TCPROS and, with ``ros2=True``, ROS 2 clients (``rclpy`` ``create_client``) of the same name over
+        DDS. ``shutdown()`` on the answer withdraws it. See docs/services.md."""
+        from .services import advertise_service
+
+        return advertise_service(self.resolve_name(service), srv_class, handler, ros2=ros2)
+
+    def service_client(self, service: str, srv_class: Any, *, timeout: Optional[float] = None,
+                       ros2: bool = True) -> "ServiceClient":
+        """A callable like ``rospy.ServiceProxy`` (with ``wait_for_service(timeout)``) that reaches a ROS 1 server
+        through the master or, with ``ros2=True``, a ROS 2 server through DDS discovery; ``timeout`` bounds each
+        call (seconds, None: wait for ever). See docs/services.md."""
+        from .services import service_client
+
+        return service_client(self.resolve_name(service), srv_class, timeout=timeout, ros2=ros2)
+
+
+from typing import TYPE_CHECKING  # noqa: E402  (kept beside the service methods)
+
+if TYPE_CHECKING:  # the services package is imported on first use
+    from .services import ServiceClient, ServiceServer
+
 
 def _profile_backends() -> Tuple[ProfileBackend, ...]:
     """The back ends (MQTT) the node's YAML profile attaches to topics beside DDS/TCPROS."""

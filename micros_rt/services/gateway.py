@@ -1,0 +1,334 @@
+"""The micros_rt side of the ROS 2 service helper (:mod:`micros_rt.services.ros2_helper`).
+
+One helper per process, started on first use with the Python of a ROS 2 installation: ``MICROS_RT_ROS2_PYTHON``,
+else ``.venv-ros2/bin/python`` beside the micros_rt source tree or in the working directory. Requests and
+replies cross a Unix socket pair as serialized ROS 2 messages (the DDS codec of
+:mod:`micros_rt.transports.dds.types`); the helper's rclpy node does the ROS 2 service protocol on DDS.
+
+Its DDS participant follows micros_rt's network rule (:mod:`micros_rt.transports.dds.participant`): on a loopback
+node (``ROS_IP``/``ROS_HOSTNAME`` loopback) Fast DDS gets ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and a profile
+that whitelists 127.0.0.1, unless the environment already names a Fast DDS profile.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import re
+import socket
+import struct
+import subprocess
+import tempfile
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Optional, Tuple
+
+from ..exceptions import MicrosRtError
+from ..log import nonblocking_logger
+from ..transports.dds.participant import _is_loopback
+
+__all__ = ["Ros2Gateway", "Ros2Unavailable", "gateway", "close_gateway", "ros2_python"]
+
+_log = nonblocking_logger("rosout.micros_rt.services")
+
+# the helper's frame codes (ros2_helper.py)
+ADVERTISE, UNADVERTISE, CLIENT, READY, CALL, CANCEL, RESPONSE, FAIL = 1, 2, 3, 4, 5, 6, 7, 8
+STATUS, RESULT, ERROR, REQUEST, HELLO = 20, 21, 22, 23, 24
+_HEAD = struct.Struct("<IBIH")
+
+HELPER = Path(__file__).resolve().parent / "ros2_helper.py"
+#: seconds the helper may take to import rclpy and start its node
+START_TIMEOUT = 20.0
+
+_FASTDDS_LOOPBACK = """<?xml version="1.0" encoding="UTF-8"?>
+<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
+  <transport_descriptors>
+    <transport_descriptor><transport_id>udp_loopback</transport_id><type>UDPv4</type>
+      <interfaceWhiteList><address>127.0.0.1</address></interfaceWhiteList></transport_descriptor>
+    <transport_descriptor><transport_id>shm_local</transport_id><type>SHM</type></transport_descriptor>
+  </transport_descriptors>
+  <participant profile_name="micros_rt_loopback" is_default_profile="true"><rtps>
+    <userTransports><transport_id>udp_loopback</transport_id><transport_id>shm_local</transport_id></userTransports>
+    <useBuiltinTransports>false</useBuiltinTransports></rtps></participant>
+</profiles>
+"""
+
+#: what must not reach the helper's interpreter from a rospy process
+_SCRUB_ENV = ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV", "ROS_PACKAGE_PATH", "ROS_PYTHON_VERSION")
+
+
+class Ros2Unavailable(MicrosRtError):
+    """The ROS 2 side of services cannot work in this process (no ROS 2 Python, the helper failed); the
+    message says why and what to set."""
+
+
+def ros2_python(env: Optional[Dict[str, str]] = None) -> Optional[str]:
+    """The Python of a ROS 2 installation: ``MICROS_RT_ROS2_PYTHON``, else a ``.venv-ros2`` beside the micros_rt
+    source tree or in the working directory; None when there is none."""
+    given = (os.environ if env is None else env).get("MICROS_RT_ROS2_PYTHON", "").strip()
+    if given:
+        return given
+    for base in (Path(__file__).resolve().parents[2], Path.cwd()):
+        candidate = base / ".venv-ros2" / "bin" / "python"
+        if candidate.exists():
+            return str(candidate)
+    return None
+
+
+class _Pending:
+    __slots__ = ("event", "meta", "body")
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.meta: Dict[str, Any] = {}
+        self.body = b""
+
+
+#: ``handler(name, request_bytes) -> response_bytes`` for a ROS 2 client's request (raises to fail it)
+Handler = Callable[[bytes], bytes]
+
+
+class Ros2Gateway:
+    """A running helper process and the calls in flight through it. Thread-safe; ``close()`` stops it."""
+
+    def __init__(self, node_name: str, *, python: Optional[str] = None, workers: int = 4) -> None:
+        python = python or ros2_python()
+        if python is None:
+            raise Ros2Unavailable(
+                "no ROS 2 Python found for services toward ROS 2: set MICROS_RT_ROS2_PYTHON to the python of an "
+                "installation with rclpy (e.g. .venv-ros2/bin/python, see docs/services.md)")
+        self.python = python
+        self._ids = itertools.count(1)
+        self._pending: Dict[int, _Pending] = {}
+        self._lock = threading.Lock()
+        self._send_lock = threading.Lock()
+        self._handlers: Dict[str, Handler] = {}
+        self._workers = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="micros_rt service")
+        self.closed = False
+        self._hello = _Pending()
+        ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+        self._sock = ours
+        env, scratch = self._helper_env()
+        try:
+            self._proc = subprocess.Popen(
+                [python, str(HELPER), str(theirs.fileno()), _ros2_node_name(node_name)],
+                pass_fds=(theirs.fileno(),), env=env, stdin=subprocess.DEVNULL, close_fds=True)
+        except OSError as exc:
+            ours.close()
+            raise Ros2Unavailable(f"cannot start the ROS 2 service helper with {python}: {exc}") from exc
+        finally:
+            theirs.close()
+        self._reader = ours.makefile("rb", buffering=1 << 16)
+        threading.Thread(target=self._read_loop, name="micros_rt ROS 2 helper", daemon=True).start()
+        try:
+            if not self._hello.event.wait(START_TIMEOUT) or not self._hello.meta:
+                self.close()
+                raise Ros2Unavailable(f"the ROS 2 service helper ({python} {HELPER.name}) did not start within "
+                                      f"{START_TIMEOUT:g} s (exit code {self._proc.poll()}); is rclpy installed there?")
+        finally:
+            for path in scratch:
+                os.unlink(path)  # Fast DDS has read its profile once the node is up
+        _log.info("micros_rt: ROS 2 service helper started (pid %s, %s)", self._hello.meta.get("pid"),
+                  self._hello.meta.get("rmw"))
+
+    @staticmethod
+    def _helper_env() -> Tuple[Dict[str, str], List[str]]:
+        env = {k: v for k, v in os.environ.items() if k not in _SCRUB_ENV}
+        scratch: List[str] = []
+        if _is_loopback(env) and not env.get("FASTRTPS_DEFAULT_PROFILES_FILE"):
+            fd, path = tempfile.mkstemp(prefix="micros_rt_fastdds_", suffix=".xml")
+            with os.fdopen(fd, "w") as f:
+                f.write(_FASTDDS_LOOPBACK)
+            scratch.append(path)
+            env["FASTRTPS_DEFAULT_PROFILES_FILE"] = path
+            env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        return env, scratch
+
+    # -- frames -------------------------------------------------------------------------------------------------
+    def _send(self, op: int, cid: int, meta: Optional[Dict[str, Any]] = None, body: bytes = b"") -> None:
+        raw = json.dumps(meta).encode() if meta else b""
+        frame = _HEAD.pack(_HEAD.size - 4 + len(raw) + len(body), op, cid, len(raw)) + raw + body
+        try:
+            with self._send_lock:
+                self._sock.sendall(frame)
+        except OSError as exc:
+            raise Ros2Unavailable(f"the ROS 2 service helper is gone ({exc})") from exc
+
+    def _read_loop(self) -> None:
+        try:
+            while True:
+                head = self._reader.read(_HEAD.size)
+                if len(head) < _HEAD.size:
+                    break
+                length, op, cid, meta_len = _HEAD.unpack(head)
+                rest = self._reader.read(length - (_HEAD.size - 4))
+                meta = json.loads(rest[:meta_len]) if meta_len else {}
+                body = bytes(rest[meta_len:])
+                if op == REQUEST:
+                    self._workers.submit(self._serve, cid, meta.get("name", ""), body)
+                    continue
+                slot = self._hello if op == HELLO else self._pending.pop(cid, None)
+                if slot is not None:
+                    slot.meta, slot.body = meta or {"ok": True}, body
+                    slot.event.set()
+        except (OSError, ValueError):
+            pass
+        finally:
+            self._fail_all("the ROS 2 service helper exited" + ("" if self.closed else
+                                                               f" (exit code {self._proc.poll()})"))
+
+    def _fail_all(self, why: str) -> None:
+        with self._lock:
+            pending, self._pending = self._pending, {}
+        for slot in pending.values():
+            slot.meta = {"ok": False, "error": why}
+            slot.event.set()
+        self._hello.event.set()
+
+    def _serve(self, rid: int, name: str, body: bytes) -> None:
+        handler = self._handlers.get(name)
+        try:
+            if handler is None:
+                raise LookupError(f"service {name} is not advertised here")
+            answer = handler(body)
+        except Exception as exc:
+            try:
+                self._send(FAIL, rid, {"error": str(exc)})
+            except Ros2Unavailable:
+                pass
+            return
+        try:
+            self._send(RESPONSE, rid, None, answer)
+        except Ros2Unavailable:
+            pass
+
+    def _exchange(self, op: int, meta: Dict[str, Any], body: bytes = b"",
+                  timeout: Optional[float] = None) -> _Pending:
+        slot = _Pending()
+        with self._lock:
+            if self.closed:
+                raise Ros2Unavailable("the ROS 2 service helper is closed")
+            cid = next(self._ids)
+            self._pending[cid] = slot
+        self._send(op, cid, meta, body)
+        if not slot.event.wait(timeout):
+            with self._lock:
+                self._pending.pop(cid, None)
+            if op == CALL:
+                self._send(CANCEL, cid)
+            raise TimeoutError(f"no answer within {timeout:g} s")
+        return slot
+
+    def _status(self, op: int, meta: Dict[str, Any]) -> Dict[str, Any]:
+        try:
+            slot = self._exchange(op, meta, timeout=START_TIMEOUT)
+        except TimeoutError:
+            raise Ros2Unavailable(f"the ROS 2 service helper did not answer within {START_TIMEOUT:g} s") from None
+        if not slot.meta.get("ok", False):
+            raise Ros2Unavailable(str(slot.meta.get("error", "the ROS 2 service helper failed")))
+        return slot.meta
+
+    # -- the API the services use -------------------------------------------------------------------------------
+    def advertise(self, name: str, ros2_type: str, handler: Handler) -> None:
+        """Serve ROS 2 clients of ``name``: ``handler(request bytes) -> response bytes`` runs on a worker."""
+        self._handlers[name] = handler
+        try:
+            self._status(ADVERTISE, {"name": name, "type": ros2_type})
+        except Exception:
+            self._handlers.pop(name, None)
+            raise
+
+    def unadvertise(self, name: str) -> None:
+        self._handlers.pop(name, None)
+        if not self.closed:
+            try:
+                self._status(UNADVERTISE, {"name": name})
+            except Ros2Unavailable:
+                pass
+
+    def prepare_client(self, name: str, ros2_type: str) -> None:
+        """Create the helper's client early, so that DDS discovery of the server runs before the first call."""
+        self._status(CLIENT, {"name": name, "type": ros2_type})
+
+    def server_ready(self, name: str, ros2_type: str) -> bool:
+        """Whether the helper's client of ``name`` has discovered a ROS 2 server."""
+        return bool(self._status(READY, {"name": name, "type": ros2_type}).get("ready"))
+
+    def call(self, name: str, ros2_type: str, request: bytes, timeout: Optional[float]) -> bytes:
+        """One call to a ROS 2 server: the response's bytes. Raises TimeoutError, or ``RuntimeError`` in words."""
+        slot = self._exchange(CALL, {"name": name, "type": ros2_type}, request, timeout)
+        if "error" in slot.meta:
+            raise RuntimeError(str(slot.meta["error"]))
+        return slot.body
+
+    def close(self) -> None:
+        """Stop the helper (its DDS entities go with it); harmless twice."""
+        if self.closed:
+            return
+        self.closed = True
+        try:
+            self._sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        self._sock.close()
+        try:
+            self._proc.wait(timeout=3.0)
+        except subprocess.TimeoutExpired:
+            self._proc.kill()
+            self._proc.wait()
+        self._workers.shutdown(wait=False)
+        self._fail_all("the ROS 2 service helper is closed")
+
+    def __enter__(self) -> "Ros2Gateway":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _ros2_node_name(ros1_name: str) -> str:
+    """A ROS 2 node name for the helper of ROS 1 node ``/ns/talker``: ``ns_talker_services``."""
+    base = re.sub(r"[^A-Za-z0-9_]", "_", ros1_name.strip("/")) or "micros_rt"
+    if base[0].isdigit():
+        base = "n" + base
+    return base + "_services"
+
+
+_gateway: Optional[Ros2Gateway] = None
+_gateway_failed: Optional[str] = None
+_gateway_lock = threading.Lock()
+
+
+def gateway(node_name: str) -> Ros2Gateway:
+    """The process's helper, started on first use; Ros2Unavailable (said once in the log) when it cannot be."""
+    global _gateway, _gateway_failed
+    with _gateway_lock:
+        if _gateway is not None and not _gateway.closed:
+            return _gateway
+        if _gateway_failed is not None:
+            raise Ros2Unavailable(_gateway_failed)
+        if os.environ.get("MICROS_RT_DISABLE_ROS2_SERVICES", "") not in ("", "0"):
+            _gateway_failed = "services toward ROS 2 are off (MICROS_RT_DISABLE_ROS2_SERVICES is set)"
+            raise Ros2Unavailable(_gateway_failed)
+        try:
+            _gateway = Ros2Gateway(node_name)
+        except Ros2Unavailable as exc:
+            _gateway_failed = str(exc)
+            _log.warning("micros_rt: %s; services reach ROS 1 only", exc)
+            raise
+        import rospy
+
+        rospy.on_shutdown(close_gateway)  # the helper also exits by itself when this process does
+        return _gateway
+
+
+def close_gateway() -> None:
+    """Stop the process's helper (at shutdown)."""
+    global _gateway
+    with _gateway_lock:
+        found, _gateway = _gateway, None
+    if found is not None:
+        found.close()
+
