@@ -7,6 +7,7 @@ decision is kept for :data:`ROUTE_TTL` seconds, then looked up again.
 
 from __future__ import annotations
 
+import re
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor, TimeoutError as FutureTimeout
@@ -181,7 +182,9 @@ class ServiceClient:
             self._route = None  # look the server up again next time
             if isinstance(exc, ServiceError):
                 raise
-            raise ServiceError(f"service {self.resolved_name} (ROS 1): {exc}") from exc
+            # rospy puts the server's words in as a bytes repr: "responded with an error: b'...'"
+            words = re.sub(r"\bb'(.*)'$", r"\1", str(exc))
+            raise ServiceError(f"service {self.resolved_name} (ROS 1): {words}") from exc
 
     def _call_ros2(self, request: Any, timeout: Optional[float], limit: Optional[float]) -> Any:
         gw, mapping = self._gateway, self._mapping
