@@ -754,6 +754,7 @@ def plots(figs, samples, transports, outdir, targets=None):
         tv = _target_value(figs, targets, f"{tag}_p50_us")
         if tv:
             ax.axvline(tv[0], color="black", linestyle="--", linewidth=1, label=f"{tv[1]}'s p50 ({head}'s p50)")
+            ax.set_xlim(min(lo, tv[0]) / 1.3, max(hi, tv[0]) * 1.3)
             ax.legend(fontsize=8, loc="upper left")
         ax.set_xlabel("round trip (µs, log scale); black ticks: p50 and p99 of this round; text: median over rounds")
         ax.set_title(f"Round-trip latency, {title} std_msgs/UInt8MultiArray, loopback, last round (lower is better)")
