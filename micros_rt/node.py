@@ -300,15 +300,19 @@ class NodeHandle:
         return self._subscribe(topic, data_class, callback, queue_size, None, transport_hints, callback_args)
 
     def subscribe_with_qos(self, topic: str, data_class: Type[genpy.Message], callback: Callable[..., None],
-                           queue_size: Optional[int], qos: SubscribeQoSOptions, *,
+                           queue_size: Optional[int], qos: SubscribeQoSOptions,
+                           transport_hints: Optional[TransportHints] = None, *,
                            callback_args: Any = None, msg_valid_period: float = math.inf) -> Subscriber:
-        """Subscribe with :class:`SubscribeQoSOptions`; DDS is preferred, TCPROS is the fallback.
+        """Subscribe with :class:`SubscribeQoSOptions`; shared memory or DDS is preferred, TCPROS is the fallback
+        (``transport_hints`` choose, as for :meth:`subscribe`).
         ``msg_valid_period``: this subscriber's own lifespan (seconds): a message older than that by its
         source stamp (the DDS write time, or its Header stamp over TCPROS) is dropped and counted in
         ``dropped_expired``, whatever the publisher offers (the shorter applies)."""
         if not isinstance(qos, SubscribeQoSOptions):
             raise QoSTypeError(f"qos={qos!r} is invalid: expected micros_rt.SubscribeQoSOptions")
-        return self._subscribe(topic, data_class, callback, queue_size, qos, None, callback_args,
+        if transport_hints is not None and not isinstance(transport_hints, TransportHints):
+            raise TypeError(f"transport_hints must be micros_rt.TransportHints, got {transport_hints!r}")
+        return self._subscribe(topic, data_class, callback, queue_size, qos, transport_hints, callback_args,
                                to_seconds(msg_valid_period, "msg_valid_period"))
 
     def subscribe_reader(self, name: str, data_class: Type[genpy.Message], open_reader: OpenReader,
@@ -365,10 +369,9 @@ class NodeHandle:
             eager = ros2_visible(_node.profile)
             new = _Subscription(resolved, data_class, queue_size, effective, hints,
                                 dds=dds_backend() if eager and hints.allows_dds else None, tag=_tag(),
-                                graph=_node.graph, extra=_profile_backends())
+                                graph=_node.graph, extra=_profile_backends(), lifespan=lifespan)
             if not eager and hints.allows_dds:
                 new.lazy_dds = dds_backend  # the DDS reader comes with the first publisher that takes DDS
-            new.lifespan = lifespan
             new.callbacks = ((callback, callback_args),)  # before start(): a latched message may come at once
             created.append(new)
             return new

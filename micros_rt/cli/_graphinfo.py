@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import concurrent.futures
 import json
-import math
 import os
 import time
 import xmlrpc.client
@@ -24,6 +23,8 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 from ..core.introspection import INFO_METHOD
 # the library's XML-RPC transport with a per-connection timeout (the micros_rt package imports rospy anyway)
 from ..core.rospy_compat import TimeoutTransport
+from ..exceptions import MicrosRtError
+from ..qos.options import describe
 from . import CommandError
 
 __all__ = [
@@ -250,35 +251,26 @@ def _describe(report: NodeReport, qos: Optional[Dict[str, Any]], *, publisher: b
     return describe_publisher_qos(qos) if publisher else describe_subscriber_qos(qos)
 
 
-def _secs(value: Any) -> float:
-    if isinstance(value, str):
-        return math.inf if value.strip().lower().lstrip("+") in ("inf", "infinity") else float(value)
-    return float(value) if value is not None else 0.0
-
-
-def _fmt_secs(value: float) -> str:
-    return f"{value * 1e3:g} ms" if value < 1.0 else f"{value:g} s"
-
-
 def _queue(qos: Mapping[str, Any]) -> str:
     q = qos.get("queue_size")
     return "lossless (queue_size None)" if not q else f"queue {q}"
 
 
+def _option_words(qos: Mapping[str, Any], side: str) -> List[str]:
+    try:
+        return describe(qos, side)
+    except MicrosRtError as exc:  # a peer's QoS that does not parse: say so, do not fail the whole report
+        return [f"QoS not understood ({exc})"]
+
+
 def describe_publisher_qos(qos: Mapping[str, Any]) -> str:
-    """``AdvertiseQoSOptions.to_dict()`` (+ queue_size, latch) in a few words.
+    """``AdvertiseQoSOptions.to_dict()`` (+ queue_size, latch) in a few words (the words are the catalogue's,
+    :data:`micros_rt.qos.options.OPTIONS`).
 
     >>> describe_publisher_qos({"transport_priority": "HIGH", "using_best_effort_protocol": True, "queue_size": None})
     'best effort, priority HIGH, lossless (queue_size None)'
     """
-    parts = ["best effort" if qos.get("using_best_effort_protocol") else "reliable",
-             f"priority {qos.get('transport_priority', 'NORMAL')}"]
-    budget = _secs(qos.get("latency_budget", 0.0))
-    if budget > 0:
-        parts.append(f"latency budget {_fmt_secs(budget)}")
-    lifespan = _secs(qos.get("msg_valid_period", "inf"))
-    if not math.isinf(lifespan):
-        parts.append(f"valid for {_fmt_secs(lifespan)}")
+    parts = _option_words(qos, "advertise")
     if qos.get("latch"):
         parts.append("latched")
     if "queue_size" in qos:
@@ -292,14 +284,7 @@ def describe_subscriber_qos(qos: Mapping[str, Any]) -> str:
     >>> describe_subscriber_qos({"deadline": 0.5, "ordered_by_sending_timestamp": False, "queue_size": 10})
     'reliable, deadline 500 ms, by arrival, queue 10'
     """
-    parts = ["best effort accepted" if qos.get("using_best_effort_protocol") else "reliable"]
-    deadline = _secs(qos.get("deadline", "inf"))
-    if not math.isinf(deadline):
-        parts.append(f"deadline {_fmt_secs(deadline)}")
-    tf = _secs(qos.get("time_filter_duration", 0.0))
-    if tf > 0:
-        parts.append(f"time filter {_fmt_secs(tf)}")
-    parts.append("by source time" if qos.get("ordered_by_sending_timestamp", True) else "by arrival")
+    parts = _option_words(qos, "subscribe")
     if "queue_size" in qos:
         parts.append(_queue(qos))
     hints = qos.get("hints")
@@ -375,7 +360,7 @@ def relay_marking(report: NodeReport, topic: str, *, publisher: bool) -> Optiona
         seen = f"exported by {', '.join(exporters)}" if exporters else "no exporting relay seen now"
         dropped = [f"{label} {counters[key]}" for key, label in (
             ("dropped_queue_full", "queue full"), ("dropped_expired", "expired"), ("dropped_filtered", "filtered"),
-            ("refused", "refused"), ("bad_input", "bad input"), ("lost", "lost"),
+            ("dropped_out_of_order", "out of order"), ("refused", "refused"), ("bad_input", "bad input"), ("lost", "lost"),
             ("deadline_missed", "deadline missed")) if counters.get(key)]
         summary = (f"relayed in from graph {im.get('origin')} (outside topic {im.get('outside')}, {seen}) by relay "
                    f"node {report.name}")

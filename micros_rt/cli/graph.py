@@ -12,6 +12,8 @@ import subprocess
 import sys
 from typing import Any, Dict, List, Set
 
+from ..exceptions import MicrosRtError
+from ..qos.options import describe
 from . import CommandError
 from ._args import ArgumentParser
 from ._graphinfo import MICROS_RT, GraphSnapshot, Master, relay_marking, snapshot
@@ -80,21 +82,19 @@ def _q(text: str) -> str:
     return '"' + text.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
 
 
+def _short(qos: Dict[str, object], side: str) -> str:
+    try:
+        return ", ".join(describe(qos, side, short=True))
+    except MicrosRtError:
+        return "QoS not understood"
+
+
 def _short_pub(qos: Dict[str, object]) -> str:
-    words = ["best effort" if qos.get("using_best_effort_protocol") else "reliable",
-             str(qos.get("transport_priority", "NORMAL"))]
-    if qos.get("latency_budget") not in (0, 0.0, None):
-        words.append(f"budget {qos['latency_budget']} s")
-    return ", ".join(words)
+    return _short(qos, "advertise")
 
 
 def _short_sub(qos: Dict[str, object]) -> str:
-    words = ["best effort ok" if qos.get("using_best_effort_protocol") else "reliable"]
-    if qos.get("deadline") not in ("inf", None):
-        words.append(f"deadline {qos['deadline']} s")
-    if qos.get("time_filter_duration") not in (0, 0.0, None):
-        words.append(f"filter {qos['time_filter_duration']} s")
-    return ", ".join(words)
+    return _short(qos, "subscribe")
 
 
 def _outside_lines(relays: Dict[str, Dict[str, Any]]) -> List[str]:

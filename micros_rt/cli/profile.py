@@ -87,14 +87,15 @@ def rule_matches(profile: Any, section: str, key: str,
                  endpoints: Mapping[str, Sequence[str]]) -> Dict[str, "tuple[List[str], Union[str, None]]"]:
     """Live topics (with their nodes) whose names rule ``key`` matches: topic -> (nodes, the key of the rule
     that wins instead, or None when this one applies). Uses the library's own lookup."""
-    import fnmatch
+    from ..qos.topic_rules import TopicPattern
 
     rules = profile.publishers if section == "publishers" else profile.subscribers
     lookup = profile.advertise_options if section == "publishers" else profile.subscribe_options
     mine = rules[key]
+    pattern = TopicPattern.parse(key)  # the profile's own matcher: names, globs and ^...$ expressions
     out: Dict[str, "tuple[List[str], Union[str, None]]"] = {}
     for topic in sorted(endpoints):
-        if not (topic == key or fnmatch.fnmatchcase(topic, key)):
+        if not pattern.matches(topic):
             continue
         winner = lookup(topic)
         shadow = None if winner is mine else next((k for k, v in rules.items() if v is winner), "?")

@@ -210,7 +210,8 @@ def latency_report(topic: str, type_name: str, sub: Any, arrivals: "Arrivals") -
     else:
         stamps = "Header stamps"
     drops = {"queue_full": stats.dropped_queue_full, "expired": stats.dropped_expired,
-             "filtered": stats.dropped_filtered, "malformed": stats.malformed}
+             "filtered": stats.dropped_filtered, "out_of_order": stats.dropped_out_of_order,
+             "malformed": stats.malformed}
     drops["total"] = sum(drops.values())
     return {
         "topic": topic, "type": type_name, "messages": n, "rate_hz": _num((n - 1) / span) if n > 1 and span > 0
@@ -246,8 +247,8 @@ def format_latency(report: Dict[str, Any]) -> str:
         f"messages:  {report['messages']}, rate {rate}",
         f"latency:   p50 {_ms(lat['p50'])}, p99 {_ms(lat['p99'])}, max {_ms(lat['max'])}, mean {_ms(lat['mean'])}"
         f" ({lat['count']} of {report['messages']} measured, from {report['timestamps']})",
-        f"drops:     {report['drops']['total']} (queue full {report['drops']['queue_full']}, expired "
-        f"{report['drops']['expired']}, filtered {report['drops']['filtered']}, malformed {report['drops']['malformed']})",
+        f"drops:     {report['drops']['total']} ("
+        + ", ".join(f"{kind.replace('_', ' ')} {n}" for kind, n in report["drops"].items() if kind != "total") + ")",
         f"deadline misses: {report['deadline_misses']}, latency budget misses: {report['budget_misses']} of "
         f"{report['budget_checked']} checked",
     ])

@@ -17,8 +17,9 @@ class SubscriberStatistics:
     ``received`` counts messages handed to the subscription; ``delivered`` those its callbacks got.
     Every message not delivered is in exactly one drop counter: ``dropped_queue_full`` (the newest
     ``queue_size`` are kept, as in ROS), ``dropped_expired`` (older than the publisher's
-    msg_valid_period), ``dropped_filtered`` (time_filter_duration), ``malformed`` (undecodable DDS
-    samples). ``writers``: DDS writers this subscription keeps state for right now.
+    msg_valid_period), ``dropped_filtered`` (time_filter_duration), ``dropped_out_of_order`` (stamped
+    before the last one delivered, ordered_by_sending_timestamp), ``malformed`` (undecodable DDS samples).
+    ``writers``: DDS writers this subscription keeps state for right now.
     """
 
     received: int
@@ -29,6 +30,7 @@ class SubscriberStatistics:
     malformed: int
     deadline_missed: int
     writers: int
+    dropped_out_of_order: int = 0
 
 
 @dataclass(frozen=True)

@@ -25,13 +25,14 @@ from .delivery import Inbox
 from .registry import EndpointRegistry
 from .stats import LatencyStats, SubscriberStatistics
 from .writers import DELIVER, HOLD, Accepted, WriterState, WriterTable
-from ..transports.base import TIME_FILTER, EndpointSpec, Feed, ProfileBackend, PushInfo, PushReader, TransportReader
+from ..transports.base import SOURCE_ORDER, TIME_FILTER, EndpointSpec, Feed, ProfileBackend, PushInfo, PushReader, TransportReader
 from ..exceptions import MicrosRtError
 from ..negotiation import DDS, SHM, TCPROS, DDSAnswer, DDSOffer, ShmAnswer, ShmOffer, TransportHints
 from ..qos import (
     UNBOUNDED_QUEUE_DEPTH,
     DeadlineMissed,
     DeadlineMonitor,
+    SourceOrder,
     SubscribeQoSOptions,
     TimeFilter,
     TransportPriority,
@@ -55,15 +56,14 @@ _RETAKE_SECONDS = 0.005  # with a bounded queue, take new samples at least this 
 class _Subscription:
     """Per topic and process: rospy subscriber, DDS reader(s) and the delivery thread."""
 
-    #: the subscriber's own msg_valid_period (seconds): a message older than this by its source stamp is
-    #: dropped (``dropped_expired``) whatever its publisher offers; the shorter of the two applies
-    lifespan: float = math.inf
-
     def __init__(self, topic: str, data_class: Type[genpy.Message], queue_size: Optional[int],
                  options: Optional[SubscribeQoSOptions], hints: TransportHints, *,
                  dds: Optional[DDSBackend], tag: Dict[str, str], graph: str,
-                 extra: Tuple[ProfileBackend, ...] = ()) -> None:
+                 extra: Tuple[ProfileBackend, ...] = (), lifespan: float = math.inf) -> None:
         self.topic = topic
+        #: the subscriber's own msg_valid_period (seconds): a message older than this by its source stamp is
+        #: dropped (``dropped_expired``) whatever its publisher offers; the shorter of the two applies
+        self.lifespan = lifespan
         self.data_class = data_class
         self.queue_size = queue_size
         self.options = options
@@ -78,10 +78,11 @@ class _Subscription:
         self.closed = False
         self.stats = LatencyStats()
         self.received = self.delivered = self.dropped_queue_full = self.dropped_expired = 0
-        self.dropped_filtered = self.malformed = 0
+        self.dropped_filtered = self.dropped_out_of_order = self.malformed = 0
         self._burst_dropped = 0
         self.queue: Deque[Tuple[bytes, Any, WriterState]] = collections.deque()
         self.time_filter = TimeFilter(self.effective.time_filter_duration)
+        self.source_order = SourceOrder(self.effective.ordered_by_sending_timestamp)
         self.deadline = DeadlineMonitor(self.effective.deadline, start=time.monotonic())
         self.writers = WriterTable(graph, self.depth or UNBOUNDED_QUEUE_DEPTH)
         self.incompatible_reported: Set[int] = set()
@@ -458,9 +459,13 @@ class _Subscription:
 
     # -- the one admission path: what the reader did not enforce, whatever the transport -------------
     def _admit_enforced(self, reader: TransportReader, source_ns: int, qos: Optional[Any]) -> bool:
-        """Apply the time filter (unless the reader's transport did) and lifespan (Cyclone expires
+        """Apply source order and the time filter (unless the reader's transport did) and lifespan (Cyclone expires
         samples in its cache, but a sample taken can still wait behind slow callbacks; a writer whose
         QoS is unknown, as over TCPROS, has none); count what is dropped."""
+        order = self.source_order  # first: an out-of-order message must not use up the time filter's window
+        if order.enabled and SOURCE_ORDER not in reader.enforces and not order.admit(source_ns):
+            self.dropped_out_of_order += 1
+            return False
         tf = self.time_filter
         if tf.period > 0.0 and TIME_FILTER not in reader.enforces and not tf.admit(time.time()):
             self.dropped_filtered += 1
@@ -637,7 +642,8 @@ class _Subscription:
         return SubscriberStatistics(
             received=self.received + pushed_drops, delivered=self.delivered,
             dropped_queue_full=self.dropped_queue_full + pushed_drops,
-            dropped_expired=self.dropped_expired, dropped_filtered=self.dropped_filtered, malformed=self.malformed,
+            dropped_expired=self.dropped_expired, dropped_filtered=self.dropped_filtered,
+            dropped_out_of_order=self.dropped_out_of_order, malformed=self.malformed,
             deadline_missed=self.deadline.missed_total, writers=len(self.writers))
 
     def close(self) -> None:

@@ -14,6 +14,7 @@ from micros_rt.qos.enforcement import (
     ClockSkewCheck,
     DeadlineMissed,
     DeadlineMonitor,
+    SourceOrder,
     TimeFilter,
     is_expired,
 )
@@ -49,6 +50,7 @@ __all__ = [
     "ClockSkewCheck",
     "DeadlineMissed",
     "DeadlineMonitor",
+    "SourceOrder",
     "TimeFilter",
     "is_expired",
     "is_lossless",

@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass
 from typing import Optional
 
-__all__ = ["TimeFilter", "DeadlineMonitor", "DeadlineMissed", "ClockSkewCheck", "CLOCK_SKEW_WARN_SECONDS",
+__all__ = ["TimeFilter", "SourceOrder", "DeadlineMonitor", "DeadlineMissed", "ClockSkewCheck", "CLOCK_SKEW_WARN_SECONDS",
            "is_expired"]
 
 #: A writer whose samples arrive stamped further than this from our clock is reported (once).
@@ -48,6 +48,31 @@ class TimeFilter:
         if now - self._last < self.period:
             return False
         self._last = now
+        return True
+
+
+class SourceOrder:
+    """``ordered_by_sending_timestamp``: a message stamped before the last one admitted is dropped, as a DDS
+    reader ordered BY_SOURCE_TIMESTAMP drops it (one instance: every publisher of the topic together).
+    Unstamped messages (0) pass and do not move the mark; ``enabled`` False lets everything through.
+
+    >>> o = SourceOrder(True)
+    >>> [o.admit(t) for t in (10, 12, 11, 0, 12, 13)]
+    [True, True, False, True, True, True]
+    """
+
+    __slots__ = ("enabled", "_last")
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled
+        self._last = 0
+
+    def admit(self, source_ns: int) -> bool:
+        if not self.enabled or not source_ns:
+            return True
+        if source_ns < self._last:
+            return False
+        self._last = source_ns
         return True
 
 
@@ -137,17 +162,6 @@ class ClockSkewCheck:
             self.done = True
             return age_ns / 1e9
         if self._n >= self.samples and now - self._first >= self.window:
-            self.done = True
-            if self._lowest > limit_ns:
-                return self._lowest / 1e9
-        return None
-        self._n += 1
-        self._lowest = min(self._lowest, age_ns)
-        limit_ns = self.limit * 1e9
-        if age_ns < -limit_ns:
-            self.done = True
-            return age_ns / 1e9
-        if self._n >= self.samples:
             self.done = True
             if self._lowest > limit_ns:
                 return self._lowest / 1e9

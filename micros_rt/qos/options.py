@@ -14,6 +14,7 @@ and YAML profiles).
 
 from __future__ import annotations
 
+import dataclasses
 import datetime
 import enum
 import math
@@ -265,6 +266,213 @@ def _check_keys(cls_name: str, known: tuple[str, ...], d: Mapping[str, Any], sou
         )
 
 
+#: Names of the enforcers: what a micros_rt subscription (or publication) applies itself, on every transport,
+#: unless the transport's reader applies it natively (its ``enforces`` set names it).
+TIME_FILTER = "time_filter"
+LIFESPAN = "lifespan"
+SOURCE_ORDER = "source_order"
+DEADLINE = "deadline"
+
+#: Where an option can have an effect besides micros_rt's own endpoints: the microcontroller link's entries
+#: (``to_microcontroller``, ``from_microcontroller``, ``services_on_microcontroller``).
+MCU_TO, MCU_FROM, MCU_SERVICE = "mcu:to_microcontroller", "mcu:from_microcontroller", "mcu:services"
+
+
+def _fmt_secs(value: float) -> str:
+    return f"{value * 1e3:g} ms" if value < 1.0 else f"{value:g} s"
+
+
+@dataclass(frozen=True)
+class QoSOption:
+    """Everything micros_rt knows about one QoS option, in one place.
+
+    ``kind`` ("priority", "duration", "bool" or "callback") gives validation and the XML-RPC/YAML form;
+    ``check`` adds the option's own rule (in words). ``dds_policy`` names the DDS policy it maps to (None: not
+    mapped, see :mod:`micros_rt.qos.mapping`); ``enforcer`` the check micros_rt applies itself on every
+    transport (a transport reader that applies it natively lists it in ``enforces``) and ``counter`` the
+    statistics field that counts what that check drops. ``words``/``short`` describe a value for
+    ``micros-rt topic info`` and for ``micros-rt graph`` (None: nothing worth saying, the default).
+    ``applies`` lists the bridge entries (``MCU_*``) the option has an effect on. Everything else (the option
+    classes' keys, validation, ``to_dict``/``from_dict``, the CLI's words, the key lists of bridges) derives
+    from :data:`OPTIONS`; adding an option is a field, an entry here and its enforcer.
+    """
+
+    name: str
+    side: str                                   # "advertise" or "subscribe"
+    kind: str
+    summary: str
+    dds_policy: Optional[str] = None
+    enforcer: Optional[str] = None
+    counter: Optional[str] = None
+    check: Optional[Callable[[Any], None]] = None
+    words: Callable[[Any], Optional[str]] = lambda _v: None
+    short: Callable[[Any], Optional[str]] = lambda _v: None
+    applies: frozenset[str] = frozenset()
+
+    @property
+    def wire(self) -> bool:
+        """Travels in ``to_dict``/``from_dict`` (XML-RPC, YAML): every kind but a callable."""
+        return self.kind != "callback"
+
+    def parse(self, value: Any) -> Any:
+        """``value`` validated and normalised (a level, float seconds, a bool), or a QoS error in words."""
+        if self.kind == "priority":
+            value = TransportPriority.parse(value)
+        elif self.kind == "duration":
+            value = to_seconds(value, self.name)
+        elif self.kind == "bool":
+            _check_bool(value, self.name)
+        if self.check is not None:
+            self.check(value)
+        return value
+
+    def encode(self, value: Any) -> Any:
+        """The XML-RPC- and YAML-safe form: a level by name, forever as ``"inf"``."""
+        if self.kind == "priority":
+            return value.name
+        if self.kind == "duration":
+            return _encode_duration(value)
+        return value
+
+    def decode(self, value: Any) -> Any:
+        """Inverse of :meth:`encode` (also takes what :meth:`parse` takes)."""
+        return _decode_duration(value, self.name) if self.kind == "duration" else value
+
+    def describe(self, encoded: Any, *, short: bool = False) -> Optional[str]:
+        """Words for an encoded value (a peer's ``to_dict``), None when there is nothing to say."""
+        return (self.short if short else self.words)(self.parse(self.decode(encoded)))
+
+
+def _no_zero_lifespan(value: float) -> None:
+    if value == 0.0:
+        # A zero lifespan expires every message before it can be delivered.
+        raise QoSValueError(
+            "msg_valid_period=0.0 is invalid: every message would expire before delivery; "
+            "expected a duration > 0 in seconds, or math.inf (the default) for no expiry"
+        )
+
+
+def _no_zero_deadline(value: float) -> None:
+    if value == 0.0:
+        raise QoSValueError(
+            "deadline=0.0 is invalid: every message would miss it; expected a duration > 0 in "
+            "seconds, or math.inf (the default) for no deadline"
+        )
+
+
+def _finite_filter(value: float) -> None:
+    if math.isinf(value):
+        raise QoSValueError(
+            "time_filter_duration=inf is invalid: only the first message would ever be delivered; "
+            "expected a finite duration >= 0 in seconds (0 = no filter)"
+        )
+
+
+def _no_data_centric(value: bool) -> None:
+    if value:
+        _refuse_data_centric_update()
+
+
+def _callable_or_none(value: Any) -> None:
+    if value is not None and not callable(value):
+        raise QoSTypeError(
+            f"deadline_cb={value!r} is invalid: expected a callable taking one argument, or None"
+        )
+
+
+_ALL_MCU = frozenset({MCU_TO, MCU_FROM})
+
+#: The catalogue: every option of both sides, in the order the CLI describes them.
+OPTIONS: tuple[QoSOption, ...] = (
+    QoSOption("using_best_effort_protocol", "advertise", "bool",
+              "True: no retransmission (subscribers must accept best effort too)", dds_policy="Reliability",
+              words=lambda v: "best effort" if v else "reliable", short=lambda v: "best effort" if v else "reliable",
+              applies=_ALL_MCU),
+    QoSOption("transport_priority", "advertise", "priority",
+              "one of 7 levels: the DDS TransportPriority, DSCP and socket priority of the link's packets",
+              dds_policy="TransportPriority", words=lambda v: f"priority {v.name}", short=lambda v: v.name,
+              applies=frozenset({MCU_TO, MCU_FROM, MCU_SERVICE})),
+    QoSOption("latency_budget", "advertise", "duration",
+              "seconds the publisher may take to deliver; samples of a topic are batched within it",
+              dds_policy="LatencyBudget",
+              words=lambda v: f"latency budget {_fmt_secs(v)}" if v > 0 else None,
+              short=lambda v: f"budget {v:g} s" if v > 0 else None, applies=frozenset({MCU_FROM})),
+    QoSOption("msg_valid_period", "advertise", "duration",
+              "lifespan: a message older than this is dropped, not delivered", dds_policy="Lifespan",
+              enforcer=LIFESPAN, counter="dropped_expired", check=_no_zero_lifespan,
+              words=lambda v: None if math.isinf(v) else f"valid for {_fmt_secs(v)}",
+              short=lambda v: None if math.isinf(v) else f"valid {v:g} s", applies=_ALL_MCU),
+    QoSOption("data_centric_update", "advertise", "bool",
+              "refused: ROS 1 messages have no keys", check=_no_data_centric),
+    QoSOption("using_best_effort_protocol", "subscribe", "bool",
+              "True: accepts reliable and best-effort publishers", dds_policy="Reliability",
+              words=lambda v: "best effort accepted" if v else "reliable",
+              short=lambda v: "best effort ok" if v else "reliable", applies=_ALL_MCU),
+    QoSOption("deadline", "subscribe", "duration",
+              "the longest silence accepted; a miss calls deadline_cb and is counted", enforcer=DEADLINE,
+              counter="deadline_missed", check=_no_zero_deadline,
+              words=lambda v: None if math.isinf(v) else f"deadline {_fmt_secs(v)}",
+              short=lambda v: None if math.isinf(v) else f"deadline {v:g} s", applies=frozenset({MCU_FROM})),
+    QoSOption("deadline_cb", "subscribe", "callback", "called with DeadlineMissed when the deadline is missed",
+              check=_callable_or_none),
+    QoSOption("time_filter_duration", "subscribe", "duration",
+              "deliver at most one message per this many seconds (0: no filter)", dds_policy="TimeBasedFilter",
+              enforcer=TIME_FILTER, counter="dropped_filtered", check=_finite_filter,
+              words=lambda v: f"time filter {_fmt_secs(v)}" if v > 0 else None,
+              short=lambda v: f"filter {v:g} s" if v > 0 else None, applies=_ALL_MCU),
+    QoSOption("ordered_by_sending_timestamp", "subscribe", "bool",
+              "True: by the publisher's timestamp, a message older than the last delivered is dropped",
+              dds_policy="DestinationOrder", enforcer=SOURCE_ORDER, counter="dropped_out_of_order",
+              words=lambda v: "by source time" if v else "by arrival"),
+    QoSOption("data_centric_update", "subscribe", "bool",
+              "refused: ROS 1 messages have no keys", check=_no_data_centric),
+)
+
+
+def options_of(side: str) -> tuple[QoSOption, ...]:
+    """The catalogue's options of one side ("advertise" or "subscribe"), in the CLI's order."""
+    return tuple(o for o in OPTIONS if o.side == side)
+
+
+def wire_keys(side: str) -> tuple[str, ...]:
+    """The option names of one side that travel as data (XML-RPC, YAML profiles, bridge configurations)."""
+    return tuple(o.name for o in options_of(side) if o.wire)
+
+
+def enforcers() -> frozenset[str]:
+    """The names of every check micros_rt applies itself (what a transport reader may say it ``enforces``)."""
+    return frozenset(o.enforcer for o in OPTIONS if o.enforcer is not None)
+
+
+def describe(encoded: Mapping[str, Any], side: str, *, short: bool = False) -> list[str]:
+    """Words for a ``to_dict`` form (a peer's, missing keys at their defaults), in the catalogue's order."""
+    cls: Any = AdvertiseQoSOptions if side == "advertise" else SubscribeQoSOptions
+    defaults = cls().to_dict()
+    out = []
+    for option in options_of(side):
+        if option.wire:
+            said = option.describe(encoded.get(option.name, defaults[option.name]), short=short)
+            if said is not None:
+                out.append(said)
+    return out
+
+
+def _normalise(instance: Any, side: str) -> None:
+    # Frozen dataclass: normalise through object.__setattr__ exactly once, at construction.
+    for option in options_of(side):
+        object.__setattr__(instance, option.name, option.parse(getattr(instance, option.name)))
+
+
+def _encoded(instance: Any, side: str) -> dict[str, Any]:
+    return {o.name: o.encode(getattr(instance, o.name)) for o in options_of(side) if o.wire}
+
+
+def _decoded(cls: Any, side: str, d: Mapping[str, Any], source: str) -> Any:
+    _check_keys(cls.__name__, cls._KEYS, d, source)
+    by_name = {o.name: o for o in options_of(side)}
+    return cls(**{key: by_name[key].decode(value) for key, value in d.items()})
+
+
 @dataclass(frozen=True)
 class AdvertiseQoSOptions:
     """What a publisher offers (micROS ``ros::AdvertiseQoSOptions``; members in the manual's order).
@@ -285,40 +493,15 @@ class AdvertiseQoSOptions:
     data_centric_update: bool = False
     msg_valid_period: float = DURATION_MAX
 
-    _KEYS: ClassVar[tuple[str, ...]] = (
-        "transport_priority",
-        "latency_budget",
-        "using_best_effort_protocol",
-        "data_centric_update",
-        "msg_valid_period",
-    )
+    #: the option names that travel as data, in field order (from :data:`OPTIONS`)
+    _KEYS: ClassVar[tuple[str, ...]] = ()
 
     def __post_init__(self) -> None:
-        # Frozen dataclass: normalise through object.__setattr__ exactly once, at construction.
-        object.__setattr__(self, "transport_priority", TransportPriority.parse(self.transport_priority))
-        object.__setattr__(self, "latency_budget", to_seconds(self.latency_budget, "latency_budget"))
-        _check_bool(self.using_best_effort_protocol, "using_best_effort_protocol")
-        if _check_bool(self.data_centric_update, "data_centric_update"):
-            _refuse_data_centric_update()
-        object.__setattr__(
-            self, "msg_valid_period", to_seconds(self.msg_valid_period, "msg_valid_period")
-        )
-        if self.msg_valid_period == 0.0:
-            # A zero lifespan expires every message before it can be delivered.
-            raise QoSValueError(
-                "msg_valid_period=0.0 is invalid: every message would expire before delivery; "
-                "expected a duration > 0 in seconds, or math.inf (the default) for no expiry"
-            )
+        _normalise(self, "advertise")
 
     def to_dict(self) -> dict[str, Any]:
         """XML-RPC- and YAML-safe form: priority by name, durations as float seconds or ``"inf"``."""
-        return {
-            "transport_priority": self.transport_priority.name,
-            "latency_budget": _encode_duration(self.latency_budget),
-            "using_best_effort_protocol": self.using_best_effort_protocol,
-            "data_centric_update": self.data_centric_update,
-            "msg_valid_period": _encode_duration(self.msg_valid_period),
-        }
+        return _encoded(self, "advertise")
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], *, source: str = "a dict") -> AdvertiseQoSOptions:
@@ -327,12 +510,8 @@ class AdvertiseQoSOptions:
         ``source`` names where ``d`` came from (a peer, a file) in error messages. Unknown keys raise
         :class:`QoSValueError` listing the known ones.
         """
-        _check_keys(cls.__name__, cls._KEYS, d, source)
-        kwargs: dict[str, Any] = dict(d)
-        for key in ("latency_budget", "msg_valid_period"):
-            if key in kwargs:
-                kwargs[key] = _decode_duration(kwargs[key], key)
-        return cls(**kwargs)
+        decoded: AdvertiseQoSOptions = _decoded(cls, "advertise", d, source)
+        return decoded
 
 
 @dataclass(frozen=True)
@@ -359,56 +538,20 @@ class SubscribeQoSOptions:
     using_best_effort_protocol: bool = False
     data_centric_update: bool = False
 
-    # deadline_cb is deliberately absent: a callable cannot cross XML-RPC or live in YAML.
-    _KEYS: ClassVar[tuple[str, ...]] = (
-        "deadline",
-        "ordered_by_sending_timestamp",
-        "time_filter_duration",
-        "using_best_effort_protocol",
-        "data_centric_update",
-    )
+    #: the option names that travel as data, in field order (deadline_cb cannot cross XML-RPC or live in YAML)
+    _KEYS: ClassVar[tuple[str, ...]] = ()
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "deadline", to_seconds(self.deadline, "deadline"))
-        if self.deadline == 0.0:
-            raise QoSValueError(
-                "deadline=0.0 is invalid: every message would miss it; expected a duration > 0 in "
-                "seconds, or math.inf (the default) for no deadline"
-            )
-        if self.deadline_cb is not None and not callable(self.deadline_cb):
-            raise QoSTypeError(
-                f"deadline_cb={self.deadline_cb!r} is invalid: expected a callable taking one "
-                f"argument, or None"
-            )
+        _normalise(self, "subscribe")
         if self.deadline_cb is not None and math.isinf(self.deadline):
             raise QoSValueError(
                 "deadline_cb is set but deadline=inf: the callback would never fire; "
                 "give a finite deadline in seconds, e.g. deadline=0.5"
             )
-        _check_bool(self.ordered_by_sending_timestamp, "ordered_by_sending_timestamp")
-        object.__setattr__(
-            self,
-            "time_filter_duration",
-            to_seconds(self.time_filter_duration, "time_filter_duration"),
-        )
-        if math.isinf(self.time_filter_duration):
-            raise QoSValueError(
-                "time_filter_duration=inf is invalid: only the first message would ever be delivered; "
-                "expected a finite duration >= 0 in seconds (0 = no filter)"
-            )
-        _check_bool(self.using_best_effort_protocol, "using_best_effort_protocol")
-        if _check_bool(self.data_centric_update, "data_centric_update"):
-            _refuse_data_centric_update()
 
     def to_dict(self) -> dict[str, Any]:
         """XML-RPC- and YAML-safe form: durations as float seconds or ``"inf"``; no callback."""
-        return {
-            "deadline": _encode_duration(self.deadline),
-            "ordered_by_sending_timestamp": self.ordered_by_sending_timestamp,
-            "time_filter_duration": _encode_duration(self.time_filter_duration),
-            "using_best_effort_protocol": self.using_best_effort_protocol,
-            "data_centric_update": self.data_centric_update,
-        }
+        return _encoded(self, "subscribe")
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], *, source: str = "a dict") -> SubscribeQoSOptions:
@@ -417,9 +560,17 @@ class SubscribeQoSOptions:
         ``source`` names where ``d`` came from in error messages. Unknown keys (``deadline_cb``
         included) raise :class:`QoSValueError` listing the known ones.
         """
-        _check_keys(cls.__name__, cls._KEYS, d, source)
-        kwargs: dict[str, Any] = dict(d)
-        for key in ("deadline", "time_filter_duration"):
-            if key in kwargs:
-                kwargs[key] = _decode_duration(kwargs[key], key)
-        return cls(**kwargs)
+        decoded: SubscribeQoSOptions = _decoded(cls, "subscribe", d, source)
+        return decoded
+
+
+def _field_keys(cls: Any, side: str) -> tuple[str, ...]:
+    wire = wire_keys(side)
+    names = tuple(f.name for f in dataclasses.fields(cls))
+    if set(names) != {o.name for o in options_of(side)}:
+        raise AssertionError(f"{cls.__name__}'s fields {names} and the catalogue's {side} options differ")
+    return tuple(n for n in names if n in wire)
+
+
+AdvertiseQoSOptions._KEYS = _field_keys(AdvertiseQoSOptions, "advertise")
+SubscribeQoSOptions._KEYS = _field_keys(SubscribeQoSOptions, "subscribe")

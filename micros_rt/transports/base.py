@@ -38,12 +38,12 @@ import genpy
 from ..qos import AdvertiseQoSOptions, SubscribeQoSOptions
 
 __all__ = ["BACKOFF_FIRST", "BACKOFF_MAX", "BackPressuredWriter", "send_with_backoff", "Backend", "EndpointSpec", "Feed", "MirrorWriter", "PROFILE_BACKENDS", "ProfileBackend", "PushInfo",
-           "PushReader", "ReaderBackend", "RemoteWriter", "Sample", "TIME_FILTER", "LIFESPAN", "TransportReader",
+           "PushReader", "ReaderBackend", "RemoteWriter", "Sample", "TIME_FILTER", "LIFESPAN", "SOURCE_ORDER", "TransportReader",
            "TransportWriter", "WriterBackend", "close_profile_backends", "profile_backends"]
 
-#: Names of the subscriber QoS a reader can enforce natively (:attr:`TransportReader.enforces`).
-TIME_FILTER = "time_filter"
-LIFESPAN = "lifespan"
+# Names of the subscriber QoS a reader can enforce natively (:attr:`TransportReader.enforces`): the catalogue's
+# enforcers (micros_rt.qos.options.OPTIONS)
+from ..qos.options import LIFESPAN, SOURCE_ORDER, TIME_FILTER  # noqa: E402
 
 
 @dataclass(frozen=True)
@@ -66,7 +66,7 @@ class RemoteWriter:
 
 
 #: One received sample: (payload, info) where ``info`` has ``valid_data`` (bool), ``source_timestamp``
-#: (ns, 0 when unknown) and ``publication_handle`` (the writer, for :meth:`TransportReader.writer`).
+#: (ns, 0 when unknown) and ``publication_handle`` (the writer, for :meth:`ReaderBackend.writer`).
 #: Cyclone's own SampleInfo has exactly these, so the DDS path builds no object of its own per sample (but
 #: for large samples taken with the GIL released: a small ``TakenInfo`` each, see transports/dds/endpoints.py).
 Sample = Tuple[Any, Any]
@@ -112,23 +112,33 @@ BACKOFF_MAX = 0.002
 def send_with_backoff(try_send: Callable[[Any], bool], prepared: Any, timeout: float,
                       closed: Callable[[], bool] = lambda: False,
                       wait: Optional[Callable[[float], None]] = None, *,
-                      first: float = BACKOFF_FIRST, most: float = BACKOFF_MAX) -> bool:
-    """Try ``try_send(prepared)`` until it succeeds or ``timeout`` seconds passed (False then), waiting
-    between tries with ``wait(seconds)`` (the transport's own wait for room, which returns as soon as there
-    is some; a sleep when it has none), ``first`` seconds, doubling, at most ``most``. The waiting never holds
-    the GIL: Cyclone's own blocking write does, and stalls the whole process (measured: a thread counting got
-    0.3 % of its rate while a write waited 1.5 s for a stopped reader's acknowledgements). The one retry loop:
-    anything retried with backoff (a peer's XML-RPC call, too) goes through it."""
+                      first: float = BACKOFF_FIRST, most: float = BACKOFF_MAX,
+                      clock: Callable[[], float] = time.monotonic) -> bool:
+    """Try ``try_send(prepared)`` until it succeeds (True), ``timeout`` seconds of ``clock`` passed since the
+    first try (``math.inf``: never) or ``closed()`` is true before a pause (False then), waiting between tries
+    with ``wait(seconds)`` (the transport's own wait for room, which returns as soon as there is some; a sleep
+    when it has none), ``first`` seconds, doubling, at most ``most``. The waiting never holds the GIL:
+    Cyclone's own blocking write does, and stalls the whole process (measured: a thread counting got 0.3 % of
+    its rate while a write waited 1.5 s for a stopped reader's acknowledgements). The one retry loop: anything
+    retried with backoff (a lane's queued samples, a peer's XML-RPC call) goes through it.
+
+    >>> now = [0.0]
+    >>> def pause(seconds: float) -> None: now[0] += seconds
+    >>> send_with_backoff(lambda _: False, None, 0.01, wait=pause, first=0.001, most=0.004, clock=lambda: now[0])
+    False
+    >>> round(now[0], 3)  # 1 + 2 + 4 + 4 ms: the first try after the timeout gives up
+    0.011
+    """
     if try_send(prepared):
         return True
-    deadline = time.monotonic() + timeout
+    deadline = clock() + timeout
     pause = first
     pausing = time.sleep if wait is None else wait
     while not closed():
         pausing(pause)
         if try_send(prepared):
             return True
-        if time.monotonic() >= deadline:
+        if clock() >= deadline:
             return False
         pause = min(pause * 2, most)
     return False
@@ -139,7 +149,7 @@ class TransportReader(Protocol):
     """A subscription's reader on one transport."""
 
     protocol: str
-    #: subscriber QoS the transport applies itself (:data:`TIME_FILTER`, :data:`LIFESPAN`)
+    #: subscriber QoS the transport applies itself (:data:`TIME_FILTER`, :data:`LIFESPAN`, :data:`SOURCE_ORDER`)
     enforces: FrozenSet[str]
 
     def take(self, n: int) -> Sequence[Sample]:

@@ -18,6 +18,7 @@ from geometry_msgs.msg import PointStamped
 
 from micros_rt.exceptions import MicrosRtError
 from micros_rt.qos import SubscribeQoSOptions
+from micros_rt.qos.options import enforcers
 from micros_rt.transports.base import LIFESPAN, TIME_FILTER, PushReader, TransportReader, TransportWriter
 
 __all__ = ["CHECKS", "Pair", "message", "wait_until"]
@@ -97,7 +98,7 @@ def check_interface_is_declared(pair: Pair) -> None:
     assert isinstance(writer, TransportWriter), f"{type(writer).__name__} lacks prepare/send/close"
     assert isinstance(reader, TransportReader), f"{type(reader).__name__} lacks take/decode/close/enforces"
     assert writer.protocol == reader.protocol, (writer.protocol, reader.protocol)
-    assert isinstance(reader.enforces, frozenset) and reader.enforces <= {TIME_FILTER, LIFESPAN}, reader.enforces
+    assert isinstance(reader.enforces, frozenset) and reader.enforces <= enforcers(), reader.enforces
 
 
 def check_prepare_is_none_without_receivers_else_a_payload(pair: Pair) -> None:

@@ -5,6 +5,7 @@ Each test runs real processes against the session's rosmaster and prints its fig
 
 from __future__ import annotations
 
+import math
 import random
 import string
 import struct
@@ -191,6 +192,7 @@ def test_ten_thousand_random_request_topic_calls(ros_master: harness.RosMaster, 
     # Warm-up: rospy's XML-RPC server answers each call on a new thread and the allocator keeps the
     # high-water mark of the first burst (a stock rospy talker grows 15-20 MB on the same 10,000 calls);
     # what must not happen is growth that goes on with the calls: the second 10,000 are measured.
+    attack_start = time.monotonic()
     volley(range(100, 104), 2500)
     rss0 = rss_kb(talker)
     counts.update(answered=0, errors=0)
@@ -200,11 +202,15 @@ def test_ten_thousand_random_request_topic_calls(ros_master: harness.RosMaster, 
     no_phantoms(uri, "/abused")
     rss1 = rss_kb(talker)
     negotiation_warnings = [w for w in logs(talker) if "DDS" in w or "protocol" in w or "offer" in w]
+    # the limiter's promise is per 30-s interval (a few first lines per kind of problem, one summary per caller
+    # and kind), so a loaded machine that stretches the attack over more intervals may log more; unlimited,
+    # the 20,000 calls would log thousands of lines
+    intervals = math.ceil((time.monotonic() - attack_start) / 30.0)
     print(f"\n10,000 random requestTopic calls in {elapsed:.1f} s ({10_000 / elapsed:.0f}/s): {counts}; talker RSS "
           f"{rss_start} kB at start, {rss0} kB after a first 10,000 (warm-up), {rss1} kB after the next 10,000; "
-          f"{len(negotiation_warnings)} WARN lines from the negotiation")
+          f"{len(negotiation_warnings)} WARN lines from the negotiation over {intervals} 30-s intervals")
     assert rss1 - rss0 < 5 * 1024, f"talker RSS grew {rss0} -> {rss1} kB over 10,000 calls after warm-up"
-    assert len(negotiation_warnings) <= 40, (len(negotiation_warnings), negotiation_warnings[:50])
+    assert len(negotiation_warnings) <= 40 * intervals, (len(negotiation_warnings), negotiation_warnings[:50])
     # and it still serves: a stock tool over TCPROS, a micros_rt listener over DDS
     cp = harness.rostopic(ros_master, "echo", "-n", "3", "/abused", timeout=30)
     assert "hello" in cp.stdout, cp.stdout
@@ -354,7 +360,12 @@ def test_lossless_publisher_outlives_subscribers_killed_one_after_another(ros_ma
     for i in range(24):
         listener = spawn(mrt("listen", "--topic", "/churn", "--duration", 60, "--node-name", f"churn_{i}"),
                          env=listener_env)
-        listener.wait_for("recv", 15)  # every newcomer hears the talker, over DDS
+        try:
+            listener.wait_for("recv", 15)  # every newcomer hears the talker, over DDS
+        except AssertionError:  # what the talker said is what tells a negotiation problem from a stalled writer
+            print(f"talker's last events {talker.events()[-3:]}\ntalker's log {logs(talker)[-30:]}\n"
+                  f"listener's log {logs(listener)[-30:]}")
+            raise
         assert listener.events("recv")[0]["transport"] == "DDS"
         listener.proc.kill()  # no goodbye: its DDS reader stays matched until the lease ends
         listener.proc.wait(10)

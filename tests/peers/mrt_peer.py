@@ -40,13 +40,13 @@ def msg_to_dict(msg: Any) -> Any:
     return msg
 
 
-def fill(msg: Any, text: str, i: int, stamp: bool) -> Any:
+def fill(msg: Any, text: str, i: int, stamp: bool, clock_offset: float = 0.0) -> Any:
     if hasattr(msg, "data") and isinstance(getattr(msg, "data"), str):
         msg.data = text
     elif hasattr(msg, "data") and isinstance(getattr(msg, "data"), int):
         msg.data = i
     if stamp and getattr(msg, "_has_header", False):
-        msg.header.stamp = genpy.Time.from_sec(time.time())
+        msg.header.stamp = genpy.Time.from_sec(time.time() + clock_offset)
         msg.header.frame_id = text
     return msg
 
@@ -57,6 +57,8 @@ def play_clock_offset(pub: Any, offset: float) -> None:
     from cyclonedds._clayer import ddspy_write_ts
 
     writer = pub._pub.dds
+    if writer is None:
+        return  # no DDS writer (hints, or DDS off): --stamp shifts the Header stamps only
     ref, shift = writer._ref, int(offset * 1e9)
 
     writer._write = lambda data: ddspy_write_ts(ref, data, time.time_ns() + shift)
@@ -166,7 +168,8 @@ def main() -> int:
     ap.add_argument("--callback-sleep", type=float, default=0.0,
                     help="listen: seconds every callback sleeps after printing (a slow subscriber)")
     ap.add_argument("--clock-offset", type=float, default=0.0,
-                    help="talk: add this many seconds to every DDS source timestamp (a host whose clock is off)")
+                    help="talk: add this many seconds to every DDS source timestamp and --stamp Header stamp "
+                         "(a host whose clock is off)")
     ap.add_argument("--log-debug", action="store_true", help="print micros_rt DEBUG log records too")
     ap.add_argument("--data-json", default=None,
                     help='talk: JSON dict of field values, e.g. \'{"data": "x {i}"}\' (see set_fields)')
@@ -254,7 +257,7 @@ def main() -> int:
                 msg = set_fields(data_class(), values, i)
                 pub.publish(as_numpy(msg) if args.numpy else msg)
             else:
-                pub.publish(fill(data_class(), text, i, args.stamp))
+                pub.publish(fill(data_class(), text, i, args.stamp, args.clock_offset))
             emit("sent", seq=i, data=text, connections=pub.get_num_connections())
             next_t = start + (i + 1) * period
             while time.monotonic() < next_t:
@@ -302,7 +305,7 @@ def main() -> int:
             if args.deadline_events:
                 import dataclasses
                 opts = dataclasses.replace(opts, deadline_cb=on_deadline)
-            sub = nh.subscribe_with_qos(args.topic, data_class, cb, args.queue_size or None, opts)
+            sub = nh.subscribe_with_qos(args.topic, data_class, cb, args.queue_size or None, opts, hints)
         else:
             sub = nh.subscribe(args.topic, data_class, cb, args.queue_size or None, hints)  # 0: None, lossless
         slow = None

@@ -111,6 +111,7 @@ PROFILE = textwrap.dedent("""\
       /chatter: {transport_priority: HIGH}
       "/cha*": {using_best_effort_protocol: true}
       "/camera/*": {msg_valid_period: 0.1}
+      "^/sc[a-z]+$": {latency_budget: 0.01}
     subscribers:
       "/*": {time_filter_duration: 0.5}
     """)
@@ -124,6 +125,10 @@ def test_rule_matches_uses_the_library_precedence() -> None:
         "/chatter": (["/a", "/b"], "/chatter"), "/chatter2": (["/c"], None)}
     assert profile_cmd.rule_matches(profile, "publishers", "/camera/*", live) == {}
     assert set(profile_cmd.rule_matches(profile, "subscribers", "/*", live)) == {"/chatter", "/chatter2", "/scan"}
+    # a ^...$ rule, which the profile applies, lists the live topics it applies to (fnmatch listed none)
+    scan = profile.advertise_options("/scan")
+    assert scan is not None and scan.latency_budget == 0.01
+    assert profile_cmd.rule_matches(profile, "publishers", "^/sc[a-z]+$", live) == {"/scan": (["/d"], None)}
 
 
 def test_profile_check_offline(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -131,7 +136,7 @@ def test_profile_check_offline(tmp_path: Path, capsys: pytest.CaptureFixture[str
     good.write_text(PROFILE)
     assert profile_cmd.main(["check", "--offline", str(good)]) == 0
     text = capsys.readouterr().out
-    assert "valid (3 publisher rules, 1 subscriber rule)" in text
+    assert "valid (4 publisher rules, 1 subscriber rule)" in text
     assert "/chatter: reliable, priority HIGH" in text
     bad = tmp_path / "bad.yaml"
     bad.write_text("subscribers:\n  /a:\n    deadline: 0\n")

@@ -18,8 +18,9 @@ import harness
 
 from micros_rt import MicrosRtError, TransportPriority
 from micros_rt.qos import AdvertiseQoSOptions, priority_socket_priority, priority_tos
+from micros_rt.qos.options import enforcers
 from micros_rt.transports.base import (
-    LIFESPAN,
+    SOURCE_ORDER,
     TIME_FILTER,
     EndpointSpec,
     PushReader,
@@ -94,7 +95,7 @@ def test_contract_shapes(pair: Pair) -> None:
     writer, reader, _, _ = pair
     assert isinstance(writer, TransportWriter) and isinstance(reader, TransportReader)
     assert isinstance(writer.protocol, str) and writer.protocol == reader.protocol
-    assert isinstance(reader.enforces, frozenset) and reader.enforces <= {TIME_FILTER, LIFESPAN}
+    assert isinstance(reader.enforces, frozenset) and reader.enforces <= enforcers()
 
 
 def test_contract_bad_value_refused_in_prepare_before_anything_is_sent(pair: Pair) -> None:
@@ -157,7 +158,7 @@ def test_every_transport_implements_the_interface() -> None:
         for name in ("prepare", "send", "close"):
             assert callable(getattr(cls, name)), (cls, name)
         assert isinstance(cls.protocol, str)
-    assert DDSTopicReader.enforces == frozenset({TIME_FILTER})
+    assert DDSTopicReader.enforces == frozenset({TIME_FILTER, SOURCE_ORDER})  # Cyclone filters and orders
     assert PushReader.enforces == frozenset()  # TCPROS, MQTT, UDP: the subscription enforces everything
 
 

@@ -203,7 +203,8 @@ class _Import:
         s = self.sub.statistics()
         return {"topic": self.rule.outside, "as": self.rule.local, "received": s.received, "published": s.delivered,
                 "dropped_queue_full": s.dropped_queue_full, "dropped_expired": s.dropped_expired,
-                "dropped_filtered": s.dropped_filtered, "refused": self.feed.refused if self.feed else 0,
+                "dropped_filtered": s.dropped_filtered, "dropped_out_of_order": s.dropped_out_of_order,
+                "refused": self.feed.refused if self.feed else 0,
                 "bad_input": self.feed.bad_input if self.feed else 0, "lost": self.feed.lost if self.feed else 0,
                 "deadline_missed": s.deadline_missed}
 

@@ -1,4 +1,4 @@
-"""DDS as a micros_rt back end (:class:`micros_rt.backends.Backend`): Cyclone writers and readers on the
+"""DDS as a micros_rt back end (:class:`micros_rt.transports.base.Backend`): Cyclone writers and readers on the
 process participant, the ROS 2 graph announcement, and DDS errors translated at this boundary."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Set, Tuple, Ty
 
 from cyclonedds.core import DDSException, Listener
 
-from ..base import TIME_FILTER, EndpointSpec, RemoteWriter, Sample, send_with_backoff
+from ..base import SOURCE_ORDER, TIME_FILTER, EndpointSpec, RemoteWriter, Sample, send_with_backoff
 from ...exceptions import MicrosRtError, PublishTimeoutError, TransportError
 from ...qos import (
     PUBLISH_BLOCK_TIMEOUT,
@@ -144,7 +144,7 @@ class DDSTopicReader:
 
     protocol = "DDS"
     #: Cyclone applies TimeBasedFilter in the reader (and Lifespan in its cache)
-    enforces = frozenset({TIME_FILTER})
+    enforces = frozenset({TIME_FILTER, SOURCE_ORDER})  # Cyclone's TimeBasedFilter and DestinationOrder
 
     def __init__(self, backend: "DDSBackend", spec: EndpointSpec, options: Optional[SubscribeQoSOptions],
                  wake: Callable[[], None], on_incompatible: Callable[[int], None], *,
