@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Callable
 
 if TYPE_CHECKING:
     from cyclonedds.qos import Qos
@@ -49,7 +49,7 @@ if TYPE_CHECKING:
 _DDS_INFINITY = 0x7FFFFFFFFFFFFFFF
 
 from micros_rt.exceptions import QoSTypeError, QoSValueError
-from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions
+from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions, options_of
 
 __all__ = [
     "PUBLISH_BLOCK_TIMEOUT",
@@ -135,6 +135,37 @@ def _user_data(user_data: bytes) -> list[object]:
     return [Policy.Userdata(data=data)] if data else []
 
 
+def _policy_builders() -> dict[str, Callable[[Any, str], list[object]]]:
+    """How a value of an option becomes DDS policies, per DDS policy the catalogue names (``dds_policy``)."""
+    from cyclonedds.qos import Policy
+
+    return {
+        # writers never wait inside Cyclone (WRITER_MAX_BLOCKING_TIME); readers' value is Cyclone's default
+        "Reliability": lambda best_effort, side: [_reliability(
+            best_effort, WRITER_MAX_BLOCKING_TIME if side == "advertise" else RELIABLE_MAX_BLOCKING_TIME)],
+        "TransportPriority": lambda level, _side: [Policy.TransportPriority(priority=int(level))],
+        # 0, not the budget: Cyclone's budget > 0 mode hands every sample to a send thread; micros_rt batches
+        # within the budget itself (transports/dds/batching.py)
+        "LatencyBudget": lambda _budget, _side: [Policy.LatencyBudget(budget=0)],
+        "Lifespan": lambda seconds, _side: [] if math.isinf(seconds) else [
+            Policy.Lifespan(lifespan=duration_ns(seconds))],
+        "DestinationOrder": lambda by_source, _side: [
+            Policy.DestinationOrder.BySourceTimestamp if by_source else Policy.DestinationOrder.ByReceptionTimestamp],
+        "TimeBasedFilter": lambda seconds, _side: [
+            Policy.TimeBasedFilter(filter_time=duration_ns(seconds))] if seconds > 0.0 else [],
+    }
+
+
+def _option_policies(options: AdvertiseQoSOptions | SubscribeQoSOptions, side: str) -> list[object]:
+    """The DDS policies of every option of ``options`` that maps to one (the catalogue's ``dds_policy``)."""
+    builders = _policy_builders()
+    out: list[object] = []
+    for option in options_of(side):
+        if option.dds_policy is not None:
+            out.extend(builders[option.dds_policy](getattr(options, option.name), side))
+    return out
+
+
 def writer_qos(
     options: AdvertiseQoSOptions, *, queue_size: int | None, latch: bool, user_data: bytes = b""
 ) -> Qos:
@@ -165,15 +196,11 @@ def writer_qos(
     history_depth(queue_size)  # validates
     lossless = is_lossless(queue_size)
     policies: list[object] = [
-        _reliability(options.using_best_effort_protocol, WRITER_MAX_BLOCKING_TIME),
         Policy.History.KeepAll if lossless else Policy.History.KeepLast(depth=history_depth(queue_size)),
         Policy.Durability.TransientLocal if latch else Policy.Durability.Volatile,
-        Policy.LatencyBudget(budget=0),  # not Cyclone's send-thread mode: micros_rt batches (dds.batching)
-        Policy.TransportPriority(priority=int(options.transport_priority)),
-        Policy.DestinationOrder.BySourceTimestamp,
+        Policy.DestinationOrder.BySourceTimestamp,  # the strongest offer: readers of either kind match
     ]
-    if not math.isinf(options.msg_valid_period):
-        policies.append(Policy.Lifespan(lifespan=duration_ns(options.msg_valid_period)))
+    policies.extend(_option_policies(options, "advertise"))
     policies.extend(_user_data(user_data))
     return Qos(*policies)
 
@@ -212,20 +239,11 @@ def reader_qos(
         raise QoSTypeError(f"transient_local={transient_local!r} is invalid: expected True or False")
     history_depth(queue_size)  # validates
     policies: list[object] = [
-        _reliability(options.using_best_effort_protocol),
         Policy.History.KeepAll,
         Policy.Durability.TransientLocal if transient_local else Policy.Durability.Volatile,
         Policy.LatencyBudget(budget=duration_ns(math.inf)),
-        (
-            Policy.DestinationOrder.BySourceTimestamp
-            if options.ordered_by_sending_timestamp
-            else Policy.DestinationOrder.ByReceptionTimestamp
-        ),
     ]
-    if options.time_filter_duration > 0.0:
-        policies.append(
-            Policy.TimeBasedFilter(filter_time=duration_ns(options.time_filter_duration))
-        )
+    policies.extend(_option_policies(options, "subscribe"))
     policies.extend(_user_data(user_data))
     return Qos(*policies)
 

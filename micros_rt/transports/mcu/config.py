@@ -36,7 +36,7 @@ import rosgraph.names
 import yaml
 
 from micros_rt.exceptions import ProfileError
-from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions
+from micros_rt.qos.options import MCU_FROM, MCU_SERVICE, MCU_TO, OPTIONS, AdvertiseQoSOptions, SubscribeQoSOptions
 from micros_rt.qos.profiles import _construct, _expect_mapping, _is_null, _kind, _pairs, _parse_options, _where
 
 from .errors import McuConfigError
@@ -51,12 +51,19 @@ DEFAULT_MTU = 1472          # 1500-byte Ethernet MTU - 20 (IPv4) - 8 (UDP)
 MAX_MTU = 65507             # the largest IPv4 UDP payload
 DEFAULT_SERVICE_TIMEOUT = 2.0
 
-#: qos keys each kind of entry understands, and what each does there (for the error message).
-_TO_QOS = ("transport_priority", "msg_valid_period", "time_filter_duration", "using_best_effort_protocol")
-_FROM_QOS = ("deadline", "time_filter_duration", "transport_priority", "latency_budget", "msg_valid_period",
-             "using_best_effort_protocol")
-_SERVICE_QOS = ("transport_priority",)
-_ADVERTISE_KEYS = ("transport_priority", "latency_budget", "msg_valid_period")
+
+
+def _applying(where: str) -> Tuple[str, ...]:
+    """The QoS keys that have an effect on one kind of entry (the catalogue's ``applies``), once each."""
+    return tuple(dict.fromkeys(o.name for o in OPTIONS if where in o.applies))
+
+
+#: qos keys each kind of entry understands (from the QoS catalogue, micros_rt.qos.options.OPTIONS)
+_TO_QOS = _applying(MCU_TO)
+_FROM_QOS = _applying(MCU_FROM)
+_SERVICE_QOS = _applying(MCU_SERVICE)
+#: the publisher-only keys go to the publishing side's options, the rest to the subscribing side's
+_ADVERTISE_KEYS = tuple(k for k in AdvertiseQoSOptions._KEYS if k not in SubscribeQoSOptions._KEYS)
 
 
 @dataclass(frozen=True)
