@@ -99,7 +99,12 @@ class Helper:
                     self.inbox.append((op, cid, meta, body))
                     self.wake.trigger()
         finally:
-            os._exit(0)  # micros_rt closed its end: nothing left to serve
+            # micros_rt closed its end: nothing left to serve. A clean shutdown lets Fast DDS remove its
+            # shared-memory segments (/dev/shm/fastrtps_*); os._exit is the fallback if that hangs.
+            fallback = threading.Timer(3.0, os._exit, args=(0,))
+            fallback.daemon = True
+            fallback.start()
+            rclpy.try_shutdown()
 
     def drain(self) -> None:
         while self.inbox:
@@ -238,7 +243,10 @@ def main() -> None:
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    os._exit(0)
+    finally:
+        executor.shutdown(timeout_sec=1.0)
+        helper.node.destroy_node()
+        rclpy.try_shutdown()
 
 
 if __name__ == "__main__":

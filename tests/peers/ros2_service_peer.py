@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import os
 import threading
 import time
 from typing import Any, Dict, List
@@ -21,6 +22,11 @@ from typing import Any, Dict, List
 import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+
+
+#: set when the peer stops: a "silent" callback returns then, so that the process exits cleanly (Fast DDS
+#: removes its shared-memory segments only then)
+STOP = threading.Event()
 
 
 def emit(event: str, **kw: Any) -> None:
@@ -59,7 +65,7 @@ def serve(args: argparse.Namespace, node: Any) -> None:
             if not args.quiet:
                 emit("served", name=name)
             if mode == "silent":
-                time.sleep(3600)
+                STOP.wait(3600)
             if srv_type == "std_srvs/srv/SetBool":
                 response.success, response.message = request.data, f"rclpy {name} got {request.data}"
             elif srv_type == "std_srvs/srv/Trigger":
@@ -128,24 +134,34 @@ def main() -> None:
     c.add_argument("--plan", required=True)
     args = parser.parse_args()
     rclpy.init()
-    node = rclpy.create_node(f"ros2_service_{args.mode}_{__import__('os').getpid()}")
+    node = rclpy.create_node(f"ros2_service_{args.mode}_{os.getpid()}")
     executor = MultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
+    finished = threading.Event()
+
+    def work() -> None:
+        try:
+            if args.mode == "serve":
+                serve(args, node)
+                STOP.wait(args.seconds)
+                emit("done")
+            else:
+                call(args, node, executor)
+        finally:
+            finished.set()
+
+    # the executor spins in the main thread (a clean exit there lets Fast DDS remove its /dev/shm segments)
+    threading.Thread(target=work, daemon=True).start()
     try:
-        if args.mode == "serve":
-            serve(args, node)
-            time.sleep(args.seconds)
-            emit("done")
-        else:
-            call(args, node, executor)
+        while not finished.is_set():
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        STOP.set()
         executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
         rclpy.try_shutdown()
-
 
 if __name__ == "__main__":
     main()
