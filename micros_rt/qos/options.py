@@ -338,10 +338,6 @@ class QoSOption:
         """Inverse of :meth:`encode` (also takes what :meth:`parse` takes)."""
         return _decode_duration(value, self.name) if self.kind == "duration" else value
 
-    def describe(self, encoded: Any, *, short: bool = False) -> Optional[str]:
-        """Words for an encoded value (a peer's ``to_dict``), None when there is nothing to say."""
-        return (self.short if short else self.words)(self.parse(self.decode(encoded)))
-
 
 def _no_zero_lifespan(value: float) -> None:
     if value == 0.0:
@@ -446,12 +442,12 @@ def enforcers() -> frozenset[str]:
 
 def describe(encoded: Mapping[str, Any], side: str, *, short: bool = False) -> list[str]:
     """Words for a ``to_dict`` form (a peer's, missing keys at their defaults), in the catalogue's order."""
-    cls: Any = AdvertiseQoSOptions if side == "advertise" else SubscribeQoSOptions
-    defaults = cls().to_dict()
+    defaults = {f.name: f.default for f in dataclasses.fields(OPTION_CLASSES[side])}
     out = []
     for option in options_of(side):
         if option.wire:
-            said = option.describe(encoded.get(option.name, defaults[option.name]), short=short)
+            value = option.decode(encoded[option.name]) if option.name in encoded else defaults[option.name]
+            said = (option.short if short else option.words)(option.parse(value))
             if said is not None:
                 out.append(said)
     return out
@@ -574,3 +570,5 @@ def _field_keys(cls: Any, side: str) -> tuple[str, ...]:
 
 AdvertiseQoSOptions._KEYS = _field_keys(AdvertiseQoSOptions, "advertise")
 SubscribeQoSOptions._KEYS = _field_keys(SubscribeQoSOptions, "subscribe")
+#: the option class of each side (its fields' defaults are the options' defaults)
+OPTION_CLASSES: dict[str, Any] = {"advertise": AdvertiseQoSOptions, "subscribe": SubscribeQoSOptions}
