@@ -15,7 +15,8 @@ from ..core import rospy_compat as compat
 from ..core.runtime import _require_node
 from .client import ServiceClient
 from .errors import ServiceError, ServiceTimeoutError, ServiceUnavailableError
-from .gateway import Ros2Gateway, Ros2Unavailable, close_gateway, gateway
+from . import gateway as _gateway
+from .gateway import Ros2Gateway, Ros2Unavailable, close_gateway
 from .mapping import check_srv_class, dds_service_topics, srv_mapping
 from .server import ServiceServer
 
@@ -35,7 +36,7 @@ __all__ = [
 
 
 def _process_gateway() -> Ros2Gateway:
-    return gateway(compat.caller_id())
+    return _gateway.gateway(compat.caller_id())
 
 
 def advertise_service(resolved_name: str, srv_class: Any, handler: Callable[[Any], Any], *,
