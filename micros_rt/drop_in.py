@@ -63,7 +63,7 @@ def install(*, profile: Optional[str] = None, hints: Optional[TransportHints] = 
     their module (``super(Subscriber, self)``), so replacing them there would break every rospy endpoint.
 
     ``profile``: a YAML QoS profile (else ``MICROS_RT_QOS_PROFILE``, as for ``micros_rt.init_node``);
-    ``hints``: every subscription's protocol order (default DDS, then TCPROS).
+    ``hints``: every subscription's protocol order (default shared memory on one host, DDS, then TCPROS).
     """
     _settings.profile = profile
     _settings.hints = hints or TransportHints()

@@ -38,21 +38,23 @@ _EPILOG = """\
 examples:
   micros-rt run talker.py
   micros-rt run --profile qos.yaml listener.py chatter:=/robot/chatter __name:=listener2
-  micros-rt run --hints tcp,dds listener.py"""
+  micros-rt run --hints tcp,dds listener.py
+  micros-rt run --hints dds,tcp listener.py    (never shared memory)"""
 
 _VALUE_OPTIONS = ("--profile", "--hints")
-_HINTS = {"dds": "dds", "tcp": "tcp", "tcpros": "tcp"}
+_HINTS = {"shm": "shm", "dds": "dds", "tcp": "tcp", "tcpros": "tcp"}
 
 
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
-        prog="micros-rt run", usage="micros-rt run [--profile QOS.yaml] [--hints dds,tcp] SCRIPT [ARGS...]",
+        prog="micros-rt run", usage="micros-rt run [--profile QOS.yaml] [--hints shm,dds,tcp] SCRIPT [ARGS...]",
         description=_DESCRIPTION, epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--profile", metavar="QOS.yaml",
                     help="YAML QoS profile for the script's topics (default: $MICROS_RT_QOS_PROFILE)")
-    ap.add_argument("--hints", metavar="dds,tcp", default="dds,tcp",
-                    help="protocol preference of every subscription, in order: dds,tcp (default), tcp,dds, "
-                         "tcp (never DDS) or dds (micros_rt publishers only)")
+    ap.add_argument("--hints", metavar="shm,dds,tcp", default="shm,dds,tcp",
+                    help="protocol preference of every subscription, in order: shm,dds,tcp (default: shared "
+                         "memory on one host, DDS, then TCPROS), e.g. dds,tcp, tcp (never DDS or shared memory) or "
+                         "shm,dds (micros_rt publishers only)")
     return ap
 
 
@@ -76,16 +78,16 @@ def _split(argv: List[str]) -> Tuple[List[str], Optional[str], List[str]]:
 
 
 def parse_hints(text: str) -> TransportHints:
-    """``"dds,tcp"`` -> ``TransportHints().dds().tcp()``; CommandError for anything else."""
+    """``"dds,tcp"`` -> ``TransportHints().dds().tcp()`` (``shm`` too); CommandError for anything else."""
     hints = TransportHints()
     names = [n.strip().lower() for n in text.split(",") if n.strip()]
     if not names:
-        raise CommandError("--hints: give dds, tcp or both in order, e.g. --hints dds,tcp", code=2)
+        raise CommandError("--hints: give shm, dds, tcp or several in order, e.g. --hints shm,dds,tcp", code=2)
     for name in names:
         if name not in _HINTS:
-            raise CommandError(f"--hints: unknown protocol '{name}' (use dds, tcp or both in order, e.g. dds,tcp)",
-                               code=2)
-        hints = hints.dds() if _HINTS[name] == "dds" else hints.tcp()
+            raise CommandError(f"--hints: unknown protocol '{name}' (use shm, dds, tcp or several in order, e.g. "
+                               f"shm,dds,tcp)", code=2)
+        hints = {"shm": hints.shm, "dds": hints.dds}.get(_HINTS[name], hints.tcp)()
     return hints
 
 
@@ -144,7 +146,7 @@ def main(argv: List[str]) -> int:
     options, script, script_args = _split(argv)
     args = _parser().parse_args(options)
     if script is None:
-        raise CommandError("no SCRIPT given (usage: micros-rt run [--profile QOS.yaml] [--hints dds,tcp] "
+        raise CommandError("no SCRIPT given (usage: micros-rt run [--profile QOS.yaml] [--hints shm,dds,tcp] "
                            "SCRIPT [ARGS...])", code=2)
     _check_script(script)
     hints = parse_hints(args.hints)
