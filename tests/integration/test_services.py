@@ -112,7 +112,16 @@ def test_rclpy_client_calls_micros_rt_server(servers: Dict[str, harness.Peer], s
         {"label": "user srv", "name": f"{P}/mrt/basic", "type": "test_msgs/srv/BasicTypes", "args": BASIC},
         {"label": "still serving", "name": f"{P}/mrt/set_bool", "type": "std_srvs/srv/SetBool",
          "args": {"data": True}}]))
+    # two more rclpy clients at once, each with its own request: each gets its own answers (request identity)
+    echo = {"name": f"{P}/mrt/basic", "type": "test_msgs/srv/BasicTypes", "count": 100, "echo_check": True,
+            "wait": 15}
+    concurrent = [spawn(ros2_peer("call", [{**echo, "label": "echo", "args": {**BASIC, "string_value": who}}]),
+                        name=f"ros2_echo_{who}") for who in ("a", "b")]
     client.wait_for("done", T)
+    for peer in concurrent:
+        peer.wait_for("done", T)
+        summary = by_label(peer, "echo", "summary")
+        assert (summary["ok"], summary["mismatches"]) == (100, 0), summary
     assert by_label(client, "true", "response")["fields"] == {"success": True,
                                                               "message": f"micros_rt {P}/mrt/set_bool got True"}
     many = by_label(client, "many", "summary")
@@ -139,7 +148,9 @@ def test_micros_rt_client_calls_rospy_and_rclpy_servers(servers: Dict[str, harne
          "count": 200, "timeout": 5},
         {"label": "ros2 trigger", "name": f"{P}/r2/trigger", "type": "std_srvs/Trigger", "wait": 10, "timeout": 5},
         {"label": "ros2 user srv", "name": f"{P}/r2/basic", "type": "test_msgs/BasicTypes", "args": BASIC,
-         "wait": 10, "timeout": 5}]))
+         "wait": 10, "timeout": 5},
+        {"label": "ros2 concurrent", "name": f"{P}/r2/basic", "type": "test_msgs/BasicTypes", "args": BASIC,
+         "timeout": 5, "count": 200, "threads": 4, "echo_check": True}]))
     client.wait_for("done", T)
     ros1 = by_label(client, "ros1", "response")
     assert (ros1["side"], ros1["fields"]) == ("ROS 1", {"success": True, "message": f"rospy {P}/r1/set_bool got True"})
@@ -151,6 +162,9 @@ def test_micros_rt_client_calls_rospy_and_rclpy_servers(servers: Dict[str, harne
     assert (many["ok"], many["n_errors"], many["last"]["success"]) == (200, 0, False), many
     assert by_label(client, "ros2 trigger", "response")["fields"]["message"] == f"rclpy {P}/r2/trigger triggered"
     assert by_label(client, "ros2 user srv", "response")["fields"] == BASIC
+    # four threads calling through one client at once: each call gets the answer to its own request
+    concurrent = by_label(client, "ros2 concurrent", "summary")
+    assert (concurrent["ok"], concurrent["n_errors"], concurrent["mismatches"]) == (200, 0, 0), concurrent
 
 
 def shm_files(pid: int) -> Set[str]:

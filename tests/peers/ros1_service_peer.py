@@ -11,7 +11,9 @@ serve: {"event": "ready", "ros2": [...names served to ROS 2 too]}, {"event": "se
 --quiet. call, per step: {"event": "calling", "label"}, then for one call {"event": "response", "fields"} or
 {"event": "error", "kind", "message", "elapsed"}; for count > 1 {"event": "summary", "ok", "errors", "p50_us",
 "p99_us", "last"}; finally {"event": "done"}. A step's "request_type" (a message type) sends a message of that
-type instead, "args" fills it.
+type instead, "args" fills it. "threads": N splits "count" among N threads calling one client at once,
+each with its own test_msgs/BasicTypes request; "echo_check" counts responses that differ from the request
+("mismatches": answers to another caller's request).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import argparse
 import json
 import os
 import sys
+import threading
 import time
 from typing import Any, Dict, List
 
@@ -116,24 +119,44 @@ def call(args: argparse.Namespace) -> None:
         times: List[float] = []
         errors: List[str] = []
         last: Any = None
-        for _ in range(count):
-            t0 = time.perf_counter()
-            try:
-                last = fields(client(request))
-                times.append(time.perf_counter() - t0)
-            except Exception as exc:
-                elapsed = time.perf_counter() - t0
-                if count == 1:
-                    emit("error", label=label, kind=type(exc).__name__, message=str(exc), elapsed=elapsed,
-                         side=getattr(client, "side", None))
-                errors.append(f"{type(exc).__name__}: {exc}")
+        mismatches = [0]
+
+        def run(n: int, request: Any) -> None:
+            nonlocal last
+            for _ in range(n):
+                t0 = time.perf_counter()
+                try:
+                    last = fields(client(request))
+                    times.append(time.perf_counter() - t0)
+                    if step.get("echo_check") and last != fields(request):
+                        mismatches[0] += 1  # an answer to another caller's request
+                except Exception as exc:
+                    elapsed = time.perf_counter() - t0
+                    if count == 1:
+                        emit("error", label=label, kind=type(exc).__name__, message=str(exc), elapsed=elapsed,
+                             side=getattr(client, "side", None))
+                    errors.append(f"{type(exc).__name__}: {exc}")
+
+        threads = int(step.get("threads", 1))
+        if threads == 1:
+            run(count, request)
+        else:  # concurrent callers of one client, each with a request of its own (string_value + its index)
+            workers = []
+            for i in range(threads):
+                own = cls._request_class(**{**step.get("args", {}),
+                                            "string_value": f"{step['args']['string_value']} {i}"})
+                workers.append(threading.Thread(target=run, args=(count // threads, own)))
+            for w in workers:
+                w.start()
+            for w in workers:
+                w.join()
         if count == 1:
             if last is not None:
                 emit("response", label=label, fields=last, elapsed=times[0], side=getattr(client, "side", None))
         else:
             emit("summary", label=label, ok=len(times), errors=errors[:3], n_errors=len(errors),
                  p50_us=percentile(times, 0.5) * 1e6, p99_us=percentile(times, 0.99) * 1e6, last=last,
-                 side=getattr(client, "side", None))
+                 side=getattr(client, "side", None), mismatches=mismatches[0])
     emit("done")
 
 

@@ -4,7 +4,8 @@
     ros2_service_peer.py call --plan '[{"name": "/mrt/set_bool", "type": "std_srvs/srv/SetBool",
                                         "args": {"data": true}, "count": 100, "timeout": 2, "wait": 10}]'
 
-The same server modes and events as tests/peers/ros1_service_peer.py ("silent": never answers; "fail": SetBool
+A step's "echo_check" (for an echoing server, test_msgs/BasicTypes) counts responses that differ from the request in
+the summary's "mismatches". The same server modes and events as tests/peers/ros1_service_peer.py ("silent": never answers; "fail": SetBool
 raises for False, which in rclpy ends the server's spin, so it is not used here). Environment as ros2_peer.py
 (loopback-only Fast DDS, this run's ROS_DOMAIN_ID).
 """
@@ -101,6 +102,7 @@ def call(args: argparse.Namespace, node: Any, executor: Any) -> None:
         errors: List[str] = []
         last = None
         count = int(step.get("count", 1))
+        mismatches = 0
         for _ in range(count):
             t0 = time.perf_counter()
             future = client.call_async(request)
@@ -109,6 +111,8 @@ def call(args: argparse.Namespace, node: Any, executor: Any) -> None:
             if done.wait(step.get("timeout") or 10.0) and future.result() is not None:
                 times.append(time.perf_counter() - t0)
                 last = fields(future.result())
+                if step.get("echo_check") and last != fields(request):
+                    mismatches += 1  # an answer to another caller's request
             else:
                 client.remove_pending_request(future)
                 errors.append(f"no response within {step.get('timeout') or 10.0} s")
@@ -119,7 +123,8 @@ def call(args: argparse.Namespace, node: Any, executor: Any) -> None:
                 emit("error", label=label, kind="Timeout", message=errors[0])
         else:
             emit("summary", label=label, ok=len(times), errors=errors[:3], n_errors=len(errors),
-                 p50_us=percentile(times, 0.5) * 1e6, p99_us=percentile(times, 0.99) * 1e6, last=last)
+                 p50_us=percentile(times, 0.5) * 1e6, p99_us=percentile(times, 0.99) * 1e6, last=last,
+                 mismatches=mismatches)
     emit("done")
 
 
