@@ -149,6 +149,7 @@ def test_micros_rt_client_calls_rospy_and_rclpy_servers(servers: Dict[str, harne
         {"label": "ros2 trigger", "name": f"{P}/r2/trigger", "type": "std_srvs/Trigger", "wait": 10, "timeout": 5},
         {"label": "ros2 user srv", "name": f"{P}/r2/basic", "type": "test_msgs/BasicTypes", "args": BASIC,
          "wait": 10, "timeout": 5},
+        {"label": "micros_rt", "name": f"{P}/mrt/trigger", "type": "std_srvs/Trigger", "wait": 10, "timeout": 5},
         {"label": "ros2 concurrent", "name": f"{P}/r2/basic", "type": "test_msgs/BasicTypes", "args": BASIC,
          "timeout": 5, "count": 200, "threads": 4, "echo_check": True}]))
     client.wait_for("done", T)
@@ -162,6 +163,9 @@ def test_micros_rt_client_calls_rospy_and_rclpy_servers(servers: Dict[str, harne
     assert (many["ok"], many["n_errors"], many["last"]["success"]) == (200, 0, False), many
     assert by_label(client, "ros2 trigger", "response")["fields"]["message"] == f"rclpy {P}/r2/trigger triggered"
     assert by_label(client, "ros2 user srv", "response")["fields"] == BASIC
+    # a micros_rt server is in the master too: two micros_rt nodes talk TCPROS
+    mrt = by_label(client, "micros_rt", "response")
+    assert (mrt["side"], mrt["fields"]["message"]) == ("ROS 1", f"micros_rt {P}/mrt/trigger triggered"), mrt
     # four threads calling through one client at once: each call gets the answer to its own request
     concurrent = by_label(client, "ros2 concurrent", "summary")
     assert (concurrent["ok"], concurrent["n_errors"], concurrent["mismatches"]) == (200, 0, 0), concurrent
