@@ -25,6 +25,9 @@ stops waiting behind it (README, constrained link). ``[TCPROS]`` alone: with ``[
 subscriber's DDS reader exists for the fallback, Cyclone matches it with a micros_rt publisher's writer
 whatever was negotiated, and the camera crossed the link twice (13 images delivered instead of 34).
 
+The file is read with :mod:`micros_rt.qos.yamlconfig` (errors name the file, the line and the key), which
+the bridges' configuration files share.
+
 Keys are resolved topic names, :mod:`fnmatch` glob patterns (``*``, ``?``, ``[...]``; note that
 ``*`` also matches ``/``) or ``^...$`` regular expressions (:mod:`micros_rt.qos.topic_rules`, the
 matcher every profile section uses). Lookup: an exact name beats any pattern; among matching patterns
@@ -49,11 +52,13 @@ from typing import Any, Mapping, TypeVar, Union
 
 import yaml
 
-from micros_rt.exceptions import MicrosRtError, ProfileError, UnsupportedQoSError
+from micros_rt.exceptions import ProfileError
 from micros_rt.negotiation.protocol import DDS, SHM, TCPROS
 from micros_rt.qos.links import LinkSpec, LinkSpecError, parse_link
 from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions
 from micros_rt.qos.topic_rules import TopicPattern, best_match
+from micros_rt.qos.yamlconfig import (compose, describe_node, expect_mapping, is_null, location, mapping_items,
+                                      node_value, parse_qos_options)
 
 __all__ = ["QoSProfile", "merge_advertise", "merge_subscribe"]
 
@@ -131,63 +136,59 @@ class QoSProfile:
     @classmethod
     def from_string(cls, text: str, *, source: str = "<string>") -> QoSProfile:
         """Parse profile YAML ``text``; ``source`` names it in error messages."""
-        try:
-            # compose() keeps nodes with their line numbers; values are constructed per node below.
-            root = yaml.compose(text, Loader=yaml.SafeLoader)
-        except yaml.YAMLError as exc:
-            raise ProfileError(f"{source}: not valid YAML: {exc}") from exc
+        root = compose(text, source=source)
         publishers: dict[str, AdvertiseQoSOptions] = {}
         subscribers: dict[str, SubscribeQoSOptions] = {}
         transports: dict[str, dict[str, tuple[str, ...]]] = {section: {} for section in _SECTIONS}
         if root is None:  # empty file: an empty profile
             return cls(publishers, subscribers, source=source)
-        _expect_mapping(root, source, "the top level", "a mapping with 'publishers'/'subscribers'")
+        expect_mapping(root, source, "the top level", "a mapping with 'publishers'/'subscribers'")
         mqtt: Any = None
         links: tuple[LinkSpec, ...] = ()
         ros2: bool | None = None
-        for section_node, body in _pairs(root, source, ""):
+        for section_node, body in mapping_items(root, source, ""):
             section = section_node.value
             if section == "ros2":
-                value = _construct(body)
+                value = node_value(body)
                 if not isinstance(value, bool):
-                    raise ProfileError(f"{_where(source, body)}: ros2: expected true (micros_rt topics are ROS 2 "
+                    raise ProfileError(f"{location(source, body)}: ros2: expected true (micros_rt topics are ROS 2 "
                                        f"topics too, the default) or false (no DDS until a peer on another host "
                                        f"needs it), got {value!r}")
                 ros2 = value
                 continue
             if section == "mqtt":
-                mqtt = _construct(body)
+                mqtt = node_value(body)
                 continue
             if section == "links":
                 links = _parse_links(body, source)
                 continue
             if section not in _SECTIONS:
                 raise ProfileError(
-                    f"{_where(source, section_node)}: unknown section {section!r}; "
+                    f"{location(source, section_node)}: unknown section {section!r}; "
                     f"expected {', '.join(repr(s) for s in (*_SECTIONS, 'links', 'mqtt', 'ros2'))}"
                 )
-            if _is_null(body):
+            if is_null(body):
                 continue
-            _expect_mapping(body, source, section, "a mapping of topic names/patterns to options")
-            for topic_node, options_node in _pairs(body, source, section):
+            expect_mapping(body, source, section, "a mapping of topic names/patterns to options")
+            for topic_node, options_node in mapping_items(body, source, section, keys_are_names=True):
                 topic = topic_node.value
                 path = f"{section}[{topic!r}]"
                 if not topic:
-                    raise ProfileError(f"{_where(source, topic_node)}: {section}: empty topic key")
+                    raise ProfileError(f"{location(source, topic_node)}: {section}: empty topic key")
                 try:
                     TopicPattern.parse(topic)
                 except re.error as exc:
-                    raise ProfileError(f"{_where(source, topic_node)}: {section}: key {topic!r} is not a valid "
+                    raise ProfileError(f"{location(source, topic_node)}: {section}: key {topic!r} is not a valid "
                                        f"regular expression: {exc}") from None
                 hints = _take_transport_hints(options_node, source, path, publisher=section == "publishers")
                 if hints is not None:
                     transports[section][topic] = hints
                 if section == "publishers":
-                    publishers[topic] = _parse_options(
+                    publishers[topic] = parse_qos_options(
                         AdvertiseQoSOptions, options_node, source, path
                     )
                 else:
-                    subscribers[topic] = _parse_options(
+                    subscribers[topic] = parse_qos_options(
                         SubscribeQoSOptions, options_node, source, path
                     )
         profile = cls(publishers, subscribers, source=source)
@@ -227,77 +228,17 @@ def _lookup(section: Mapping[str, _Value], topic: str) -> _Value | None:
     return best_match(((TopicPattern.parse(key), options) for key, options in section.items()), topic)
 
 
-def _where(source: str, node: yaml.Node) -> str:
-    return f"{source}:{node.start_mark.line + 1}"
-
-
-def _is_null(node: yaml.Node) -> bool:
-    return isinstance(node, yaml.ScalarNode) and node.tag == "tag:yaml.org,2002:null"
-
-
-def _expect_mapping(node: yaml.Node, source: str, what: str, expected: str) -> None:
-    if not isinstance(node, yaml.MappingNode):
-        raise ProfileError(f"{_where(source, node)}: {what}: expected {expected}, got {_kind(node)}")
-
-
-def _kind(node: yaml.Node) -> str:
-    if isinstance(node, yaml.SequenceNode):
-        return "a list"
-    if isinstance(node, yaml.ScalarNode):
-        return f"the value {node.value!r}"
-    return "a mapping"
-
-
-def _pairs(node: yaml.Node, source: str, path: str) -> list[tuple[yaml.ScalarNode, yaml.Node]]:
-    """Key/value node pairs of a mapping, with string keys and no duplicates (YAML allows both)."""
-    assert isinstance(node, yaml.MappingNode)  # callers check with _expect_mapping first
-    seen: dict[str, yaml.Node] = {}
-    pairs: list[tuple[yaml.ScalarNode, yaml.Node]] = []
-    for key_node, value_node in node.value:
-        where = _where(source, key_node)
-        if not isinstance(key_node, yaml.ScalarNode) or key_node.tag != "tag:yaml.org,2002:str":
-            shown = key_node.value if isinstance(key_node, yaml.ScalarNode) else _kind(key_node)
-            raise ProfileError(f"{where}: {path or 'top level'}: key {shown!r} must be a string")
-        if key_node.value in seen:
-            first = seen[key_node.value].start_mark.line + 1
-            raise ProfileError(
-                f"{where}: {_child(path, key_node.value)}: duplicate key (first given on line {first})"
-            )
-        seen[key_node.value] = key_node
-        pairs.append((key_node, value_node))
-    return pairs
-
-
-def _child(path: str, key: str) -> str:
-    # The same spelling as the error messages elsewhere: publishers['/a'].latency_budget
-    if not path:
-        return key
-    if path in _SECTIONS:
-        return f"{path}[{key!r}]"
-    return f"{path}.{key}"
-
-
-def _construct(node: yaml.Node) -> Any:
-    # A fresh SafeLoader's constructor turns one scalar node into its Python value (true -> True,
-    # 0.5 -> 0.5, .inf -> inf) exactly as yaml.safe_load would.
-    loader = yaml.SafeLoader("")
-    try:
-        return loader.construct_object(node, deep=True)
-    finally:
-        loader.dispose()
-
-
 def _parse_links(node: yaml.Node, source: str) -> tuple[LinkSpec, ...]:
-    if _is_null(node):
+    if is_null(node):
         return ()
-    _expect_mapping(node, source, "links", "a mapping of link names to {bandwidth, peers or interface}")
+    expect_mapping(node, source, "links", "a mapping of link names to {bandwidth, peers or interface}")
     found: list[LinkSpec] = []
-    for name_node, body in _pairs(node, source, "links"):
+    for name_node, body in mapping_items(node, source, "links"):
         try:
-            found.append(parse_link(name_node.value, _construct(body)))
+            found.append(parse_link(name_node.value, node_value(body)))
         except LinkSpecError as exc:
             where = f"links.{name_node.value}.{exc.key}" if exc.key else f"links.{name_node.value}"
-            raise ProfileError(f"{_where(source, body)}: {where}: {exc.text}") from None
+            raise ProfileError(f"{location(source, body)}: {where}: {exc.text}") from None
     return tuple(found)
 
 
@@ -312,74 +253,24 @@ def _take_transport_hints(node: yaml.Node, source: str, path: str, *, publisher:
     else:
         return None
     del node.value[i]
-    where, key = _where(source, value_node), f"{path}.transport_hints"
+    where, key = location(source, value_node), f"{path}.transport_hints"
     allowed = f"a list of {SHM!r}, {DDS!r} and {TCPROS!r} in the order preferred, e.g. [{TCPROS}, {DDS}]"
     if not isinstance(value_node, yaml.SequenceNode) or not value_node.value:
-        raise ProfileError(f"{where}: {key}: expected {allowed}, got {_kind(value_node)}")
+        raise ProfileError(f"{where}: {key}: expected {allowed}, got {describe_node(value_node)}")
     names: list[str] = []
     for item in value_node.value:
         name = str(item.value).upper() if isinstance(item, yaml.ScalarNode) else ""
         if name not in (SHM, DDS, TCPROS):
-            shown = item.value if isinstance(item, yaml.ScalarNode) else _kind(item)
-            raise ProfileError(f"{_where(source, item)}: {key}: {shown!r} is not a transport; expected {allowed}")
+            shown = item.value if isinstance(item, yaml.ScalarNode) else describe_node(item)
+            raise ProfileError(f"{location(source, item)}: {key}: {shown!r} is not a transport; expected {allowed}")
         if name in names:
-            raise ProfileError(f"{_where(source, item)}: {key}: {name} is given twice")
+            raise ProfileError(f"{location(source, item)}: {key}: {name} is given twice")
         names.append(name)
     if publisher and TCPROS not in names:
         raise ProfileError(f"{where}: {key}: a publisher always serves {TCPROS} (stock ROS subscribers connect "
                            f"with nothing else); [{TCPROS}] keeps the topic off {DDS}, [{DDS}, {TCPROS}] is the "
                            f"default")
     return tuple(names)
-
-
-def _parse_options(
-    cls: type[_Options], node: yaml.Node, source: str, path: str
-) -> _Options:
-    if _is_null(node):
-        return cls()
-    _expect_mapping(node, source, path, "a mapping of option names to values")
-    values: dict[str, Any] = {}
-    known = cls._KEYS
-    for key_node, value_node in _pairs(node, source, path):
-        key = key_node.value
-        where = _where(source, key_node)
-        if key == "deadline_cb":
-            raise ProfileError(
-                f"{where}: {path}.deadline_cb: deadline callbacks cannot be given in a YAML profile; "
-                f"pass deadline_cb=... in code (the profile may still set deadline)"
-            )
-        if key not in known:
-            raise ProfileError(
-                f"{where}: {path}.{key}: unknown option; known options: {', '.join(known)}"
-            )
-        if not isinstance(value_node, yaml.ScalarNode):
-            raise ProfileError(
-                f"{_where(source, value_node)}: {path}.{key}: expected a single value, "
-                f"got {_kind(value_node)}"
-            )
-        value = _construct(value_node)
-        try:
-            # Validate each option on its own so that the error points at its line.
-            cls.from_dict({key: value}, source=source)
-        except UnsupportedQoSError as exc:
-            raise ProfileError(f"{_where(source, value_node)}: {path}.{key}: {exc}") from exc
-        except MicrosRtError as exc:
-            raise ProfileError(
-                f"{_where(source, value_node)}: {path}.{key}: {value!r} is invalid: "
-                f"{_expected_part(exc)}"
-            ) from exc
-        values[key] = value
-    try:
-        return cls.from_dict(values, source=source)
-    except MicrosRtError as exc:  # combinations of options (none expressible today, but be safe)
-        raise ProfileError(f"{_where(source, node)}: {path}: {exc}") from exc
-
-
-def _expected_part(exc: Exception) -> str:
-    # options.py phrases errors as "<option>=<value> is invalid: <what is allowed>"; keep the last part.
-    text = str(exc)
-    marker = " is invalid: "
-    return text.split(marker, 1)[1] if marker in text else text
 
 
 def _merge(cls: type[_Options], code: _Options | None, profile: _Options | None) -> _Options:

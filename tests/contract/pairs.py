@@ -83,7 +83,7 @@ def _free_port(kind: int) -> int:
 def mcu_pair() -> Pair:
     """The link's writer sends to the link's own port (the "board" is the link itself, on loopback), so its
     reader hears what its writer sent, through the kernel, in the wire's own form."""
-    from micros_rt.transports.mcu.config import parse_config
+    from micros_rt.bridges.mcu.config import parse_config
     from micros_rt.transports.mcu.link import McuLink
 
     udp, tcp = _free_port(socket.SOCK_DGRAM), _free_port(socket.SOCK_STREAM)

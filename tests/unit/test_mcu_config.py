@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from micros_rt import TransportPriority
-from micros_rt.transports.mcu.config import load_config, parse_config
+from micros_rt.bridges.mcu.config import load_config, parse_config
 from micros_rt.transports.mcu.wire import WireForm
 from micros_rt.transports.mcu.errors import McuConfigError
 

@@ -25,7 +25,7 @@ from std_srvs.srv import SetBool, SetBoolRequest, SetBoolResponse, Trigger, Trig
 
 import harness
 from micros_rt.transports.mcu import wire
-from micros_rt.transports.mcu.config import parse_config
+from micros_rt.bridges.mcu.config import parse_config
 from micros_rt.transports.mcu.errors import McuConfigError, McuServiceError, WireError
 from micros_rt.transports.mcu.link import McuLink
 

@@ -18,7 +18,8 @@ from std_msgs.msg import String
 import harness
 from micros_rt import SubscribeQoSOptions, TransportError
 from micros_rt.transports.mcu import wire
-from micros_rt.transports.mcu.config import McuConfig, parse_config
+from micros_rt.bridges.mcu.config import parse_config
+from micros_rt.transports.mcu.spec import McuConfig
 from micros_rt.transports.mcu.errors import DatagramTooLargeError
 from micros_rt.transports.mcu.link import McuLink, UdpWriter
 

@@ -14,7 +14,7 @@ from micros_rt.exceptions import QoSValueError
 from micros_rt.qos import mapping, options
 from micros_rt.qos.options import (OPTIONS, AdvertiseQoSOptions, QoSOption, SubscribeQoSOptions, describe,
                                    enforcers, options_of, wire_keys)
-from micros_rt.transports.mcu import config as mcu_config
+from micros_rt.bridges.mcu import config as mcu_config
 
 
 @pytest.mark.parametrize("side,cls", [("advertise", AdvertiseQoSOptions), ("subscribe", SubscribeQoSOptions)])

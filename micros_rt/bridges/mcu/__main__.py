@@ -1,6 +1,6 @@
 """``micros-rt mcu-bridge --config mcu.yaml`` (also ``python -m micros_rt.bridges.mcu``): the microcontroller bridge.
 
-Reads the configuration (see :mod:`micros_rt.transports.mcu.config` and docs/mcu.md), starts the node (name
+Reads the configuration (see :mod:`micros_rt.bridges.mcu.config` and docs/mcu.md), starts the node (name
 ``mcu_bridge`` unless ``--name`` or a ``__name:=`` remapping says otherwise) and bridges until Ctrl-C.
 A bad configuration or a port already in use is one line on stderr and exit code 1.
 ``--json`` prints the counters (``{"event": "stats", ...}``) every ``stats_period`` and each deadline
@@ -42,7 +42,7 @@ def main(argv: List[str]) -> int:
     ros_args = [a for a in argv if ":=" in a]
     args = _parser().parse_args([a for a in argv if ":=" not in a])
 
-    from ...transports.mcu.config import load_config
+    from .config import load_config
     from ...transports.mcu.errors import McuConfigError
 
     try:

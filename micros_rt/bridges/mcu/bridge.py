@@ -39,7 +39,7 @@ import micros_rt
 from micros_rt.log import nonblocking_logger
 
 from ...transports.mcu import wire
-from ...transports.mcu.config import McuConfig, ServiceEntry, TopicEntry
+from ...transports.mcu.spec import McuConfig, ServiceEntry, TopicEntry
 from ...transports.mcu.errors import DatagramTooLargeError, McuServiceError, WireError
 from ...transports.mcu.link import McuLink, UdpWriter
 

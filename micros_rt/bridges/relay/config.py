@@ -21,7 +21,7 @@ An export's options are :class:`~micros_rt.AdvertiseQoSOptions` keys (the DDS wr
 ``max_rate`` (Hz, applied before the link: newer messages within 1/max_rate of the last one sent are not
 sent, counted), ``queue_size`` (the writer's history; null: lossless) and ``latch``. An import's options are
 :class:`~micros_rt.SubscribeQoSOptions` keys (deadline, time filter, ...) plus ``as``, ``queue_size`` and
-``latch``. Option values are checked as in a QoS profile (:mod:`micros_rt.qos.profiles`).
+``latch``. Option values are checked as in a QoS profile (:mod:`micros_rt.qos.yamlconfig`).
 
 ``link_bandwidth`` (bits per second, ``40Mbit`` as in a profile's ``links``) is the rate of the link the
 exports cross. The relay process that carries only exports below HIGH then asks for a small UDP send buffer
@@ -43,8 +43,9 @@ import yaml
 from ...exceptions import MicrosRtError
 from ...qos import AdvertiseQoSOptions, SubscribeQoSOptions
 from ...qos.links import parse_bandwidth, send_buffer_for
-from ...qos.profiles import _construct, _expect_mapping, _is_null, _pairs, _parse_options, _where
 from ...qos.topic_rules import TopicPattern
+from ...qos.yamlconfig import (compose, expect_mapping, is_null, location, mapping_items, node_value, parse_qos_options,
+                               sub_mapping)
 
 __all__ = ["ExportRule", "ImportRule", "RelayConfig", "RelayConfigError", "ServiceImport", "load_config",
            "parse_config", "send_buffer_for"]
@@ -113,9 +114,9 @@ def load_config(path: str) -> RelayConfig:
 def parse_config(text: str, *, source: str = "<string>") -> RelayConfig:
     """Parse relay YAML ``text``; ``source`` names it in errors."""
     try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-    except yaml.YAMLError as exc:
-        raise RelayConfigError(f"{source}: not valid YAML: {exc}") from None
+        root = compose(text, source=source)
+    except MicrosRtError as exc:
+        raise RelayConfigError(str(exc)) from None
     if root is None:
         raise RelayConfigError(f"{source}: empty relay configuration; it needs at least 'graph:'")
     try:
@@ -127,7 +128,7 @@ def parse_config(text: str, *, source: str = "<string>") -> RelayConfig:
 
 
 def _parse(root: yaml.Node, source: str) -> RelayConfig:
-    _expect_mapping(root, source, "the top level", "a mapping with 'graph', 'export' and 'import'")
+    expect_mapping(root, source, "the top level", "a mapping with 'graph', 'export' and 'import'")
     graph: Optional[str] = None
     exports: List[ExportRule] = []
     imports: List[ImportRule] = []
@@ -135,35 +136,35 @@ def _parse(root: yaml.Node, source: str) -> RelayConfig:
     export_services: List[str] = []
     service_nodes: List[Tuple[yaml.ScalarNode, yaml.Node]] = []
     link_bandwidth: Optional[float] = None
-    for key_node, body in _pairs(root, source, ""):
+    for key_node, body in mapping_items(root, source, ""):
         key = key_node.value
         if key == "graph":
-            value = _construct(body) if isinstance(body, yaml.ScalarNode) else None
+            value = node_value(body) if isinstance(body, yaml.ScalarNode) else None
             if not isinstance(value, str) or not _GRAPH_NAME.match(value):
-                raise RelayConfigError(f"{_where(source, body)}: graph: {value!r} is invalid: expected a name "
+                raise RelayConfigError(f"{location(source, body)}: graph: {value!r} is invalid: expected a name "
                                        f"(a letter, then letters, digits, '_'), e.g. robot_a")
             graph = value
         elif key == "export":
-            if not _is_null(body):
-                _expect_mapping(body, source, "export", "a mapping of topic names/patterns to options")
-                exports = [_export(k, v, source) for k, v in _pairs(body, source, "export")]
+            if not is_null(body):
+                expect_mapping(body, source, "export", "a mapping of topic names/patterns to options")
+                exports = [_export(k, v, source) for k, v in mapping_items(body, source, "export")]
         elif key == "import":
-            if not _is_null(body):
-                _expect_mapping(body, source, "import", "a mapping of outside topic names to options")
-                import_nodes = _pairs(body, source, "import")
+            if not is_null(body):
+                expect_mapping(body, source, "import", "a mapping of outside topic names to options")
+                import_nodes = mapping_items(body, source, "import")
         elif key == "export_services":
             export_services = _service_names(body, source)
         elif key == "import_services":
-            if not _is_null(body):
-                _expect_mapping(body, source, "import_services", "a mapping of outside service names to options")
-                service_nodes = _pairs(body, source, "import_services")
+            if not is_null(body):
+                expect_mapping(body, source, "import_services", "a mapping of outside service names to options")
+                service_nodes = mapping_items(body, source, "import_services")
         elif key == "link_bandwidth":
             try:
-                link_bandwidth = parse_bandwidth(_construct(body) if isinstance(body, yaml.ScalarNode) else body)
+                link_bandwidth = parse_bandwidth(node_value(body) if isinstance(body, yaml.ScalarNode) else body)
             except ValueError as exc:
-                raise RelayConfigError(f"{_where(source, body)}: link_bandwidth: {exc}") from None
+                raise RelayConfigError(f"{location(source, body)}: link_bandwidth: {exc}") from None
         else:
-            raise RelayConfigError(f"{_where(source, key_node)}: unknown key {key!r}; expected 'graph', 'export', "
+            raise RelayConfigError(f"{location(source, key_node)}: unknown key {key!r}; expected 'graph', 'export', "
                                    f"'import', 'export_services', 'import_services', 'link_bandwidth'")
     if graph is None:
         raise RelayConfigError(f"{source}:1: graph: missing; name this graph (e.g. 'graph: robot_a'): exported "
@@ -186,16 +187,16 @@ def _parse(root: yaml.Node, source: str) -> RelayConfig:
 
 
 def _service_names(node: yaml.Node, source: str) -> List[str]:
-    if _is_null(node):
+    if is_null(node):
         return []
     if not isinstance(node, yaml.SequenceNode):
-        raise RelayConfigError(f"{_where(source, node)}: export_services: expected a list of service names "
+        raise RelayConfigError(f"{location(source, node)}: export_services: expected a list of service names "
                                f"(e.g. [/add_two_ints])")
     names = []
     for item in node.value:
-        value = _construct(item) if isinstance(item, yaml.ScalarNode) else None
+        value = node_value(item) if isinstance(item, yaml.ScalarNode) else None
         if not isinstance(value, str) or not _TOPIC_NAME.match(value):
-            raise RelayConfigError(f"{_where(source, item)}: export_services: {value!r} is not a global service "
+            raise RelayConfigError(f"{location(source, item)}: export_services: {value!r} is not a global service "
                                    f"name (e.g. /add_two_ints)")
         names.append(value)
     return names
@@ -204,26 +205,26 @@ def _service_names(node: yaml.Node, source: str) -> List[str]:
 def _service_import(key_node: yaml.ScalarNode, body: yaml.Node, source: str, graph: str) -> ServiceImport:
     outside = key_node.value
     path = f"import_services[{outside!r}]"
-    where = _where(source, key_node)
+    where = location(source, key_node)
     if not _TOPIC_NAME.match(outside) or outside.count("/") < 2 or outside.split("/")[1] == graph:
         raise RelayConfigError(f"{where}: import_services: {outside!r} is invalid: expected /<other graph>/<service> "
                                f"as the exporting relay names it")
     mine, rest = _split(body, source, path, ("as", "timeout"))
     if isinstance(rest, yaml.MappingNode) and rest.value:
         key = rest.value[0][0]
-        raise RelayConfigError(f"{_where(source, key)}: {path}.{key.value}: unknown option; known: as, timeout")
+        raise RelayConfigError(f"{location(source, key)}: {path}.{key.value}: unknown option; known: as, timeout")
     local = outside
     if "as" in mine:
         node, value = mine["as"]
         if not isinstance(value, str) or not _TOPIC_NAME.match(value):
-            raise RelayConfigError(f"{_where(source, node)}: {path}.as: {value!r} is invalid: expected a global "
+            raise RelayConfigError(f"{location(source, node)}: {path}.as: {value!r} is invalid: expected a global "
                                    f"service name")
         local = value
     timeout = 10.0
     if "timeout" in mine:
         node, value = mine["timeout"]
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
-            raise RelayConfigError(f"{_where(source, node)}: {path}.timeout: {value!r} is invalid: expected "
+            raise RelayConfigError(f"{location(source, node)}: {path}.timeout: {value!r} is invalid: expected "
                                    f"seconds, a number above 0")
         timeout = float(value)
     return ServiceImport(outside, local, outside.split("/")[1], timeout)
@@ -232,29 +233,28 @@ def _service_import(key_node: yaml.ScalarNode, body: yaml.Node, source: str, gra
 def _split(node: yaml.Node, source: str, path: str, own: Tuple[str, ...]) -> Tuple[Dict[str, Tuple[yaml.Node, Any]],
                                                                                 yaml.Node]:
     """The relay's own keys (``own``) of an options mapping, and a mapping node with the QoS keys left."""
-    if _is_null(node):
+    if is_null(node):
         return {}, node
-    _expect_mapping(node, source, path, "a mapping of option names to values")
+    expect_mapping(node, source, path, "a mapping of option names to values")
     mine: Dict[str, Tuple[yaml.Node, Any]] = {}
     rest: List[Tuple[yaml.Node, yaml.Node]] = []
-    for key_node, value_node in _pairs(node, source, path):
+    for key_node, value_node in mapping_items(node, source, path):
         if key_node.value in own:
-            mine[key_node.value] = (value_node, _construct(value_node) if isinstance(value_node, yaml.ScalarNode)
+            mine[key_node.value] = (value_node, node_value(value_node) if isinstance(value_node, yaml.ScalarNode)
                                     else None)
         else:
             rest.append((key_node, value_node))
-    left = yaml.MappingNode("tag:yaml.org,2002:map", rest, node.start_mark, node.end_mark)
-    return mine, left
+    return mine, sub_mapping(node, rest)
 
 
 def _queue_size(mine: Dict[str, Tuple[yaml.Node, Any]], source: str, path: str) -> Optional[int]:
     if "queue_size" not in mine:
         return DEFAULT_QUEUE_SIZE
     node, value = mine["queue_size"]
-    if value is None and _is_null(node):
+    if value is None and is_null(node):
         return None
     if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise RelayConfigError(f"{_where(source, node)}: {path}.queue_size: {value!r} is invalid: expected a "
+        raise RelayConfigError(f"{location(source, node)}: {path}.queue_size: {value!r} is invalid: expected a "
                                f"positive integer, or null for lossless")
     return value
 
@@ -264,7 +264,7 @@ def _flag(mine: Dict[str, Tuple[yaml.Node, Any]], key: str, source: str, path: s
         return False
     node, value = mine[key]
     if not isinstance(value, bool):
-        raise RelayConfigError(f"{_where(source, node)}: {path}.{key}: {value!r} is invalid: expected true or false")
+        raise RelayConfigError(f"{location(source, node)}: {path}.{key}: {value!r} is invalid: expected true or false")
     return value
 
 
@@ -274,20 +274,20 @@ def _export(key_node: yaml.ScalarNode, body: yaml.Node, source: str) -> ExportRu
     try:
         pattern = TopicPattern.parse(key)
     except re.error as exc:
-        raise RelayConfigError(f"{_where(source, key_node)}: export: key {key!r} is not a valid regular "
+        raise RelayConfigError(f"{location(source, key_node)}: export: key {key!r} is not a valid regular "
                                f"expression: {exc}") from None
     if pattern.exact and not _TOPIC_NAME.match(key):
-        raise RelayConfigError(f"{_where(source, key_node)}: export: {key!r} is not a global topic name "
+        raise RelayConfigError(f"{location(source, key_node)}: export: {key!r} is not a global topic name "
                                f"(e.g. /camera/image)")
     mine, qos_node = _split(body, source, path, ("max_rate", "queue_size", "latch"))
     max_rate = math.inf
     if "max_rate" in mine:
         node, value = mine["max_rate"]
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
-            raise RelayConfigError(f"{_where(source, node)}: {path}.max_rate: {value!r} is invalid: expected "
+            raise RelayConfigError(f"{location(source, node)}: {path}.max_rate: {value!r} is invalid: expected "
                                    f"messages per second, a number above 0")
         max_rate = float(value)
-    options = _parse_options(AdvertiseQoSOptions, qos_node, source, path)
+    options = parse_qos_options(AdvertiseQoSOptions, qos_node, source, path)
     return ExportRule(key, options, max_rate, _queue_size(mine, source, path), _flag(mine, "latch", source, path),
                       pattern)
 
@@ -295,7 +295,7 @@ def _export(key_node: yaml.ScalarNode, body: yaml.Node, source: str) -> ExportRu
 def _import(key_node: yaml.ScalarNode, body: yaml.Node, source: str, graph: str) -> ImportRule:
     outside = key_node.value
     path = f"import[{outside!r}]"
-    where = _where(source, key_node)
+    where = location(source, key_node)
     if not _TOPIC_NAME.match(outside) or outside.count("/") < 2:
         raise RelayConfigError(f"{where}: import: {outside!r} is invalid: expected /<graph>/<topic> as the "
                                f"exporting relay names it (e.g. /robot_a/chatter)")
@@ -308,9 +308,9 @@ def _import(key_node: yaml.ScalarNode, body: yaml.Node, source: str, graph: str)
     if "as" in mine:
         node, value = mine["as"]
         if not isinstance(value, str) or not _TOPIC_NAME.match(value):
-            raise RelayConfigError(f"{_where(source, node)}: {path}.as: {value!r} is invalid: expected a global "
+            raise RelayConfigError(f"{location(source, node)}: {path}.as: {value!r} is invalid: expected a global "
                                    f"topic name (e.g. /others/chatter)")
         local = value
-    options = None if _is_null(qos_node) or not qos_node.value else _parse_options(SubscribeQoSOptions, qos_node, source, path)
+    options = None if is_null(qos_node) or not qos_node.value else parse_qos_options(SubscribeQoSOptions, qos_node, source, path)
     return ImportRule(outside, local, origin, options, _queue_size(mine, source, path),
                       _flag(mine, "latch", source, path))

@@ -1,9 +1,10 @@
 """The microcontroller link (seed 003): MessagePack over UDP for topics, TCP for service calls.
 
-``micros-rt mcu-bridge --config mcu.yaml`` runs it (:mod:`micros_rt.bridges.mcu`); docs/mcu.md describes the
-configuration, the wire format, QoS on the link and the counters. The transport's pieces:
+``micros-rt mcu-bridge --config mcu.yaml`` runs it (:mod:`micros_rt.bridges.mcu`, which reads the YAML
+configuration into a :class:`McuConfig`); docs/mcu.md describes the configuration, the wire format, QoS on the
+link and the counters. The transport's pieces:
 
-- :mod:`~micros_rt.transports.mcu.config`  the YAML configuration (errors name file, line and key)
+- :mod:`~micros_rt.transports.mcu.spec`    what a link is made of: addresses, mtu, wire form, streams, services
 - :mod:`~micros_rt.transports.mcu.wire`    datagrams, serial datagrams (SLIP + CRC32) and message codecs (pure)
 - :mod:`~micros_rt.transports.mcu.link`    sockets, counters, rate-limited warnings; UdpWriter/UdpReader back ends
 
@@ -16,12 +17,11 @@ from typing import Any
 
 from .errors import DatagramTooLargeError, McuConfigError, McuServiceError, WireError
 
-__all__ = ["McuConfig", "load_config", "parse_config", "McuConfigError", "WireError",
-           "DatagramTooLargeError", "McuServiceError"]
+__all__ = ["McuConfig", "McuConfigError", "WireError", "DatagramTooLargeError", "McuServiceError"]
 
 
 def __getattr__(name: str) -> Any:
-    if name in ("McuConfig", "load_config", "parse_config"):
-        from . import config
-        return getattr(config, name)
+    if name == "McuConfig":
+        from .spec import McuConfig
+        return McuConfig
     raise AttributeError(name)

@@ -36,7 +36,7 @@ from micros_rt.transports.marking import mark_socket
 from micros_rt.qos.options import TransportPriority, priority_tos
 
 from . import wire
-from .config import McuConfig, ServiceEntry, TopicEntry
+from .spec import McuConfig, ServiceEntry, TopicEntry
 from .errors import DatagramTooLargeError, McuServiceError, WireError
 
 __all__ = ["LinkStats", "McuLink", "UdpWriter", "UdpReader", "ServiceHandler", "PROTOCOL"]

@@ -17,8 +17,10 @@
     services_for_microcontroller:                # ROS services the board may call through the bridge
       - {service: /set_mode, type: std_srvs/SetBool, name: set_mode}
 
-Every error (:class:`McuConfigError`) names the file, the line and the key. ``qos:`` values are
-parsed and validated exactly as in a YAML QoS profile (:mod:`micros_rt.qos.profiles`).
+Every error (:class:`~micros_rt.transports.mcu.errors.McuConfigError`) names the file, the line and the key.
+``qos:`` values are parsed and validated exactly as in a YAML QoS profile (:mod:`micros_rt.qos.yamlconfig`).
+The result is the link's :class:`~micros_rt.transports.mcu.spec.McuConfig`, which
+:class:`~micros_rt.transports.mcu.link.McuLink` takes.
 """
 
 from __future__ import annotations
@@ -27,30 +29,22 @@ import dataclasses
 import ipaddress
 import math
 import os
-from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Optional, Tuple, Type
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
-import genpy
 import roslib.message
 import rosgraph.names
 import yaml
 
 from micros_rt.exceptions import ProfileError
 from micros_rt.qos.options import MCU_FROM, MCU_SERVICE, MCU_TO, OPTIONS, AdvertiseQoSOptions, SubscribeQoSOptions
-from micros_rt.qos.profiles import _construct, _expect_mapping, _is_null, _kind, _pairs, _parse_options, _where
+from micros_rt.qos.yamlconfig import (compose, describe_node, expect_mapping, is_null, location, mapping_items,
+                                      node_value, parse_qos_options, sub_mapping)
+from micros_rt.transports.mcu.errors import McuConfigError
+from micros_rt.transports.mcu.spec import (DEFAULT_SERVICE_TIMEOUT, MAX_MTU, Address, McuConfig, ServiceEntry,
+                                           TopicEntry)
+from micros_rt.transports.mcu.wire import WIRE_FORM_NAMES, WireForm
 
-from .errors import McuConfigError
-from .wire import WIRE_FORM_NAMES, WireForm
-
-__all__ = ["Address", "TopicEntry", "ServiceEntry", "McuConfig", "load_config", "parse_config",
-           "DEFAULT_TOPIC_PORT", "DEFAULT_SERVICE_PORT", "DEFAULT_MTU", "MAX_MTU"]
-
-DEFAULT_TOPIC_PORT = 20000
-DEFAULT_SERVICE_PORT = 20001
-DEFAULT_MTU = 1472          # 1500-byte Ethernet MTU - 20 (IPv4) - 8 (UDP)
-MAX_MTU = 65507             # the largest IPv4 UDP payload
-DEFAULT_SERVICE_TIMEOUT = 2.0
-
+__all__ = ["load_config", "parse_config"]
 
 
 def _applying(where: str) -> Tuple[str, ...]:
@@ -64,67 +58,6 @@ _FROM_QOS = _applying(MCU_FROM)
 _SERVICE_QOS = _applying(MCU_SERVICE)
 #: the publisher-only keys go to the publishing side's options, the rest to the subscribing side's
 _ADVERTISE_KEYS = tuple(k for k in AdvertiseQoSOptions._KEYS if k not in SubscribeQoSOptions._KEYS)
-
-
-@dataclass(frozen=True)
-class Address:
-    """An IP address (a literal, v4 or v6) with the link's two ports."""
-
-    address: str
-    topic_port: int = DEFAULT_TOPIC_PORT
-    service_port: int = DEFAULT_SERVICE_PORT
-
-    @property
-    def family_v6(self) -> bool:
-        return ipaddress.ip_address(self.address).version == 6
-
-    def topic(self) -> Tuple[str, int]:
-        return (self.address, self.topic_port)
-
-    def service(self) -> Tuple[str, int]:
-        return (self.address, self.service_port)
-
-
-@dataclass(frozen=True)
-class TopicEntry:
-    """One stream: a ROS topic and the datagram name it travels under."""
-
-    topic: str
-    type: str
-    name: str
-    data_class: Type[genpy.Message] = field(compare=False, repr=False)
-    advertise: AdvertiseQoSOptions = AdvertiseQoSOptions()
-    subscribe: SubscribeQoSOptions = SubscribeQoSOptions(using_best_effort_protocol=True)
-    line: int = 0
-
-
-@dataclass(frozen=True)
-class ServiceEntry:
-    """One service: a ROS service name, its type and the name it is called by on the wire."""
-
-    service: str
-    type: str
-    name: str
-    service_class: Any = field(compare=False, repr=False)
-    timeout: float = DEFAULT_SERVICE_TIMEOUT
-    advertise: AdvertiseQoSOptions = AdvertiseQoSOptions()
-    line: int = 0
-
-
-@dataclass(frozen=True)
-class McuConfig:
-    """The whole configuration (see the module docstring)."""
-
-    microcontroller: Address
-    bind: Address = Address("0.0.0.0")
-    mtu: int = DEFAULT_MTU
-    stats_period: float = 1.0
-    wire_form: WireForm = WireForm.FINAL
-    to_microcontroller: Tuple[TopicEntry, ...] = ()
-    from_microcontroller: Tuple[TopicEntry, ...] = ()
-    services_on_microcontroller: Tuple[ServiceEntry, ...] = ()
-    services_for_microcontroller: Tuple[ServiceEntry, ...] = ()
-    source: str = "<string>"
 
 
 def load_config(path: str | os.PathLike[str]) -> McuConfig:
@@ -150,22 +83,19 @@ class _Parser:
         self.source = source
 
     def error(self, node: yaml.Node, path: str, words: str) -> McuConfigError:
-        return McuConfigError(f"{_where(self.source, node)}: {path}: {words}")
+        return McuConfigError(f"{location(self.source, node)}: {path}: {words}")
 
     def parse(self, text: str) -> McuConfig:
-        try:
-            root = yaml.compose(text, Loader=yaml.SafeLoader)
-        except yaml.YAMLError as exc:
-            raise McuConfigError(f"{self.source}: not valid YAML: {exc}") from exc
+        root = compose(text, source=self.source)
         if root is None:
             raise McuConfigError(f"{self.source}: empty configuration; at least 'microcontroller: "
                                  f"{{address: ...}}' is needed")
-        _expect_mapping(root, self.source, "the top level", "a mapping")
+        expect_mapping(root, self.source, "the top level", "a mapping")
         known = ("microcontroller", "bind", "mtu", "stats_period", "wire_form", "to_microcontroller", "from_microcontroller",
                  "services_on_microcontroller", "services_for_microcontroller")
         values: Dict[str, Any] = {"source": self.source}
         board: Optional[Address] = None
-        for key_node, node in _pairs(root, self.source, ""):
+        for key_node, node in mapping_items(root, self.source, ""):
             key = key_node.value
             if key not in known:
                 raise self.error(key_node, key, f"unknown key; known keys: {', '.join(known)}")
@@ -195,8 +125,8 @@ class _Parser:
     # -- scalars
     def scalar(self, node: yaml.Node, path: str) -> Any:
         if not isinstance(node, yaml.ScalarNode):
-            raise self.error(node, path, f"expected a single value, got {_kind(node)}")
-        return _construct(node)
+            raise self.error(node, path, f"expected a single value, got {describe_node(node)}")
+        return node_value(node)
 
     def integer(self, node: yaml.Node, path: str, lo: int, hi: int) -> int:
         value = self.scalar(node, path)
@@ -230,9 +160,9 @@ class _Parser:
                                      f"micros_rt wrote as 'cvra' before). Every form is read whatever this says")
 
     def address(self, node: yaml.Node, path: str, *, required_address: bool) -> Address:
-        _expect_mapping(node, self.source, path, "a mapping with address, topic_port, service_port")
+        expect_mapping(node, self.source, path, "a mapping with address, topic_port, service_port")
         got: Dict[str, Any] = {}
-        for key_node, value_node in _pairs(node, self.source, path):
+        for key_node, value_node in mapping_items(node, self.source, path):
             key = key_node.value
             if key == "address":
                 text = self.text(value_node, f"{path}.address")
@@ -256,20 +186,20 @@ class _Parser:
 
     # -- entries
     def entries(self, node: yaml.Node, path: str) -> List[Tuple[int, yaml.MappingNode]]:
-        if _is_null(node):
+        if is_null(node):
             return []
         if not isinstance(node, yaml.SequenceNode):
-            raise self.error(node, path, f"expected a list of entries, got {_kind(node)}")
+            raise self.error(node, path, f"expected a list of entries, got {describe_node(node)}")
         out = []
         for i, item in enumerate(node.value):
-            _expect_mapping(item, self.source, f"{path}[{i}]", "a mapping")
+            expect_mapping(item, self.source, f"{path}[{i}]", "a mapping")
             out.append((i, item))
         return out
 
     def fields(self, item: yaml.MappingNode, path: str, known: Tuple[str, ...],
                required: Tuple[str, ...]) -> Dict[str, Tuple[yaml.Node, yaml.Node]]:
         got: Dict[str, Tuple[yaml.Node, yaml.Node]] = {}
-        for key_node, value_node in _pairs(item, self.source, path):
+        for key_node, value_node in mapping_items(item, self.source, path):
             if key_node.value not in known:
                 raise self.error(key_node, f"{path}.{key_node.value}", f"unknown key; known keys: {', '.join(known)}")
             got[key_node.value] = (key_node, value_node)
@@ -346,13 +276,13 @@ class _Parser:
     def qos(self, pair: Optional[Tuple[yaml.Node, yaml.Node]], path: str, allowed: Tuple[str, ...],
             section: str) -> Tuple[AdvertiseQoSOptions, SubscribeQoSOptions]:
         advertise, subscribe = AdvertiseQoSOptions(), SubscribeQoSOptions(using_best_effort_protocol=True)
-        if pair is None or _is_null(pair[1]):
+        if pair is None or is_null(pair[1]):
             return advertise, subscribe
         node = pair[1]
-        _expect_mapping(node, self.source, path, "a mapping of QoS option names to values")
+        expect_mapping(node, self.source, path, "a mapping of QoS option names to values")
         adv_pairs: List[Tuple[yaml.Node, yaml.Node]] = []
         sub_pairs: List[Tuple[yaml.Node, yaml.Node]] = []
-        for key_node, value_node in _pairs(node, self.source, path):
+        for key_node, value_node in mapping_items(node, self.source, path):
             key = key_node.value
             known = key in AdvertiseQoSOptions._KEYS or key in SubscribeQoSOptions._KEYS or key == "deadline_cb"
             if key not in allowed:
@@ -368,13 +298,10 @@ class _Parser:
                                  "(services_on_microcontroller), which waits for the board's answer")
             (adv_pairs if key in _ADVERTISE_KEYS else sub_pairs).append((key_node, value_node))
         if adv_pairs:
-            advertise = _parse_options(AdvertiseQoSOptions, _mapping(node, adv_pairs), self.source, path)
+            advertise = parse_qos_options(AdvertiseQoSOptions, sub_mapping(node, adv_pairs), self.source, path)
         if sub_pairs:
-            parsed = _parse_options(SubscribeQoSOptions, _mapping(node, sub_pairs), self.source, path)
+            parsed = parse_qos_options(SubscribeQoSOptions, sub_mapping(node, sub_pairs), self.source, path)
             subscribe = dataclasses.replace(parsed, using_best_effort_protocol=True)  # the link's only kind
         return advertise, subscribe
 
 
-def _mapping(like: yaml.Node, pairs: List[Tuple[yaml.Node, yaml.Node]]) -> yaml.MappingNode:
-    """A mapping node of some of ``like``'s pairs, so the profile parser validates just those."""
-    return yaml.MappingNode("tag:yaml.org,2002:map", pairs, like.start_mark, like.end_mark)
