@@ -16,7 +16,7 @@ import harness
 
 from micros_rt.bridges.mqtt import bridge as bridge_module
 from micros_rt.transports.mqtt import codec
-from micros_rt.transports.mqtt.params import Mqtt2RosParams
+from micros_rt.bridges.mqtt.params import Mqtt2RosParams
 
 
 class _SlowMasterNodeHandle:

@@ -7,7 +7,8 @@ from typing import Any, Dict
 
 import pytest
 
-from micros_rt.transports.mqtt.params import ParamsError, load_params, parse_params, resolve_path
+from micros_rt.bridges.mqtt.params import ParamsError, load_params, parse_params
+from micros_rt.transports.mqtt.params import resolve_path
 
 MINIMAL: Dict[str, Any] = {"bridge": {"ros2mqtt": [{"ros_topic": "/ping/ros", "mqtt_topic": "pingpong/ros"}]}}
 

@@ -22,7 +22,7 @@ from micros_rt.transports.base import EndpointSpec
 from micros_rt.transports.mqtt import codec
 from micros_rt.transports.mqtt.backend import MqttRule, MqttTopicWriter, parse_mqtt_section
 from micros_rt.transports.mqtt.generations import PeerGenerations
-from micros_rt.transports.mqtt.params import Ros2MqttParams, parse_params
+from micros_rt.bridges.mqtt.params import Ros2MqttParams, parse_params
 
 V1, V2 = codec.WireGeneration.V1, codec.WireGeneration.V2
 FIXTURES = Path(__file__).resolve().parent.parent / "fixtures" / "mqtt_client"

@@ -18,7 +18,7 @@ from std_msgs.msg import Int32, String
 from micros_rt.transports.mqtt import codec
 from micros_rt.transports.mqtt.backend import MqttRule, MqttTopicReader, MqttTopicWriter, parse_mqtt_section
 from micros_rt.bridges.mqtt.bridge import is_connected_service_class
-from micros_rt.transports.mqtt.params import ParamsError, parse_params
+from micros_rt.bridges.mqtt.params import ParamsError, parse_params
 from micros_rt.qos import AdvertiseQoSOptions
 from micros_rt.transports.base import EndpointSpec
 
@@ -258,7 +258,7 @@ class FakeNodeHandle:
 
 def bridge_topic(monkeypatch: pytest.MonkeyPatch, **entry: Any) -> Tuple[Any, FakeNodeHandle]:
     from micros_rt.bridges.mqtt import bridge as bridge_module
-    from micros_rt.transports.mqtt.params import Mqtt2RosParams
+    from micros_rt.bridges.mqtt.params import Mqtt2RosParams
 
     monkeypatch.setattr(bridge_module, "_await_subscribers", lambda pub: None)   # no ROS master here
     nh = FakeNodeHandle()

@@ -37,7 +37,7 @@ def main(argv: List[str]) -> int:
     args = _parser().parse_args([a for a in argv if ":=" not in a])
 
     from ...transports.mqtt.client import MqttConfigError
-    from ...transports.mqtt.params import ParamsError, load_params
+    from .params import ParamsError, load_params
 
     try:
         params, warnings = load_params(args.params)

@@ -48,7 +48,7 @@ from ...ratelimit import RateLimitedLog
 from ...transports.mqtt import codec
 from ...transports.mqtt.client import MqttConnection
 from ...transports.mqtt.generations import ANNOUNCEMENTS, PeerGenerations
-from ...transports.mqtt.params import Mqtt2RosParams, MqttParams, Ros2MqttParams
+from .params import Mqtt2RosParams, MqttParams, Ros2MqttParams
 
 __all__ = ["MqttBridge", "PENDING_LIMIT", "is_connected_service_class"]
 

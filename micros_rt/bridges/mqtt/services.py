@@ -48,7 +48,7 @@ QOS = 1
 
 
 def _connection() -> MqttConnection:
-    from ...node import node_info
+    from ... import node_info
     from ...transports.mqtt.backend import process_backend
 
     node = node_info()

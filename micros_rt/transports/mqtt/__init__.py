@@ -12,7 +12,7 @@
 
 from typing import Any
 
-__all__ = ["MqttParams", "ParamsError", "close_profile_backend", "load_params", "parse_params", "profile_backend"]
+__all__ = ["ParamsError", "close_profile_backend", "profile_backend"]
 
 
 def profile_backend(profile: Any, *, graph: str, node: str) -> Any:
@@ -29,9 +29,9 @@ def close_profile_backend() -> None:
     close_process_backend()
 
 
-def __getattr__(name: str) -> Any:  # the bridge's names, imported when used
-    if name in ("MqttParams", "ParamsError", "load_params", "parse_params"):
-        from . import params
+def __getattr__(name: str) -> Any:  # imported when used
+    if name == "ParamsError":
+        from .params import ParamsError
 
-        return getattr(params, name)
+        return ParamsError
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -47,7 +47,7 @@ from ...qos.topic_rules import TopicPattern, best_match
 from ...qos import AdvertiseQoSOptions, SubscribeQoSOptions, TransportPriority, priority_socket_priority, priority_tos
 from . import codec
 from .client import MqttConnection
-from .params import MqttParams, ParamsError, _Reader, parse_connection, parse_wire
+from .params import ConnectionParams, ParamsError, ParamsReader, parse_connection, parse_wire
 
 __all__ = ["MqttBackend", "MqttRule", "MqttSettings", "MqttTopicReader", "MqttTopicWriter", "parse_mqtt_section",
            "process_backend", "close_process_backend", "SOURCE_PROPERTY"]
@@ -98,14 +98,11 @@ class MqttRule:
 class MqttSettings:
     """A profile's ``mqtt`` section."""
 
-    params: MqttParams
+    params: ConnectionParams
     rules: Tuple[MqttRule, ...]
     source: str
-
-    @property
-    def wire(self) -> codec.WireGeneration:
-        """The mqtt_client generation ``ros1`` topics are written in (``mqtt_client_version``)."""
-        return self.params.wire
+    #: the mqtt_client generation ``ros1`` topics are written in (``mqtt_client_version``)
+    wire: codec.WireGeneration = codec.WireGeneration.V2
 
     def rule_for(self, topic: str, direction: str) -> Optional[MqttRule]:
         """The rule for ``topic`` going ``out`` or ``in``: an exact name beats a pattern, the longest pattern
@@ -115,7 +112,7 @@ class MqttSettings:
 
 def parse_mqtt_section(data: Any, *, source: str) -> MqttSettings:
     """Validate a profile's ``mqtt`` section; :class:`micros_rt.ProfileError` naming the key."""
-    r = _Reader(f"{source}: mqtt")
+    r = ParamsReader(f"{source}: mqtt")
     try:
         if not isinstance(data, dict):
             raise ParamsError(f"{source}: mqtt: expected a mapping with 'broker', 'client' and 'topics'")
@@ -128,10 +125,10 @@ def parse_mqtt_section(data: Any, *, source: str) -> MqttSettings:
         rules = tuple(_rule(r, str(key), value or {}, k) for k, (key, value) in enumerate(topics.items()))
     except ParamsError as exc:
         raise ProfileError(str(exc)) from None
-    return MqttSettings(MqttParams(broker, client, (), (), wire), rules, source)
+    return MqttSettings(ConnectionParams(broker, client), rules, source, wire)
 
 
-def _rule(r: _Reader, key: str, value: Any, order: int) -> MqttRule:
+def _rule(r: ParamsReader, key: str, value: Any, order: int) -> MqttRule:
     name = f"topics/{key}"
     if not isinstance(value, dict):
         raise r.fail(name, f"must be a mapping of MQTT options, got {value!r}")

@@ -32,7 +32,7 @@ from paho.mqtt.reasoncodes import ReasonCode
 
 from ...log import nonblocking_logger
 from ...ratelimit import RateLimitedLog
-from .params import MqttParams, resolve_path
+from .params import ConnectionParams, resolve_path
 from ...exceptions import MicrosRtError
 from ..marking import mark_socket_tos
 
@@ -180,7 +180,7 @@ class MqttConnection:
     configured CA, or the broker refuses the credentials.
     """
 
-    def __init__(self, params: MqttParams, *, mqtt5: bool = False, on_fatal: Optional[Callable[[str], None]] = None,
+    def __init__(self, params: ConnectionParams, *, mqtt5: bool = False, on_fatal: Optional[Callable[[str], None]] = None,
                  on_connection_change: Optional[Callable[[bool], None]] = None,
                  on_live: Optional[Callable[[], None]] = None) -> None:
         self.params = params
