@@ -32,8 +32,8 @@ import genpy
 import roslib.message
 import rospy.msg
 
-from micros_rt.core.rospy_compat import TimeoutTransport
 from micros_rt.exceptions import MicrosRtError
+from micros_rt.extend import TimeoutTransport
 from micros_rt.transports.dds.types import register_message_classes
 
 from .services import ServiceCallError, encode_header, read_header

@@ -1,10 +1,11 @@
 """The relay node: named topics of this ROS graph out to other graphs over DDS, and theirs in.
 
-A thin program on micros_rt's public API and the DDS transport:
+A thin program on micros_rt's public API (:mod:`micros_rt`, and :mod:`micros_rt.extend` for the process's
+DDS back end, the lane and the node's info section) and the DDS transport:
 
 - **export**: a micros_rt subscription of the local topic (TCPROS from stock roscpp/rospy publishers, DDS
   from micros_rt ones) whose callback sends each message on a DDS writer of ``/<graph><topic>`` with the
-  rule's QoS, behind the core's lane (:class:`~micros_rt.core.lanes.Lane`: a KEEP_LAST sample superseded
+  rule's QoS, behind the core's lane (:class:`~micros_rt.extend.Lane`: a KEEP_LAST sample superseded
   before it left is not sent, back-pressure never holds the callback). ``max_rate`` is applied before the
   lane. The writer's micros_rt tag says ``relay=<graph>``, the ROS type and the QoS: ordinary micros_rt
   readers of other graphs ignore it (they deliver only negotiated writers, or those an importing relay
@@ -41,10 +42,8 @@ import roslib.message
 import rospy
 
 import micros_rt
-from micros_rt.core import introspection
-from micros_rt.core.lanes import Lane
+from micros_rt.extend import Lane, dds_backend, register_info_section, unregister_info_section
 from micros_rt.qos import DURATION_MAX, SubscribeQoSOptions
-from micros_rt.core.runtime import dds_backend
 from micros_rt.log import nonblocking_logger
 from micros_rt.qos.topic_rules import best_match
 from micros_rt.transports.base import BackPressuredWriter, EndpointSpec, PushReader, TransportWriter
@@ -314,7 +313,7 @@ class Relay:
         self._lock = threading.Lock()
 
     def start(self) -> "Relay":
-        introspection.register_section("relay", self.info)   # what the micros-rt tools show of this relay
+        register_info_section("relay", self.info)   # what the micros-rt tools show of this relay
         self._thread.start()
         return self
 
@@ -503,7 +502,7 @@ class Relay:
                 "imports": [i.info() for i in imports], "not_carried": dict(self._refused)}
 
     def close(self) -> None:
-        introspection.unregister_section("relay")
+        unregister_info_section("relay")
         self._stop.set()
         if self._thread.is_alive() and self._thread is not threading.current_thread():
             self._thread.join(timeout=5.0)

@@ -1,0 +1,34 @@
+"""What programs built on micros_rt use beyond a node's API (the relay is one): the few pieces of the core a
+program needs when :class:`~micros_rt.NodeHandle`, ``NodeHandle.subscribe_reader`` and
+:class:`~micros_rt.Publisher` do not do the job. Prefer those; use these where a program drives a transport
+itself (a DDS writer with a tag of its own, a reader it feeds).
+
+- :func:`dds_backend`: this process's DDS back end (:class:`~micros_rt.transports.dds.backend.DDSBackend`:
+  ``open_writer(spec, options)``, ``open_reader(...)``), or None when DDS did not start; call it after
+  ``init_node``.
+- :func:`register_info_section` / :func:`unregister_info_section`: a section of the program's own state in
+  the node's ``microsRtInfo`` answer, which ``micros-rt graph`` and ``micros-rt topic`` show.
+- :class:`Lane`: put in front of a :class:`~micros_rt.transports.base.BackPressuredWriter` so that
+  back-pressure on one topic never holds the caller (KEEP_LAST samples superseded before they left are
+  dropped and counted, as a publication does).
+- :class:`TimeoutTransport`: an :mod:`xmlrpc.client` transport with a timeout of its own (rospy sets a
+  process-wide socket timeout), for XML-RPC calls to other nodes and masters.
+
+>>> import micros_rt
+>>> from micros_rt.extend import Lane, dds_backend, register_info_section
+>>> micros_rt.init_node("my_program")                                        # doctest: +SKIP
+>>> backend = dds_backend()                                                  # doctest: +SKIP
+>>> writer = backend.open_writer(spec, micros_rt.AdvertiseQoSOptions())     # doctest: +SKIP
+>>> sender = Lane(writer, topic=spec.topic, depth=10)                       # doctest: +SKIP
+>>> register_info_section("my_program", lambda: {"sent": sender.delayed})   # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from .core.introspection import register_section as register_info_section
+from .core.introspection import unregister_section as unregister_info_section
+from .core.lanes import Lane
+from .core.runtime import dds_backend
+from .transports.tcpros.xmlrpc import TimeoutTransport
+
+__all__ = ["Lane", "TimeoutTransport", "dds_backend", "register_info_section", "unregister_info_section"]
