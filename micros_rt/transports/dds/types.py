@@ -1,6 +1,6 @@
 """ROS 1 message classes as DDS types, with a generated CDR codec.
 
-One rule for every genpy message class (DESIGN.md, wire format), chosen so ROS 2
+One rule for every genpy message class (docs/ros2.md, type mapping rules), chosen so ROS 2
 nodes read micros_rt topics natively:
 
 * DDS type name ``<pkg>::msg::dds_::<Type>_``; fields in order, names lower-cased
@@ -10,7 +10,7 @@ nodes read micros_rt topics natively:
 * ``uint8[]``/``char[]`` -> sequence<octet>, moved as ``bytes``.
 
 Why a codec of our own instead of cyclonedds' IdlStruct objects: the binding's
-per-sample object churn is the bottleneck (DESIGN.md), and going genpy -> IdlStruct
+per-sample object churn is the bottleneck, and going genpy -> IdlStruct
 -> CDR would pay it twice. The codec writes XCDR1 (plain CDR, little endian, the
 encoding ROS 2 uses) straight from the genpy message and reads straight back into
 one. The IdlStruct class is still built, with the identical layout, because

@@ -1,9 +1,10 @@
-"""MQTT for micros_rt: an mqtt_client-compatible bridge node (``micros-rt mqtt-bridge``).
+"""MQTT as a micros_rt transport. The mqtt_client-compatible bridge node (``micros-rt mqtt-bridge``) that stands
+on it is :mod:`micros_rt.bridges.mqtt`; docs/mqtt.md describes both.
 
-- :mod:`.params`: mqtt_client's parameter layout, defaults and validation.
+- :mod:`.params`: mqtt_client's connection parameters (``broker``, ``client``), defaults and validation.
 - :mod:`.codec`: payload formats (mqtt_client's ROS 1 framing and type announcement, primitive text, JSON).
+- :mod:`.generations`: which mqtt_client generation (1.x, 2.x) to write on each topic, from the peers' announcements.
 - :mod:`.client`: the paho-mqtt connection (TLS, auth, last will, reconnect, disk buffer).
-- :mod:`.bridge`: the node. See docs/mqtt.md.
 - :mod:`.backend`: MQTT as a back end of any micros_rt topic, chosen in the YAML profile's ``mqtt`` section
   (a :class:`micros_rt.transports.base.ProfileBackend`: :func:`profile_backend` is what
   ``micros_rt.transports.base`` calls for a profile with an ``mqtt`` section, :func:`close_profile_backend`
