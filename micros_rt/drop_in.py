@@ -31,7 +31,7 @@ import rospy.client
 import rospy.names
 import rospy.topics
 
-from .core import rospy_compat as compat
+from .transports.tcpros import patches
 from . import node as _node
 from .log import nonblocking_logger
 from .negotiation.hints import TransportHints
@@ -111,10 +111,10 @@ def _take_names(obj: Any, endpoint: Any, reg_type: str) -> None:
     obj.type = endpoint.type
     obj.md5sum = endpoint.md5sum
     obj.reg_type = reg_type
-    obj.impl = compat.topic_impl(endpoint.resolved_name, publisher=reg_type == "pub")
+    obj.impl = patches.topic_impl(endpoint.resolved_name, publisher=reg_type == "pub")
 
 
-class Publisher(compat.ROSPY_PUBLISHER):  # type: ignore[misc]
+class Publisher(patches.ROSPY_PUBLISHER):  # type: ignore[misc]
     """``rospy.Publisher`` on micros_rt: DDS to micros_rt subscribers, TCPROS to the others.
 
     Same arguments and behaviour as rospy's: ``queue_size`` (None: synchronous, nothing lost),
@@ -141,11 +141,11 @@ class Publisher(compat.ROSPY_PUBLISHER):  # type: ignore[misc]
         self.micros_rt = pub
         _take_names(self, pub, "pub")
         if tcp_nodelay:
-            compat.set_publisher_tcp_nodelay(pub.resolved_name)
+            patches.set_publisher_tcp_nodelay(pub.resolved_name)
         if subscriber_listener is not None and self.impl is not None:
             self._listener = _Listener(subscriber_listener, self.publish)
             _dds_subscribers.watch(pub.resolved_name, self._listener)
-        compat.configure_publisher_impl(self.impl, headers=headers, subscriber_listener=self._listener)
+        patches.configure_publisher_impl(self.impl, headers=headers, subscriber_listener=self._listener)
 
     def publish(self, *args: Any, **kwds: Any) -> None:
         pub = self.micros_rt
@@ -169,7 +169,7 @@ class Publisher(compat.ROSPY_PUBLISHER):  # type: ignore[misc]
         pub.unregister()
 
 
-class Subscriber(compat.ROSPY_SUBSCRIBER):  # type: ignore[misc]
+class Subscriber(patches.ROSPY_SUBSCRIBER):  # type: ignore[misc]
     """``rospy.Subscriber`` on micros_rt: DDS from micros_rt publishers, TCPROS from the others.
 
     Same arguments and behaviour as rospy's: ``callback(msg)`` or ``callback(msg, callback_args)``,
@@ -191,7 +191,7 @@ class Subscriber(compat.ROSPY_SUBSCRIBER):  # type: ignore[misc]
         self.micros_rt = sub
         _take_names(self, sub, "sub")
         self.callback, self.callback_args = callback, callback_args
-        compat.configure_subscriber_impl(self.impl, buff_size=None if buff_size == _DEFAULT_BUFF_SIZE else buff_size,
+        patches.configure_subscriber_impl(self.impl, buff_size=None if buff_size == _DEFAULT_BUFF_SIZE else buff_size,
                                          tcp_nodelay=tcp_nodelay)
 
     def get_num_connections(self) -> int:
@@ -285,7 +285,7 @@ class _DDSSubscriberWatch:
                     return
                 work = [(t, list(ls)) for t, ls in self._topics.items()]
             for topic, listeners in work:
-                conns = compat.dds_connections(topic, publisher=True)
+                conns = patches.dds_connections(topic, publisher=True)
                 for listener in listeners:
                     told = self._told.get(id(listener))
                     if told is None:

@@ -22,7 +22,7 @@ import genpy
 import rospy
 
 from .core import introspection as _introspection
-from .core import rospy_compat as compat
+from .transports.tcpros import patches
 from .core.publication import Publisher, _Publication
 from .core.runtime import (_graph_id, _log, _node, _require_node, dds_backend, ros2_visible, start_dds_early,
                            wait_dds_started)
@@ -71,13 +71,13 @@ def init_node(name: str, argv: Optional[List[str]] = None, anonymous: bool = Fal
 
     >>> micros_rt.init_node("talker", anonymous=True)   # doctest: +SKIP
     """
-    compat.install(_node.publications.get, _node.subscriptions.get)
+    patches.install(_node.publications.get, _node.subscriptions.get)
     _introspection.install(lambda: _node)
     path = qos_profile or os.environ.get("MICROS_RT_QOS_PROFILE") or None
     profile = QoSProfile.load(path) if path else None
     _tune_malloc()
     start_dds_early(profile)
-    with compat.prompt_registration_poll():
+    with patches.prompt_registration_poll():
         rospy.init_node(name, argv=argv, anonymous=anonymous, **kwargs)
     with _node.lock:
         _node.initialized = True
@@ -125,7 +125,7 @@ def _tune_malloc() -> None:
 def _housekeeping_loop() -> None:
     # Publisher-side bookkeeping that no data event drives: subscribers gone from DDS;
     # and the master: rospy never re-registers after a master restart, micros_rt does.
-    watch = compat.MasterWatch()
+    watch = patches.MasterWatch()
     while not rospy.is_shutdown():
         try:
             watch.check()
@@ -157,7 +157,7 @@ def node_info() -> NodeInfo:
     """This process's node; raises NodeNotInitializedError before :func:`init_node`."""
     if not _node.initialized:
         raise NodeNotInitializedError("call micros_rt.init_node(name) first")
-    return NodeInfo(compat.caller_id(), _node.graph, _node.profile)
+    return NodeInfo(patches.caller_id(), _node.graph, _node.profile)
 
 
 def spin() -> None:
@@ -411,12 +411,12 @@ if TYPE_CHECKING:  # the services package is imported on first use
 
 def _profile_backends() -> Tuple[ProfileBackend, ...]:
     """The back ends (MQTT) the node's YAML profile attaches to topics beside DDS/TCPROS."""
-    return profile_backends(_node.profile, graph=_node.graph, node=compat.caller_id())
+    return profile_backends(_node.profile, graph=_node.graph, node=patches.caller_id())
 
 
 def _tag() -> Dict[str, str]:
     """What micros_rt endpoints tell peers about themselves (DDS USER_DATA): the graph and the node."""
-    return {"graph": _node.graph, "node": compat.caller_id()}
+    return {"graph": _node.graph, "node": patches.caller_id()}
 
 
 def _check_subscriber(data_class: Any, callback: Any) -> None:

@@ -22,7 +22,7 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 from ..core.introspection import INFO_METHOD
 # the library's XML-RPC transport with a per-connection timeout (the micros_rt package imports rospy anyway)
-from ..core.rospy_compat import TimeoutTransport
+from ..transports.tcpros.xmlrpc import TimeoutTransport
 from ..exceptions import MicrosRtError
 from ..qos.options import describe
 from . import CommandError

@@ -24,7 +24,7 @@ import threading
 import time
 from typing import Any, Callable, Dict, List, Optional
 
-from . import rospy_compat as compat
+from ..transports.tcpros import patches
 from ..negotiation import Verdict
 
 __all__ = ["INFO_METHOD", "INFO_VERSION", "answer", "install", "node_info", "register_section", "unregister_section"]
@@ -82,7 +82,7 @@ def _verdict_dict(verdict: Verdict) -> Dict[str, Any]:
 def _links(topic: str, *, publisher: bool) -> List[Dict[str, Any]]:
     key = "subscriber" if publisher else "publisher"
     return [{key: endpoint, "protocol": transport, "info": info}
-            for endpoint, transport, info in compat.bus_info(topic, publisher=publisher)]
+            for endpoint, transport, info in patches.bus_info(topic, publisher=publisher)]
 
 
 def _publication_info(pub: Any) -> Dict[str, Any]:
@@ -119,7 +119,7 @@ def node_info() -> Dict[str, Any]:
     dds = _node.dds
     return {
         "version": INFO_VERSION,
-        "node": compat.caller_id(),
+        "node": patches.caller_id(),
         "pid": os.getpid(),
         "time": time.time(),
         "graph": _node.graph,
@@ -146,4 +146,4 @@ def install(node_state: Callable[[], Any]) -> None:
     (the node's publications, subscriptions, graph, DDS back end and profile)."""
     global _node_state
     _node_state = node_state
-    compat.add_node_api_method(INFO_METHOD, answer)
+    patches.add_node_api_method(INFO_METHOD, answer)

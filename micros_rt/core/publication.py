@@ -15,13 +15,13 @@ import genpy
 import rospy
 import rospy.topics
 
-from . import rospy_compat as compat
+from ..transports.tcpros import patches
+from ..transports.tcpros.writer import TcprosWriter
 from .lanes import Lane, max_age_for
 from .registry import EndpointRegistry
-from .rospy_compat import short
+from ..transports.tcpros.patches import short
 from .stats import PublisherStatistics
 from ..transports.base import BackPressuredWriter, EndpointSpec, ProfileBackend, TransportWriter
-from ..transports.marking import mark_socket
 from ..exceptions import MicrosRtError
 from ..negotiation import (
     MAX_PENDING_DDS_OFFERS,
@@ -42,7 +42,7 @@ from ..negotiation import (
     dds_transport,
     remember_verdict,
 )
-from ..qos import AdvertiseQoSOptions, is_lossless, priority_tos
+from ..qos import AdvertiseQoSOptions, is_lossless
 from ..log import nonblocking_logger
 
 if TYPE_CHECKING:
@@ -91,17 +91,19 @@ class _Publication:
         self.options = options
         self.queue_size = queue_size
         self.lock = threading.Lock()
-        self.connections: Dict[str, compat.DDSConnection] = {}  # subscriber caller id -> DDS link
+        self.connections: Dict[str, patches.DDSConnection] = {}  # subscriber caller id -> DDS link
         # links dropped because discovery had not matched their reader in time, by reader GUID (bounded)
-        self._expired: "collections.OrderedDict[str, compat.DDSConnection]" = collections.OrderedDict()
+        self._expired: "collections.OrderedDict[str, patches.DDSConnection]" = collections.OrderedDict()
         # the last DDS verdict per subscriber caller id, for `micros-rt topic info` (bounded)
         self.verdicts: "collections.OrderedDict[str, Verdict]" = collections.OrderedDict()
         self.published = 0
         self.blocked_seconds = 0.0
-        self.tcpros: Optional[compat.TcprosWriter] = None
+        self.closed = False
+        self._publish_lock = threading.Lock()
+        self.tcpros: Optional[TcprosWriter] = None
         #: shared memory: the writer (made when a first subscriber chooses SHM) and its pseudo-connections
         self.shm: "Optional[ShmWriter]" = None
-        self.shm_links: Dict[str, compat.DDSConnection] = {}  # subscriber caller id -> SHM link
+        self.shm_links: Dict[str, patches.DDSConnection] = {}  # subscriber caller id -> SHM link
         #: why this topic serves no SHM by choice (the node's profile), in words; None: it does if it can
         self.off_shm: Optional[str] = None
         self.dds: "Optional[DDSTopicWriter]" = None
@@ -162,8 +164,9 @@ class _Publication:
                 self._refresh_writers()
 
     def start(self) -> None:
-        self.tcpros = compat.TcprosWriter(self.topic, self.data_class, self.queue_size, self.latch,
-                                          pseudo_links=lambda: len(self.connections) + len(self.shm_links))
+        self.tcpros = TcprosWriter(self.topic, self.data_class, self.queue_size, self.latch,
+                                   pseudo_links=lambda: len(self.connections) + len(self.shm_links),
+                                   priority=self.options.transport_priority, pacer=self._pacer)
         self._refresh_writers()
 
     def _refresh_writers(self) -> None:
@@ -234,7 +237,7 @@ class _Publication:
         info = (f"SHM connection on channel {channel.name} to {who} ("
                 f"{'lossless' if is_lossless(self.queue_size) else f'newest {self.queue_size} kept'}, "
                 f"priority {self.options.transport_priority.name})")
-        conn = compat.DDSConnection(self.topic, subscriber, "o", info, peer_guid=channel.name,
+        conn = patches.DDSConnection(self.topic, subscriber, "o", info, peer_guid=channel.name,
                                     on_close=self._shm_connection_closed, transport=SHM)
         with self.lock:
             old = self.shm_links.get(subscriber)
@@ -242,17 +245,17 @@ class _Publication:
         refused = self._attach_link(old, conn, what="SHM", subscriber=who, fallback="the next protocol")
         if refused is not None:
             return refused, None
-        return verdict, ShmAnswer(channel=channel.name, latch=self.latch, qos=self.options, node=compat.caller_id(),
+        return verdict, ShmAnswer(channel=channel.name, latch=self.latch, qos=self.options, node=patches.caller_id(),
                                   pid=os.getpid())
 
-    def _attach_link(self, old: Optional[compat.DDSConnection], conn: compat.DDSConnection, *, what: str,
+    def _attach_link(self, old: Optional[patches.DDSConnection], conn: patches.DDSConnection, *, what: str,
                      subscriber: str, fallback: str) -> Optional[Verdict]:
         """Put a subscriber's new DDS or SHM link into rospy's connection list in place of ``old``; a Verdict
         in words when rospy has no publisher left to attach it to (the link is closed then)."""
         if old is not None:
-            compat.remove_pseudo_connection(self.topic, old, publisher=True)
+            patches.remove_pseudo_connection(self.topic, old, publisher=True)
             old.close()
-        if compat.add_pseudo_connection(self.topic, conn, publisher=True):
+        if patches.add_pseudo_connection(self.topic, conn, publisher=True):
             return None
         conn.close()
         return Verdict(False, "closing", f"topic {self.topic}: no rospy publisher to attach the {what} link of "
@@ -275,7 +278,7 @@ class _Publication:
             self._refresh_writers()
         return self.shm
 
-    def _shm_connection_closed(self, conn: compat.DDSConnection) -> None:
+    def _shm_connection_closed(self, conn: patches.DDSConnection) -> None:
         with self.lock:
             if self.shm_links.get(conn.endpoint_id) is conn:
                 del self.shm_links[conn.endpoint_id]
@@ -290,7 +293,7 @@ class _Publication:
             conn = self.shm_links.get(channel.subscriber)
         if conn is not None and conn.peer_guid == channel.name:
             _log.debug("micros_rt: topic %s: SHM subscriber %s is gone", self.topic, short(channel.subscriber))
-            compat.remove_pseudo_connection(self.topic, conn, publisher=True)
+            patches.remove_pseudo_connection(self.topic, conn, publisher=True)
             conn.close()
 
     def judge(self, offer: DDSOffer, subscriber: str) -> Tuple[Verdict, Optional[Union[DDSAnswer, DDSOpenFirst]]]:
@@ -334,7 +337,7 @@ class _Publication:
             info = (f"DDS connection on topic {foreign.topic} to reader {offer.reader}, served straight by "
                     f"the writers of graph {foreign.via}'s relay (now {foreign.writer}, priority "
                     f"{foreign.options.transport_priority.name}); none of it passes through this node")
-        conn = compat.DDSConnection(self.topic, subscriber, "o", info, peer_guid=offer.reader,
+        conn = patches.DDSConnection(self.topic, subscriber, "o", info, peer_guid=offer.reader,
                                     on_close=self._connection_closed)
         with self.lock:
             old = self.connections.get(subscriber)
@@ -351,24 +354,18 @@ class _Publication:
         assert self._dds_backend is not None
         if foreign is not None:
             return verdict, DDSAnswer(writer=foreign.writer, participant=foreign.participant, latch=foreign.latch,
-                                      qos=foreign.options, node=compat.caller_id(), via=foreign.via,
+                                      qos=foreign.options, node=patches.caller_id(), via=foreign.via,
                                       topic="" if foreign.topic == self.topic else foreign.topic)
         return verdict, DDSAnswer(writer=dds.guid, participant=dds.participant.guid,
-                                  latch=self.latch, qos=self.options, node=compat.caller_id())
+                                  latch=self.latch, qos=self.options, node=patches.caller_id())
 
     def on_tcpros_connection(self, conn: Any, sock: Any) -> None:
-        """A TCPROS subscriber connected (rospy thread): mark its socket with our transport priority, and
-        pace it when it crosses one of the profile's links of limited bandwidth."""
-        prio = self.options.transport_priority
-        if sock is not None and mark_socket(sock, prio):
-            _log.debug("micros_rt: topic %s: TCPROS link to %s marked TOS 0x%02x (%s)", self.topic,
-                       getattr(conn, "endpoint_id", "?"), priority_tos(prio), prio.name)
-        paced = self._pacer.attach(sock, self.topic, prio) if self._pacer is not None and sock is not None else None
-        if paced:
-            _log.info("micros_rt: topic %s: TCPROS link to %s %s", self.topic, getattr(conn, "endpoint_id", "?"),
-                      paced)
+        """A TCPROS subscriber connected (rospy's thread): the TCPROS writer marks and paces its link."""
+        tcpros = self.tcpros
+        if tcpros is not None:
+            tcpros.link_opened(conn, sock)
 
-    def _connection_closed(self, conn: compat.DDSConnection) -> None:
+    def _connection_closed(self, conn: patches.DDSConnection) -> None:
         with self.lock:
             if self.connections.get(conn.endpoint_id) is conn:
                 del self.connections[conn.endpoint_id]
@@ -435,19 +432,19 @@ class _Publication:
                     self._expired.popitem(last=False)
             else:
                 continue
-            compat.remove_pseudo_connection(self.topic, conn, publisher=True)
+            patches.remove_pseudo_connection(self.topic, conn, publisher=True)
             conn.close()
         # a real subscriber on a slow or lossy network can be discovered after the bound: take it back
         for guid in [g for g in self._expired if g in matched]:
             old = self._expired.pop(guid)
             if old.endpoint_id in self.connections:
                 continue
-            late = compat.DDSConnection(self.topic, old.endpoint_id, "o", old.info, peer_guid=guid,
+            late = patches.DDSConnection(self.topic, old.endpoint_id, "o", old.info, peer_guid=guid,
                                         on_close=self._connection_closed)
             late.seen = True
             with self.lock:
                 self.connections[old.endpoint_id] = late
-            if compat.add_pseudo_connection(self.topic, late, publisher=True):
+            if patches.add_pseudo_connection(self.topic, late, publisher=True):
                 _log.warning("micros_rt: topic %s: DDS subscriber %s was discovered late; connected again",
                              self.topic, short(old.endpoint_id))
             else:
@@ -475,10 +472,9 @@ class _Publication:
     # -- data ----------------------------------------------------------------
     def publish(self, msg: Any) -> None:
         """Refuse a bad message before anything is sent on any transport, then send it on each."""
-        tcpros = self.tcpros
-        if tcpros is None or tcpros.closed:
+        if self.closed or not self.writers:
             raise rospy.ROSException(f"publish() to a closed topic {self.topic}")
-        with tcpros.lock():
+        with self._publish_lock:  # one message at a time, in the same order on every transport
             try:
                 # every writer prepares (serializes, may raise) before any sends; TCPROS, first, raises
                 # inside its send before it writes anything
@@ -508,6 +504,7 @@ class _Publication:
 
     def close(self) -> None:
         """Release the DDS links and writer and unregister from rospy (the registry calls this once)."""
+        self.closed = True
         with self.lock:
             conns = list(self.connections.values()) + list(self.shm_links.values())
         for conn in conns:

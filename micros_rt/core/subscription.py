@@ -19,7 +19,8 @@ from typing import TYPE_CHECKING, Any, Callable, Deque, Dict, List, Optional, Se
 import genpy
 import rospy
 
-from . import rospy_compat as compat
+from ..transports.tcpros import patches
+from ..transports.tcpros.reader import TcprosReader
 from . import threadprio
 from .delivery import Inbox
 from .registry import EndpointRegistry
@@ -115,7 +116,7 @@ class _Subscription:
             _log.warning("micros_rt: topic %s: TransportHints allow only DDS, but DDS is unavailable; "
                          "nothing will be received", topic)
         self.thread = threading.Thread(target=self._run, name=f"micros_rt delivery {topic}", daemon=True)
-        self.tcpros: Optional[compat.TcprosReader] = None
+        self.tcpros: Optional[TcprosReader] = None
         # pushed readers: TCPROS (rospy's receive thread per connection waits for room: back-pressure to
         # that link, as rospy's own callback queue) and one per profile feed (MQTT: paho's network thread
         # is shared by every MQTT topic of the process, so it never waits; the oldest is dropped, counted)
@@ -132,7 +133,7 @@ class _Subscription:
     def start(self) -> None:
         """Start delivering and register with rospy (which triggers the negotiation: the reader exists)."""
         self.thread.start()
-        self.tcpros = compat.TcprosReader(self.topic, self.data_class, self.tcp_in.put, self.queue_size)
+        self.tcpros = TcprosReader(self.topic, self.data_class, self.tcp_in.put, self.queue_size)
         # fed by the transports the YAML profile attaches to this topic (MQTT), each through a pushed
         # reader of its own into the same admission path (time filter, deadline, latency, counters)
         spec = EndpointSpec(self.topic, self.data_class, self.queue_size, False, self.tag)
@@ -237,7 +238,7 @@ class _Subscription:
                 return 0, f"cannot read {answer.topic} over DDS", 0
         source = (f"straight from the writers of graph {answer.via}'s relay (now {answer.writer}), no hop through "
                   f"{answer.node or pub_uri}") if answer.via else f"from writer {answer.writer}"
-        conn = compat.DDSConnection(self.topic, pub_uri, "i", f"DDS connection on topic {dds_topic} {source}",
+        conn = patches.DDSConnection(self.topic, pub_uri, "i", f"DDS connection on topic {dds_topic} {source}",
                                     peer_guid=answer.writer, on_close=self.writers.connection_closed)
         accepted = Accepted(pub_uri, answer.node, answer.latch, conn)
         self.writers.accept(answer.writer, accepted, answer.qos)
@@ -246,7 +247,7 @@ class _Subscription:
         if answer.qos is not None and (self.priority is None or answer.qos.transport_priority > self.priority):
             # taken on by the delivery thread, woken below
             self.priority = TransportPriority(answer.qos.transport_priority)
-        if not compat.add_pseudo_connection(self.topic, conn, publisher=False):
+        if not patches.add_pseudo_connection(self.topic, conn, publisher=False):
             conn.close()
             return 0, "subscriber closed", 0
         _log.debug("micros_rt: topic %s: receiving from %s over DDS", self.topic, pub_uri)
@@ -262,7 +263,7 @@ class _Subscription:
         node = answer.node or pub_uri
         header = {"callerid": node, "topic": self.topic, "type": self.data_class._type,
                   "md5sum": self.data_class._md5sum, "transport": SHM}
-        conn = compat.DDSConnection(self.topic, pub_uri, "i", f"SHM connection on channel {answer.channel} from "
+        conn = patches.DDSConnection(self.topic, pub_uri, "i", f"SHM connection on channel {answer.channel} from "
                                     f"{node}", peer_guid=answer.channel, on_close=self._shm_connection_closed,
                                     transport=SHM)
         put: Callable[[Any, int, Any], None] = self.shm_in.put
@@ -293,14 +294,14 @@ class _Subscription:
             link.start_thread()  # the delivery thread waits on Cyclone's wait set: the link wakes it
         if answer.qos is not None and (self.priority is None or answer.qos.transport_priority > self.priority):
             self.priority = TransportPriority(answer.qos.transport_priority)
-        if not compat.add_pseudo_connection(self.topic, conn, publisher=False):
+        if not patches.add_pseudo_connection(self.topic, conn, publisher=False):
             conn.close()
             return 0, "subscriber closed", 0
         _log.debug("micros_rt: topic %s: receiving from %s over shared memory", self.topic, pub_uri)
         self.inbox.wake()
         return 1, f"Connected topic[{self.topic}] over SHM", 0
 
-    def _shm_connection_closed(self, conn: compat.DDSConnection) -> None:
+    def _shm_connection_closed(self, conn: patches.DDSConnection) -> None:
         with self.lock:
             link = self.shm_links.get(conn.endpoint_id)
             if link is not None and link.channel == conn.peer_guid:
@@ -310,13 +311,13 @@ class _Subscription:
         if link is not None:
             link.close()
 
-    def _shm_link_gone(self, conn: compat.DDSConnection) -> None:
+    def _shm_link_gone(self, conn: patches.DDSConnection) -> None:
         """The publisher's end went (unregistered, or its process died): drop the connection, so that rospy
         connects again when the master names the publisher anew (a restart)."""
         if self.closed or conn.done:
             return
         _log.debug("micros_rt: topic %s: SHM publisher %s is gone", self.topic, conn.endpoint_id)
-        compat.remove_pseudo_connection(self.topic, conn, publisher=False)
+        patches.remove_pseudo_connection(self.topic, conn, publisher=False)
         conn.close()
 
     def _follow(self, topic: str, latched: bool) -> str:
@@ -617,7 +618,7 @@ class _Subscription:
             if not conn.seen:
                 _log.warning("micros_rt: topic %s: publisher %s accepted DDS but its writer was never discovered "
                              "in 30 s; check both nodes' network (ROS_IP, CYCLONEDDS_URI)", self.topic, acc.pub_uri)
-            compat.remove_pseudo_connection(self.topic, conn, publisher=False)
+            patches.remove_pseudo_connection(self.topic, conn, publisher=False)
             conn.close()
         if self.queue or any(r.pending() for r in self.pushed):
             return  # samples of a gone writer still to deliver: prune next time
@@ -628,7 +629,7 @@ class _Subscription:
         as rospy's ``add_callback`` does (#1852), in the caller's thread as there: DDS writers' from their
         state, TCPROS links' from rospy's connections."""
         msgs = [s.latched for s in self.writers.accepted_states() if s.latched is not None]
-        for msg in msgs + compat.latched_messages(self.topic):
+        for msg in msgs + patches.latched_messages(self.topic):
             try:
                 if callback_args is None:
                     callback(msg)

@@ -20,7 +20,7 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any, Deque, Dict, List, Optional, Set, Tuple
 
-from .rospy_compat import DDSConnection
+from ..transports.tcpros.patches import DDSConnection
 from ..transports.base import RemoteWriter
 from ..qos import AdvertiseQoSOptions, ClockSkewCheck
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Any, Callable, Optional
 
-from ..core import rospy_compat as compat
+from ..transports.tcpros import patches
 from ..core.runtime import _require_node
 from .client import ServiceClient
 from .errors import ServiceError, ServiceTimeoutError, ServiceUnavailableError
@@ -36,7 +36,7 @@ __all__ = [
 
 
 def _process_gateway() -> Ros2Gateway:
-    return _gateway.gateway(compat.caller_id())
+    return _gateway.gateway(patches.caller_id())
 
 
 def advertise_service(resolved_name: str, srv_class: Any, handler: Callable[[Any], Any], *,

@@ -148,13 +148,13 @@ def mqtt_pair(broker_port: int) -> Pair:
 
 def tcpros_pair(topic: Optional[str] = None) -> Pair:
     """rospy's TCPROS (micros_rt's TcprosWriter/TcprosReader) in this node, which must be initialised."""
-    from micros_rt.core import rospy_compat as compat
+    from micros_rt.transports.tcpros import TcprosReader, TcprosWriter
     from micros_rt.negotiation import TCPROS
 
     topic = topic or _topic("tcpros")
-    writer = compat.TcprosWriter(topic, PointStamped, 10, False, pseudo_links=lambda: 0)
+    writer = TcprosWriter(topic, PointStamped, 10, False, pseudo_links=lambda: 0)
     reader = PushReader(TCPROS, 100, lambda: None, blocking=True)
-    sub = compat.TcprosReader(topic, PointStamped, reader.put, 100)
+    sub = TcprosReader(topic, PointStamped, reader.put, 100)
     reader_close = reader.close
 
     def close() -> None:
@@ -162,7 +162,7 @@ def tcpros_pair(topic: Optional[str] = None) -> Pair:
         reader_close()
 
     reader.close = close  # type: ignore[method-assign]
-    lonely: Callable[[], TransportWriter] = lambda: compat.TcprosWriter(_topic("tcpros_lonely"), PointStamped, 10,
+    lonely: Callable[[], TransportWriter] = lambda: TcprosWriter(_topic("tcpros_lonely"), PointStamped, 10,
                                                                         False, pseudo_links=lambda: 0)
 
     def corrupt() -> None:  # rospy's receive thread decodes TCPROS: what micros_rt adds is its own codec check

@@ -42,7 +42,7 @@ def test_failed_registration_leaks_nothing(ros_master: harness.RosMaster) -> Non
     # delivery thread or a findable endpoint behind (they were created before rospy was asked)
     report = run_script(ros_master, """
 import rospy
-import micros_rt.core.rospy_compat as compat
+import micros_rt.transports.tcpros.patches as compat
 from std_msgs.msg import String
 micros_rt.init_node("leaky")
 nh = micros_rt.NodeHandle()

@@ -1,5 +1,5 @@
 """The one retry loop (micros_rt.transports.base.send_with_backoff) and a caller of it outside the writers:
-the subscriber's requestTopic to a publisher (core/rospy_compat._request_topic)."""
+the subscriber's requestTopic to a publisher (transports/tcpros/patches._request_topic)."""
 
 from __future__ import annotations
 
@@ -57,7 +57,7 @@ def publisher() -> Iterator[str]:
 
 
 def test_request_topic_answers_refuses_at_once_and_names_the_publisher(publisher: str) -> None:
-    from micros_rt.core.rospy_compat import _request_topic
+    from micros_rt.transports.tcpros.patches import _request_topic
 
     assert _request_topic(publisher, "/t", [["TCPROS"]]) == (1, "ready on /t", ["TCPROS", "127.0.0.1", 1])
     with socket.socket() as s:

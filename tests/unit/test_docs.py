@@ -28,7 +28,7 @@ README_MAX_LINES = 250
 #: directories of this repository whose paths the pages name (``scripts/demo.sh``, ``tests/peers/...``)
 REPO_DIRS = ("scripts", "benchmarks", "examples", "tests", "micros_rt", "docs", ".ci")
 _PATH = re.compile(r"(?<![\w./~$-])(?:\./)?((?:%s)/[\w./*+-]*)" % "|".join(re.escape(d) for d in REPO_DIRS))
-#: a path relative to the package, as the pages write them inside micros_rt (``core/rospy_compat.py``)
+#: a path relative to the package, as the pages write them inside micros_rt (``core/publication.py``)
 _PACKAGE_PATH = re.compile(r"`((?:qos|negotiation|transports|core|bridges|cli)/[\w./-]+\.py)`")
 _LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)")
 _COMMAND = re.compile(r"(?:micros-rt|python -m micros_rt)\s+([a-z][a-z0-9-]*)(?=[\s`'\"|)]|$)(.*)")

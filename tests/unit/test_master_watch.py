@@ -1,4 +1,4 @@
-"""micros_rt.core.rospy_compat.MasterWatch against a stand-in master in a subprocess (an XML-RPC server answering
+"""micros_rt.transports.tcpros.patches.MasterWatch against a stand-in master in a subprocess (an XML-RPC server answering
 getPid, as rosmaster does): the watch holds one idle connection, notices the process's end through it, and
 re-registers when a master answers again with another pid. No rospy node."""
 
@@ -12,7 +12,7 @@ from typing import Iterator, List, Tuple
 
 import pytest
 
-from micros_rt.core import rospy_compat
+from micros_rt.transports.tcpros import patches as rospy_compat
 
 SERVER = """
 import sys, threading

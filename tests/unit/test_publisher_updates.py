@@ -1,4 +1,4 @@
-"""rospy's registration races, and micros_rt's fixes (core/rospy_compat: _merging_publisher_update, _OneAtATime).
+"""rospy's registration races, and micros_rt's fixes (transports/tcpros/patches: _merging_publisher_update, _OneAtATime).
 
 rospy's RegManager queues publisher lists (from ``registerSubscriber``'s answer and from the master's
 ``publisherUpdate`` calls) and its thread connects to the newest list of a topic, discarding the older ones. When
@@ -15,7 +15,7 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import rospy.impl.registration as registration
 
-from micros_rt.core import rospy_compat
+from micros_rt.transports.tcpros import patches as rospy_compat
 
 
 def _reg_manager() -> Any:

@@ -11,7 +11,7 @@ import pytest
 
 from micros_rt.core import writers as _writers
 from micros_rt.core.registry import EndpointRegistry
-from micros_rt.core.rospy_compat import DDSConnection
+from micros_rt.transports.tcpros.patches import DDSConnection
 from micros_rt.core.writers import DELIVER, DROP, HOLD, Accepted, WriterTable
 from micros_rt.transports.base import RemoteWriter
 from micros_rt.qos import AdvertiseQoSOptions

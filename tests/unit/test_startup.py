@@ -8,7 +8,7 @@ from typing import List
 import pytest
 import rospy.impl.init
 
-from micros_rt.core import rospy_compat as compat
+from micros_rt.transports.tcpros import patches as compat
 
 
 def test_registration_poll_starts_fine_and_backs_off_to_rospys_step(monkeypatch: pytest.MonkeyPatch) -> None:

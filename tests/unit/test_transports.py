@@ -151,10 +151,10 @@ def test_dds_writer_encodes_nothing_while_no_reader_is_matched() -> None:
 
 def test_every_transport_implements_the_interface() -> None:
     """TCPROS, DDS, MQTT and the microcontroller link: the writer and reader classes have the methods."""
-    from micros_rt.core import rospy_compat as compat
+    from micros_rt.transports.tcpros import TcprosWriter
     from micros_rt.transports.dds.backend import DDSTopicReader, DDSTopicWriter
 
-    for cls in (compat.TcprosWriter, DDSTopicWriter):
+    for cls in (TcprosWriter, DDSTopicWriter):
         for name in ("prepare", "send", "close"):
             assert callable(getattr(cls, name)), (cls, name)
         assert isinstance(cls.protocol, str)

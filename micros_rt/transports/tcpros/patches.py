@@ -1,4 +1,5 @@
-"""The one module that touches rospy's private ``rospy.impl`` layer.
+"""rospy's patches: the one module that changes rospy's private ``rospy.impl`` layer (the TCPROS transport's
+writer and reader, :mod:`.writer` and :mod:`.reader`, use what it keeps: rospy's own endpoint classes).
 
 micros_rt plugs into ROS 1's protocol negotiation (``requestTopic``) on both
 sides:
@@ -40,9 +41,9 @@ import rospy.impl.registration
 import rospy.names
 import rospy.topics
 import rosgraph
-from ..negotiation import (DDS, SHM, TCPROS, DDSAnswer, DDSOffer, DDSOpenFirst, MalformedNegotiationError,
-                           RateLimitedLog, ShmAnswer, Verdict)
-from ..negotiation import NegotiatedTransport, choose_protocol
+from ...negotiation import (DDS, SHM, TCPROS, DDSAnswer, DDSOffer, DDSOpenFirst, MalformedNegotiationError,
+                            RateLimitedLog, ShmAnswer, Verdict)
+from ...negotiation import NegotiatedTransport, choose_protocol
 from rospy.impl.registration import (
     RegManager,
     Registration,
@@ -50,9 +51,9 @@ from rospy.impl.registration import (
     get_service_manager,
     get_topic_manager,
 )
-from ..exceptions import TransportError
-from ..transports.base import send_with_backoff
-from ..log import nonblocking_logger
+from ...log import nonblocking_logger
+from ..base import send_with_backoff
+from .xmlrpc import TimeoutTransport
 
 __all__ = [
     "DDSConnection",
@@ -74,8 +75,6 @@ __all__ = [
     "latched_messages",
     "set_publisher_tcp_nodelay",
     "topic_impl",
-    "TcprosReader",
-    "TcprosWriter",
 ]
 
 _log = nonblocking_logger("rosout.micros_rt.negotiation")
@@ -273,19 +272,6 @@ def add_node_api_method(name: str, method: Callable[[str], List[Any]]) -> None:
     """Answer the XML-RPC method ``name(caller_id)`` on this node's API, beside ``getBusInfo``: rospy's
     server dispatches a call to the ``ROSHandler`` attribute of that name (idempotent)."""
     setattr(masterslave.ROSHandler, name, lambda self, caller_id, *_: method(caller_id))
-
-
-class TimeoutTransport(xmlrpc.client.Transport):
-    # rospy sets a process-wide socket timeout for this call; a per-connection
-    # timeout keeps user sockets out of it.
-    def __init__(self, timeout: float) -> None:
-        super().__init__()
-        self._timeout = timeout
-
-    def make_connection(self, host: Any) -> Any:
-        conn = super().make_connection(host)
-        conn.timeout = self._timeout
-        return conn
 
 
 def _request_topic(pub_uri: str, topic: str, protocols: List[List[Any]]) -> Tuple[int, str, Any]:
@@ -666,84 +652,3 @@ def install(find_publication: Callable[[str], Optional[PublicationHook]],
         pub_cls.add_connection = _wrapped_publisher_add_connection(pub_cls.add_connection)
         rospy.impl.registration.RegManager.publisher_update = _merging_publisher_update
         _installed = True
-
-
-class TcprosWriter:
-    """TCPROS, rospy's own transport, for one publication: the rospy Publisher (master registration too)
-    behind the transport writer methods (:class:`micros_rt.transports.base.TransportWriter`).
-
-    rospy serializes inside ``publish`` and raises ``genpy.SerializationError`` before writing anything,
-    so :meth:`prepare` hands the message through and a publication sends TCPROS first. rospy's list of
-    connections also holds micros_rt's DDS pseudo-connections (``pseudo_links()`` counts them): with no
-    TCPROS link left and no latch, there is nothing to send."""
-
-    protocol = TCPROS
-
-    def __init__(self, topic: str, data_class: Any, queue_size: Optional[int], latch: bool, *,
-                 pseudo_links: Callable[[], int]) -> None:
-        self.latch = latch
-        self._pub = ROSPY_PUBLISHER(topic, data_class, queue_size=queue_size, latch=latch)
-        self._impl = self._pub.impl
-        self._pseudo_links = pseudo_links
-        self.guid = topic
-
-    @property
-    def closed(self) -> bool:
-        return self._impl is None or bool(self._impl.closed)
-
-    def links(self) -> int:
-        """Connections in rospy's list: TCPROS links and micros_rt's DDS pseudo-connections."""
-        return 0 if self._impl is None else len(self._impl.connections)
-
-    def lock(self) -> Any:
-        """rospy's publish lock (ordering of publish() calls across threads)."""
-        return self._impl.publock
-
-    def latched(self) -> Any:
-        """The message a latching publisher keeps for new subscribers (None: none yet)."""
-        return None if self._impl is None else self._impl.latch
-
-    def prepare(self, msg: Any) -> Any:
-        if self.latch or len(self._impl.connections) > self._pseudo_links():
-            return msg
-        return None
-
-    def send(self, msg: Any) -> None:
-        """Publish to the TCPROS links (rospy keeps the latched message even when there are none)."""
-        try:
-            self._impl.publish(msg)
-        except genpy.SerializationError:
-            # rospy leaves the half-written message in its per-topic buffer, and its next publish() sends those
-            # bytes ahead of its own: the subscriber reads garbage and drops the link (found by tests/contract)
-            buff = self._impl.buff
-            buff.seek(0)
-            buff.truncate(0)
-            raise
-        except rospy.ROSException as exc:  # rospy's "publish() to a closed topic" (silent at shutdown)
-            if not self.closed:
-                raise
-            raise TransportError(f"topic {self.guid}: its TCPROS writer is closed (the publication was "
-                                 f"unregistered); nothing was sent") from exc
-
-    def close(self) -> None:
-        self._pub.unregister()
-
-
-class TcprosReader:
-    """TCPROS for one subscription: the rospy Subscriber (registration, negotiation, receive threads)."""
-
-    protocol = TCPROS
-
-    def __init__(self, topic: str, data_class: Any, callback: Callable[[Any], None],
-                 queue_size: Optional[int]) -> None:
-        self._sub = ROSPY_SUBSCRIBER(topic, data_class, callback, queue_size=queue_size)
-
-    def transports(self) -> dict[str, str]:
-        """Publisher URI -> 'DDS' or 'TCPROS' for every current connection."""
-        impl = self._sub.impl
-        if impl is None:
-            return {}
-        return {c.endpoint_id: getattr(c, "transport_type", TCPROS) for c in impl.connections}
-
-    def close(self) -> None:
-        self._sub.unregister()
