@@ -31,7 +31,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple, Type
 import genpy
 import roslib.message
 
-from ...rostypes import INT_RANGES
+from ...rostypes import BYTES_TYPES, FLOAT_TYPES, INT_RANGES, TIME_TYPES, parse_slot_type
 from ...exceptions import MicrosRtError, TypeMappingError
 from .typecache import type_key
 
@@ -64,8 +64,6 @@ _PRIMS: Dict[str, Tuple[str, int, str]] = {
     "float32": ("f", 4, "float32"),
     "float64": ("d", 8, "float64"),
 }
-_BYTES_TYPES = ("uint8", "char")
-_TIME_TYPES = ("time", "duration")
 _HEADER = "std_msgs/Header"
 
 
@@ -88,15 +86,6 @@ def _field_name(name: str) -> str:
     # ROS 2 requires lower-case field names; the rename happened exactly this way
     # for the messages that had upper-case ones (CameraInfo D K R P, ...).
     return name.lower()
-
-
-def _parse_type(slot_type: str) -> Tuple[str, bool, int | None]:
-    """'float64[9]' -> ('float64', True, 9); 'string[]' -> ('string', True, None)."""
-    if slot_type.endswith("]"):
-        base, _, rest = slot_type.partition("[")
-        n = rest[:-1]
-        return base, True, (int(n) if n else None)
-    return slot_type, False, None
 
 
 #: message classes built at run time from a definition (``genpy.dynamic``), by ROS type: the nested types of a
@@ -145,13 +134,13 @@ def _idl_class(ros_type: str) -> Any:
     with _idl_lock:
         if ros_type in _idl_cache:
             return _idl_cache[ros_type]
-        if ros_type in _TIME_TYPES:
+        if ros_type in TIME_TYPES:
             fields: Dict[str, Any] = {"sec": t.int32, "nanosec": t.uint32}
         else:
             cls = _msg_class(ros_type)
             fields = {}
             for name, slot_type in _fields(cls):
-                base, is_array, length = _parse_type(slot_type)
+                base, is_array, length = parse_slot_type(slot_type)
                 if base in _PRIMS:
                     elem: Any = getattr(t, _PRIMS[base][2]) if _PRIMS[base][2] != "bool" else bool
                 elif base == "string":
@@ -159,7 +148,7 @@ def _idl_class(ros_type: str) -> Any:
                 else:
                     elem = None
                 if elem is None:
-                    if base in _TIME_TYPES:
+                    if base in TIME_TYPES:
                         sub = base
                     else:
                         sub = _msg_class(base)._type
@@ -171,7 +160,7 @@ def _idl_class(ros_type: str) -> Any:
         cls_name = typename.replace("::", "_")
         idl = make_idl_struct(cls_name, typename, fields)
         # what the XTypes bytes of this class depend on (dds.typecache): the mapping and the definition
-        definition = "" if ros_type in _TIME_TYPES else f"{cls._md5sum}\n{getattr(cls, '_full_text', '')}"
+        definition = "" if ros_type in TIME_TYPES else f"{cls._md5sum}\n{getattr(cls, '_full_text', '')}"
         setattr(idl, "__micros_rt_xtypes_key__", type_key(idl, f"{ros_type}\n{fields!r}\n{definition}"))
         _idl_cache[ros_type] = idl
         return idl
@@ -233,29 +222,29 @@ class _CodecBuilder:
     # -- walking ---------------------------------------------------------
     def _leaves(self, ros_type: str, path: str) -> List[Tuple[Any, ...]]:
         """Flatten a message into leaves: ('prim', path, code, is_bool) or ('var', kind, ...)."""
-        if ros_type in _TIME_TYPES:
+        if ros_type in TIME_TYPES:
             return [("prim", path + ".secs", "i", False), ("prim", path + ".nsecs", "I", False)]
         out: List[Tuple[Any, ...]] = []
         cls = _msg_class(ros_type)
         for name, slot_type in _fields(cls):
             p = f"{path}.{name}"
-            base, is_array, length = _parse_type(slot_type)
+            base, is_array, length = parse_slot_type(slot_type)
             if not is_array:
                 if base in _PRIMS:
                     out.append(("prim", p, _PRIMS[base][0], base == "bool"))
                 elif base == "string":
                     out.append(("string", p))
                 else:
-                    sub = base if base in _TIME_TYPES else _msg_class(base)._type
+                    sub = base if base in TIME_TYPES else _msg_class(base)._type
                     out.extend(self._leaves(sub, p))
-            elif base in _BYTES_TYPES:
+            elif base in BYTES_TYPES:
                 out.append(("bytes", p, length))
             elif base in _PRIMS:
                 out.append(("primarray", p, _PRIMS[base][0], length, base == "bool"))
             elif base == "string":
                 out.append(("strarray", p, length))
             else:
-                sub = base if base in _TIME_TYPES else _msg_class(base)._type
+                sub = base if base in TIME_TYPES else _msg_class(base)._type
                 out.append(("msgarray", p, sub, length))
         return out
 
@@ -360,7 +349,7 @@ class _CodecBuilder:
     def decode_body(self, ros_type: str, target: str) -> None:
         """Emit code that fills the already created object ``target``."""
         s = self.dec
-        if ros_type in _TIME_TYPES:
+        if ros_type in TIME_TYPES:
             fields: List[Tuple[str, str]] = [("secs", "int32"), ("nsecs", "uint32")]
         else:
             cls = _msg_class(ros_type)
@@ -382,7 +371,7 @@ class _CodecBuilder:
 
         def walk_scalars(rtype: str, obj: str) -> None:
             # nested fixed parts are flattened into the current run, objects created first
-            if rtype in _TIME_TYPES:
+            if rtype in TIME_TYPES:
                 run.append((obj + ".secs", "i", False))
                 run.append((obj + ".nsecs", "I", False))
                 return
@@ -395,7 +384,7 @@ class _CodecBuilder:
             if owner_type == _HEADER and name == "seq":
                 s.emit(f"{p} = 0")  # set per publisher by the subscriber
                 return
-            base, is_array, length = _parse_type(slot_type)
+            base, is_array, length = parse_slot_type(slot_type)
             if not is_array:
                 if base in _PRIMS:
                     run.append((p, _PRIMS[base][0], base == "bool"))
@@ -408,7 +397,7 @@ class _CodecBuilder:
                     s.emit(f"{p} = buf[p + 4:p + 3 + {n}].decode()")
                     s.emit(f"p += 4 + {n}")
                 else:
-                    sub = base if base in _TIME_TYPES else _msg_class(base)._type
+                    sub = base if base in TIME_TYPES else _msg_class(base)._type
                     c = self._new(sub)
                     s.emit(f"{p} = {c}.__new__({c})")
                     walk_scalars(sub, p)
@@ -423,7 +412,7 @@ class _CodecBuilder:
                 s.emit(f"if {n} > len(buf) - p: raise _bad_count({n}, len(buf) - p, p)")
             else:
                 s.emit(f"{n} = {length}")
-            if base in _BYTES_TYPES:
+            if base in BYTES_TYPES:
                 s.emit(f"{p} = bytes(buf[p:p + {n}])")
                 s.emit(f"p += {n}")
             elif base in _PRIMS:
@@ -458,7 +447,7 @@ class _CodecBuilder:
                 s.emit(f"    p += 4 + {m}")
                 s.emit(f"{p} = {lst}")
             else:
-                sub = base if base in _TIME_TYPES else _msg_class(base)._type
+                sub = base if base in TIME_TYPES else _msg_class(base)._type
                 c = self._new(sub)
                 lst, i, x = s.var("l"), s.var("i"), s.var("x")
                 s.emit(f"{lst} = []")
@@ -471,7 +460,7 @@ class _CodecBuilder:
                 s.emit(f"{p} = {lst}")
 
         for fname, ftype in fields:
-            if ros_type in _TIME_TYPES:
+            if ros_type in TIME_TYPES:
                 run.append((f"{target}.{fname}", "i" if fname == "secs" else "I", False))
             else:
                 handle(ros_type, fname, ftype, target)
@@ -581,7 +570,7 @@ def _bad_scalar(base: str, value: Any) -> str | None:
         if not lo <= int(value) <= hi:
             return f"{_short(value)} is out of range ({base}: {lo}..{hi})"
         return None
-    if base in ("float32", "float64"):
+    if base in FLOAT_TYPES:
         return None if isinstance(value, numbers.Real) else f"{_short(value)} is not a number ({base})"
     if base == "string":
         if isinstance(value, (bytes, bytearray)):
@@ -601,24 +590,24 @@ _SEQUENCES = (list, tuple, array.array) + ((numpy.ndarray,) if numpy is not None
 def describe_bad_field(msg: Any, ros_type: str, path: str = "") -> str | None:
     """The first field of ``msg`` whose value cannot be serialized, in words (``field header.stamp.secs:
     8589934592 is out of range (int32: ...)``), or None when none is found. Slow; only for error messages."""
-    if ros_type in _TIME_TYPES:
+    if ros_type in TIME_TYPES:
         fields = [("secs", "int32" if ros_type == "duration" else "uint32"), ("nsecs", "int32" if ros_type ==
                                                                                "duration" else "uint32")]
     else:
         cls = _msg_class(ros_type)
-        if not isinstance(msg, cls) and not (ros_type in _TIME_TYPES):
+        if not isinstance(msg, cls) and not (ros_type in TIME_TYPES):
             return f"field {path or '(message)'}: {_short(msg)} is not a {ros_type}"
         fields = list(zip(cls.__slots__, cls._slot_types))
     for name, slot_type in fields:
         where = f"{path}.{name}" if path else name
         value = getattr(msg, name, None)
-        base, is_array, length = _parse_type(slot_type)
+        base, is_array, length = parse_slot_type(slot_type)
         if base == "Header":
             base = _HEADER
         if is_array:
-            if base in _BYTES_TYPES and isinstance(value, (bytes, bytearray)):
+            if base in BYTES_TYPES and isinstance(value, (bytes, bytearray)):
                 items: List[Any] = []
-            elif not isinstance(value, _SEQUENCES) and not (base in _BYTES_TYPES and isinstance(value, (bytes,
+            elif not isinstance(value, _SEQUENCES) and not (base in BYTES_TYPES and isinstance(value, (bytes,
                                                                                                      bytearray))):
                 return f"field {where}: {_short(value)} is not a list"
             elif getattr(value, "ndim", 1) != 1:
@@ -642,7 +631,7 @@ def _describe_value(value: Any, base: str, where: str) -> str | None:
     if base in _PRIMS or base == "string":
         problem = _bad_scalar(base, value)
         return f"field {where}: {problem}" if problem else None
-    if base in _TIME_TYPES:
+    if base in TIME_TYPES:
         if not isinstance(value, (genpy.Time, genpy.Duration)):
             return f"field {where}: {_short(value)} is not a {base}"
         return describe_bad_field(value, base, where)

@@ -43,7 +43,7 @@ import genpy
 import msgpack
 import roslib.message
 
-from micros_rt.rostypes import FLOAT_TYPES, INT_RANGES
+from micros_rt.rostypes import FLOAT_TYPES, INT_RANGES, TIME_TYPES, parse_slot_type
 
 from .errors import WireError
 
@@ -168,14 +168,6 @@ def _message_class(type_name: str) -> Type[genpy.Message]:
     if cls is None:
         raise ValueError(f"unknown ROS message type {type_name!r}")
     return cls  # type: ignore[no-any-return]
-
-
-def _split_array(slot_type: str) -> Tuple[str, Optional[int], bool]:
-    """'float64[9]' -> ('float64', 9, True); 'uint8[]' -> ('uint8', None, True); 'int32' -> (.., False)."""
-    if not slot_type.endswith("]"):
-        return slot_type, None, False
-    base, _, size = slot_type[:-1].partition("[")
-    return base, (int(size) if size else None), True
 
 
 # --------------------------------------------------------------------------- scalar codecs
@@ -310,9 +302,10 @@ def _array_codec(item: Tuple[_Enc, _Dec], size: Optional[int]) -> Tuple[_Enc, _D
 
 
 def _field_codec(slot_type: str) -> Tuple[_Enc, _Dec]:
-    base, size, is_array = _split_array(slot_type)
-    if is_array and base in ("uint8", "char"):
-        return _bytes_codec(size)
+    slot = parse_slot_type(slot_type)
+    if slot.is_bytes:
+        return _bytes_codec(slot.length)
+    base = slot.base
     if base in _INT_RANGES:
         one = _int_codec(base)
     elif base in _FLOATS:
@@ -321,12 +314,12 @@ def _field_codec(slot_type: str) -> Tuple[_Enc, _Dec]:
         one = (_bool_enc, _bool_dec)
     elif base == "string":
         one = (_string_enc, _string_dec)
-    elif base in ("time", "duration"):
+    elif base in TIME_TYPES:
         one = _time_codec(base)
     else:
         nested = codec_for(_message_class(base))
         one = (nested._enc, nested._dec)
-    return _array_codec(one, size) if is_array else one
+    return _array_codec(one, slot.length) if slot.is_array else one
 
 
 # --------------------------------------------------------------------------- messages

@@ -29,7 +29,7 @@ import genmsg.msgs  # type: ignore[import-untyped]
 import genpy
 
 from ...exceptions import MicrosRtError
-from ...rostypes import INT_RANGES
+from ...rostypes import FLOAT_TYPES, INT_RANGES, TIME_TYPES, parse_slot_type
 
 __all__ = [
     "CodecError",
@@ -233,7 +233,7 @@ def msg_to_text(msg: genpy.Message) -> str:
         return "true" if value else "false"
     if kind == "string":
         return str(value)
-    if kind in ("float32", "float64"):
+    if kind in FLOAT_TYPES:
         return _float_text(float(value), 32 if kind == "float32" else 64)
     return str(int(value))
 
@@ -280,7 +280,7 @@ def text_to_msg(text: str, data_class: Type[genpy.Message]) -> genpy.Message:
             value = False
         else:
             raise CodecError(f"text {_short(text)} is not a bool (true/false) for {data_class._type}")
-    elif kind in ("float32", "float64"):
+    elif kind in FLOAT_TYPES:
         try:
             value = float(stripped)
         except ValueError:
@@ -350,9 +350,10 @@ def _fill(msg: genpy.Message, data: Any, where: str) -> None:
 
 
 def _convert(current: Any, slot_type: str, value: Any, where: str) -> Any:
-    base, is_array, _ = genmsg.msgs.parse_type(slot_type)
-    if is_array:
-        if base in ("uint8", "char"):
+    slot = parse_slot_type(slot_type)
+    base = slot.base
+    if slot.is_array:
+        if slot.is_bytes:
             if not isinstance(value, list) or not all(isinstance(v, int) and 0 <= v <= 255 for v in value):
                 raise CodecError(f"{where}: expected a list of numbers 0..255")
             return bytes(value)
@@ -378,12 +379,12 @@ def _convert(current: Any, slot_type: str, value: Any, where: str) -> Any:
 
 
 def _scalar(base: str, value: Any, where: str) -> Any:
-    if base in ("time", "duration"):
+    if base in TIME_TYPES:
         if not isinstance(value, dict):
             raise CodecError(f"{where}: expected {{\"secs\": ..., \"nsecs\": ...}}")
         cls = genpy.Time if base == "time" else genpy.Duration
         return cls(int(value.get("secs", 0)), int(value.get("nsecs", 0)))
-    if base in ("float32", "float64") and isinstance(value, str):
+    if base in FLOAT_TYPES and isinstance(value, str):
         try:
             return float(value)                       # "nan", "inf" as written by msg_to_json
         except ValueError:
