@@ -32,7 +32,7 @@ import threading
 import time
 from typing import Any, Deque, Optional, Tuple
 
-from ..transports.base import BACKOFF_FIRST, BACKOFF_MAX, BackPressuredWriter
+from ..transports.base import BackPressuredWriter, send_with_backoff
 from ..log import nonblocking_logger
 
 __all__ = ["Lane", "LANE_IDLE_EXIT", "LANE_CLOSE_FLUSH", "max_age_for"]
@@ -79,6 +79,7 @@ class Lane:
         self._closed = False
         self._close_deadline = float("inf")
         self._burst = 0                         # dropped since the last report
+        self._sent_at = time.monotonic()        # when the lane's thread last sent (it ends when idle long)
 
     def prepare(self, msg: Any) -> Any:
         return self.writer.prepare(msg)
@@ -120,68 +121,83 @@ class Lane:
         self._burst += 1
         return True
 
-    def _next(self, idle_since: float) -> Any:
-        """The (sample, when) to try (under the lock); None to stop the thread."""
+    def _head(self) -> Any:
+        """The (sample, when) to try now, passing over the superseded and the stale; None when the lane holds
+        nothing (under the lock)."""
+        if self._inflight is not None and not self._superseded and not self._stale(self._inflight):
+            return self._inflight
+        self._inflight, self._superseded = None, False
+        while self._queue:
+            item = self._queue.popleft()
+            if not self._stale(item):
+                self._inflight = item
+                return item
+        self._active = False
+        return None
+
+    def _wait_for_work(self) -> bool:
+        """True when the lane holds a sample to send; False (the thread ends) once it is closed or has had
+        nothing to send for :data:`LANE_IDLE_EXIT` seconds."""
         with self._cond:
-            while True:
-                if self._inflight is not None and not self._superseded and not self._stale(self._inflight):
-                    return self._inflight
-                self._inflight, self._superseded = None, False
-                while self._queue:
-                    item = self._queue.popleft()
-                    if not self._stale(item):
-                        self._inflight = item
-                        return item
-                self._active = False
-                if self._closed or time.monotonic() - idle_since > LANE_IDLE_EXIT:
+            while self._head() is None:
+                if self._closed or time.monotonic() - self._sent_at > LANE_IDLE_EXIT:
                     self._thread = None
-                    return None
+                    return False
                 self._cond.wait(LANE_IDLE_EXIT / 4)
+            return True
+
+    def _try_head(self, _: Any) -> bool:
+        """One try at the oldest sample still worth sending: True when it left or nothing is left to send. One
+        retry loop spans the samples superseded or out of date while the link had no room, so its pauses go
+        on growing as they did for the first."""
+        with self._cond:
+            item = self._head()
+        if item is None:
+            return True
+        try:
+            sent = self.writer.try_send(item[0])
+        except Exception:
+            _log.exception("micros_rt: topic %s: sending a queued %s sample failed; dropped", self.topic,
+                           self.protocol)
+            sent = True
+        if not sent:
+            return False
+        with self._cond:
+            if self._inflight is item:
+                if self._superseded:        # it left after all: not a drop
+                    self.dropped -= 1
+                    self._burst -= 1
+                self._inflight, self._superseded = None, False
+            burst, self._burst = self._burst, 0
+        if burst > 0:
+            _log.warning("micros_rt: topic %s: %d %s samples were superseded%s before the link had room for "
+                         "them and were not sent (queue_size=%d keeps the newest, as ROS does; %d in all%s)",
+                         self.topic, burst, self.protocol,
+                         "" if math.isinf(self.max_age) else f" or older than {self.max_age:g} s",
+                         self.depth or 0, self.dropped,
+                         f", {self.expired} out of date" if self.expired else "")
+        self._sent_at = time.monotonic()
+        return True
+
+    def _flush_over(self) -> bool:
+        """True once the lane is closed and :data:`LANE_CLOSE_FLUSH` has passed: the retries stop."""
+        return self._closed and time.monotonic() > self._close_deadline
 
     def _run(self) -> None:
-        pause = BACKOFF_FIRST
-        idle_since = time.monotonic()
-        while True:
-            item = self._next(idle_since)
-            if item is None:
-                return
-            try:
-                sent = self.writer.try_send(item[0])
-            except Exception:
-                _log.exception("micros_rt: topic %s: sending a queued %s sample failed; dropped", self.topic,
-                               self.protocol)
-                sent = True
-            if sent:
-                with self._cond:
-                    if self._inflight is item:
-                        if self._superseded:        # it left after all: not a drop
-                            self.dropped -= 1
-                            self._burst -= 1
-                        self._inflight, self._superseded = None, False
-                    burst, self._burst = self._burst, 0
-                if burst > 0:
-                    _log.warning("micros_rt: topic %s: %d %s samples were superseded%s before the link had room for "
-                                 "them and were not sent (queue_size=%d keeps the newest, as ROS does; %d in all%s)",
-                                 self.topic, burst, self.protocol,
-                                 "" if math.isinf(self.max_age) else f" or older than {self.max_age:g} s",
-                                 self.depth or 0, self.dropped,
-                                 f", {self.expired} out of date" if self.expired else "")
-                pause = BACKOFF_FIRST
-                idle_since = time.monotonic()
+        self._sent_at = time.monotonic()
+        while self._wait_for_work():
+            if send_with_backoff(self._try_head, None, math.inf, self._flush_over):
                 continue
-            if self._closed and time.monotonic() > self._close_deadline:
-                with self._cond:
-                    lost = len(self._queue) + (1 if self._inflight is not None and not self._superseded else 0)
-                    self._queue.clear()
-                    self._inflight, self._superseded, self._active = None, False, False
-                    self.dropped += lost
-                    self._thread = None
-                if lost:
-                    _log.warning("micros_rt: topic %s: %d %s samples were still waiting for room when the "
-                                 "publisher closed; dropped", self.topic, lost, self.protocol)
-                return
-            time.sleep(pause)
-            pause = min(pause * 2, BACKOFF_MAX)
+            with self._cond:
+                lost = len(self._queue) + (1 if self._inflight is not None and not self._superseded else 0)
+                self._queue.clear()
+                self._inflight, self._superseded, self._active = None, False, False
+                self.dropped += lost
+                self._thread = None
+            if lost:
+                _log.warning("micros_rt: topic %s: %d %s samples were still waiting for room when the "
+                             "publisher closed; dropped", self.topic, lost, self.protocol)
+            return
 
     def close(self) -> None:
         """Give what the lane holds :data:`LANE_CLOSE_FLUSH` seconds to leave, then close the writer."""

@@ -3,6 +3,7 @@ the subscriber's requestTopic to a publisher (transports/tcpros/patches._request
 
 from __future__ import annotations
 
+import math
 import socket
 import threading
 import xmlrpc.server
@@ -13,12 +14,67 @@ import pytest
 from micros_rt.transports.base import BACKOFF_FIRST, BACKOFF_MAX, send_with_backoff
 
 
-def test_backoff_doubles_from_first_to_most_and_gives_up_at_the_timeout() -> None:
+class FakeTime:
+    """A clock that only the pauses move, and a record of the pauses and of when each try came."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+        self.pauses: List[float] = []
+        self.tries: List[float] = []
+
+    def clock(self) -> float:
+        return self.now
+
+    def wait(self, seconds: float) -> None:
+        self.pauses.append(seconds)
+        self.now += seconds
+
+    def failing(self, _: Any) -> bool:
+        self.tries.append(self.now)
+        return False
+
+
+def test_backoff_doubles_from_first_to_most_and_gives_up_at_the_first_try_past_the_timeout() -> None:
+    t = FakeTime()                              # (binary fractions: the sums are exact)
+    assert not send_with_backoff(t.failing, None, 3.75, wait=t.wait, first=0.25, most=1.0, clock=t.clock)
+    assert t.pauses == [0.25, 0.5, 1.0, 1.0, 1.0]   # the try right at the timeout is the last
+    assert t.tries == [100.0, 100.25, 100.75, 101.75, 102.75, 103.75]
+    t = FakeTime()
+    assert not send_with_backoff(t.failing, None, 0.015, wait=t.wait, clock=t.clock)   # the defaults
+    assert t.pauses[:3] == [BACKOFF_FIRST, 2 * BACKOFF_FIRST, 4 * BACKOFF_FIRST] and max(t.pauses) == BACKOFF_MAX
+    assert sum(t.pauses) == pytest.approx(0.015, abs=BACKOFF_MAX)
+
+
+def test_backoff_times_out_from_the_first_try_not_from_the_call() -> None:
+    t = FakeTime()
+
+    def slow_first_try(prepared: Any) -> bool:
+        if not t.tries:
+            t.now += 1.0                        # a first try that took a second does not use up the timeout
+        return t.failing(prepared)
+
+    assert not send_with_backoff(slow_first_try, None, 0.75, wait=t.wait, first=0.25, most=1.0, clock=t.clock)
+    assert t.pauses == [0.25, 0.5]
+
+
+def test_backoff_without_a_timeout_goes_on_at_most_until_closed() -> None:
+    t = FakeTime()
+    assert not send_with_backoff(t.failing, None, math.inf, lambda: t.now > 160.0, t.wait, first=0.5, most=8.0,
+                                 clock=t.clock)
+    assert t.pauses == [0.5, 1.0, 2.0, 4.0] + [8.0] * 7 and t.now == pytest.approx(163.5)
+
+
+def test_backoff_closed_is_asked_before_each_pause_and_a_success_ends_at_once() -> None:
+    t = FakeTime()
+    assert not send_with_backoff(t.failing, None, 60.0, lambda: True, t.wait, clock=t.clock)
+    assert t.pauses == [] and len(t.tries) == 1            # one try, no pause: closed before the first
+    t = FakeTime()
+    assert send_with_backoff(lambda _: True, None, 0.0, lambda: True, t.wait, clock=t.clock)
+    assert t.pauses == []
+
+
+def test_backoff_succeeds_on_a_later_try_with_the_real_clock() -> None:
     pauses: List[float] = []
-    # wait records instead of sleeping: the loop ends on the clock
-    assert not send_with_backoff(lambda _: False, None, 0.05, wait=pauses.append, first=0.001, most=0.004)
-    assert pauses[:4] == [0.001, 0.002, 0.004, 0.004]
-    pauses.clear()
     tries: List[int] = []
 
     def third_time(_: Any) -> bool:

@@ -6,6 +6,7 @@ stalls the interpreter's other threads."""
 
 from __future__ import annotations
 
+import functools
 import threading
 import time
 from typing import Any, List, Tuple
@@ -15,8 +16,9 @@ import pytest
 import harness
 
 from micros_rt import PublishTimeoutError
+from micros_rt.core import lanes
 from micros_rt.core.lanes import Lane
-from micros_rt.transports.base import BackPressuredWriter, send_with_backoff
+from micros_rt.transports.base import BACKOFF_FIRST, BackPressuredWriter, send_with_backoff
 
 
 class _Valve:
@@ -120,6 +122,32 @@ def test_keep_last_order_holds_while_the_thread_drains() -> None:
     # a producer faster than the link loses the oldest (counted), never the order
     assert valve.sent == sorted(valve.sent) and len(set(valve.sent)) == len(valve.sent)
     assert valve.sent[-1] == 1999
+    lane.close()
+
+
+def test_the_lanes_thread_retries_in_the_one_loop_whose_pauses_span_superseded_samples(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    valve = _Valve()
+    valve.open.clear()
+    lane = Lane(valve, topic="/t", depth=1)
+    pauses: List[float] = []
+
+    def wait(seconds: float) -> None:       # on the lane's thread, between two tries
+        pauses.append(seconds)
+        if len(pauses) == 3:
+            lane.send("b")                  # supersedes "a", which the thread is trying
+        elif len(pauses) in (6, 8):
+            valve.open.set()
+
+    monkeypatch.setattr(lanes, "send_with_backoff", functools.partial(send_with_backoff, wait=wait))
+    lane.send("a")
+    harness.wait_until(lambda: valve.sent == ["b"], 5.0, message="b sent")
+    # one loop for "a" and then "b": the pauses go on doubling, they do not start again at "b"
+    assert pauses == [BACKOFF_FIRST * 2 ** i for i in range(6)] and lane.dropped == 1
+    valve.open.clear()
+    lane.send("c")                          # no room: to the lane's thread, whose pauses start again
+    harness.wait_until(lambda: valve.sent == ["b", "c"], 5.0, message="c sent")
+    assert pauses[6:] == [BACKOFF_FIRST, 2 * BACKOFF_FIRST]
     lane.close()
 
 
