@@ -225,6 +225,10 @@ class _Publication:
                                  md5=self.data_class._md5sum, options=self.options, latch=self.latch)
         verdict = decide_shm(offer, facts, host=shm_transport.host_identity(), unavailable=unavailable,
                              subscriber=who)
+        if verdict.accepted and offer.held and self._still_held(subscriber, offer):
+            # asked again on a publisher update: the subscriber's channel is there and read, keep it
+            return verdict, ShmAnswer(channel=offer.held, latch=self.latch, qos=self.options,
+                                      node=patches.caller_id(), pid=os.getpid())
         if verdict.accepted:
             try:
                 channel = self._shm_writer().open_channel(subscriber, offer.pid)
@@ -247,6 +251,16 @@ class _Publication:
             return refused, None
         return verdict, ShmAnswer(channel=channel.name, latch=self.latch, qos=self.options, node=patches.caller_id(),
                                   pid=os.getpid())
+
+    def _still_held(self, subscriber: str, offer: ShmOffer) -> bool:
+        """The channel ``offer`` says its subscriber reads is this publication's channel for that subscriber
+        process, open, its port attached, its link in rospy's list."""
+        shm = self.shm
+        channel = shm.channel_for(subscriber) if shm is not None else None
+        with self.lock:
+            linked = subscriber in self.shm_links
+        return (channel is not None and linked and channel.name == offer.held and channel.peer_pid == offer.pid
+                and not channel.closed and channel.attached())
 
     def _attach_link(self, old: Optional[patches.DDSConnection], conn: patches.DDSConnection, *, what: str,
                      subscriber: str, fallback: str) -> Optional[Verdict]:

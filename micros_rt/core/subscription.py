@@ -178,7 +178,7 @@ class _Subscription:
             _log.warning("micros_rt: %s", describe_incompatible_policy(policy, topic=self.topic, side="subscriber"))
 
     # -- negotiation (rospy's connect threads) ----------------------------
-    def offered_protocols(self) -> List[List[Any]]:
+    def offered_protocols(self, held_shm: str = "") -> List[List[Any]]:
         out: List[List[Any]] = []
         for proto in self.hints.protocols:
             reader, dds = self.reader, self._dds
@@ -188,7 +188,7 @@ class _Subscription:
                 if shm.unavailable_reason() is None:
                     out.append(ShmOffer(host=shm.host_identity(), md5=self.data_class._md5sum,
                                         type_name=self.data_class._type, qos=self.effective,
-                                        pid=os.getpid()).to_xmlrpc())
+                                        pid=os.getpid(), held=held_shm).to_xmlrpc())
             elif proto == DDS and reader is None and self.lazy_dds is not None:
                 from ..transports.dds.participant import domain_id_from_env
 
@@ -459,12 +459,16 @@ class _Subscription:
             self._pushed_dropped = dropped
 
     # -- the one admission path: what the reader did not enforce, whatever the transport -------------
-    def _admit_enforced(self, reader: TransportReader, source_ns: int, qos: Optional[Any]) -> bool:
+    def _admit_enforced(self, reader: TransportReader, source_ns: int, qos: Optional[Any], *,
+                        sent_ns: int = 0) -> bool:
         """Apply source order and the time filter (unless the reader's transport did) and lifespan (Cyclone expires
         samples in its cache, but a sample taken can still wait behind slow callbacks; a writer whose
         QoS is unknown, as over TCPROS, has none); count what is dropped."""
-        order = self.source_order  # first: an out-of-order message must not use up the time filter's window
-        if order.enabled and SOURCE_ORDER not in reader.enforces and not order.admit(source_ns):
+        # first: an out-of-order message must not use up the time filter's window. By the sending time only
+        # (``sent_ns``, 0 when the link does not carry one, as TCPROS): a Header stamp is when the data was
+        # taken, and publishers of one topic legitimately send data stamped out of order (tf)
+        order = self.source_order
+        if order.enabled and sent_ns and SOURCE_ORDER not in reader.enforces and not order.admit(sent_ns):
             self.dropped_out_of_order += 1
             return False
         tf = self.time_filter
@@ -479,10 +483,11 @@ class _Subscription:
 
     def _deliver_pushed(self, reader: PushReader, msg: Any, info: Any) -> None:
         self.received += 1
-        source_ns = info.source_timestamp or _header_stamp(msg)
+        sent_ns = info.source_timestamp
+        source_ns = sent_ns or _header_stamp(msg)
         # a link that knows its publisher's QoS (shared memory's, from the answer) has its lifespan and budget
         qos = getattr(info.publication_handle, "qos", None)
-        if not self._admit_enforced(reader, source_ns or 0, qos):
+        if not self._admit_enforced(reader, source_ns or 0, qos, sent_ns=sent_ns):
             return
         self._deliver(msg, source_ns, qos.latency_budget if qos is not None else 0.0)
 
@@ -491,7 +496,7 @@ class _Subscription:
 
     def _deliver_dds(self, data: bytes, info: Any, state: WriterState) -> None:
         qos = state.qos
-        if not self._admit_enforced(self.readers[0], info.source_timestamp, qos):
+        if not self._admit_enforced(self.readers[0], info.source_timestamp, qos, sent_ns=info.source_timestamp):
             return
         if not state.skew.done:
             self._check_clock_skew(state, time.time_ns() - info.source_timestamp, time.monotonic())

@@ -226,17 +226,23 @@ class ShmOffer:
     transient_local: bool = False
     #: the subscriber's process id (same host): the publisher notices a SIGKILLed subscriber by it
     pid: int = 0
+    #: the channel this subscriber already reads from this publisher ("" none): asked again on a publisher
+    #: update, the publisher keeps it (a new channel would lose what the old one still holds)
+    held: str = ""
 
     def to_xmlrpc(self) -> List[Any]:
-        return [SHM, {"host": self.host, "md5": self.md5, "type": self.type_name, "qos": self.qos.to_dict(),
-                      "transient_local": self.transient_local, "pid": self.pid}]
+        params = {"host": self.host, "md5": self.md5, "type": self.type_name, "qos": self.qos.to_dict(),
+                  "transient_local": self.transient_local, "pid": self.pid}
+        if self.held:
+            params["held"] = self.held
+        return [SHM, params]
 
     @classmethod
     def from_xmlrpc(cls, params: object, *, source: str = "a subscriber") -> "ShmOffer":
         d = _mapping(params, "SHM offer")
         qos = _qos(SubscribeQoSOptions, d, source)
         return cls(host=_str(d, "host"), md5=_str(d, "md5"), type_name=_str(d, "type"), qos=qos,
-                   transient_local=_bool(d, "transient_local"), pid=_pid(d))
+                   transient_local=_bool(d, "transient_local"), pid=_pid(d), held=_str(d, "held", required=False))
 
 
 def _pid(d: Mapping[str, Any]) -> int:

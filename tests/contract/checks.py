@@ -19,7 +19,7 @@ from geometry_msgs.msg import PointStamped
 from micros_rt.exceptions import MicrosRtError
 from micros_rt.qos import SubscribeQoSOptions
 from micros_rt.qos.options import enforcers
-from micros_rt.transports.base import LIFESPAN, TIME_FILTER, PushReader, TransportReader, TransportWriter
+from micros_rt.transports.base import LIFESPAN, SOURCE_ORDER, TIME_FILTER, PushReader, TransportReader, TransportWriter
 
 __all__ = ["CHECKS", "Pair", "message", "wait_until"]
 
@@ -180,6 +180,19 @@ def check_what_the_reader_does_not_enforce_the_core_applies(pair: Pair) -> None:
         assert sub._admit_enforced(reader, now, None) is True
     finally:
         sub.close()
+    # ordered_by_sending_timestamp: by the sending time the link carries, unless the reader orders itself
+    ordered = _Subscription("/contract/order", PointStamped, 100, SubscribeQoSOptions(), TransportHints().tcp(),
+                            dds=None, tag={}, graph="contract")
+    try:
+        now = time.time_ns()
+        admitted = [ordered._admit_enforced(reader, t, None, sent_ns=t) for t in (now, now - 1_000_000, now + 1)]
+        if SOURCE_ORDER in reader.enforces:
+            assert admitted == [True] * 3 and ordered.dropped_out_of_order == 0, "the core ordered again"
+        else:
+            assert admitted == [True, False, True] and ordered.dropped_out_of_order == 1, admitted
+        assert ordered._admit_enforced(reader, now - 2_000_000, None) is True  # no sending time: arrival order
+    finally:
+        ordered.close()
     assert (pair.filtering_reader is not None) == (TIME_FILTER in reader.enforces), \
         f"{reader.protocol} declares {set(reader.enforces)}: a reader that says it filters must be shown to"
     if pair.filtering_reader is not None:

@@ -75,6 +75,39 @@ def test_shm_tcpros_and_dds_on_one_topic_each_message_once(ros_master: harness.R
     assert re.search(r"-> /stock_listener\w*: TCPROS", info.stdout), info.stdout
 
 
+def test_order_by_sending_time_on_shm(ros_master: harness.RosMaster, spawn: harness.Spawner) -> None:
+    # two publishers, one whose clock is 0.3 s behind: before the core enforced ordered_by_sending_timestamp
+    # (the catalogue's SOURCE_ORDER), only Cyclone ordered, and a shared-memory link delivered every "late"
+    env = shm_env(ros_master)
+    topic = "/shm/order"
+    listener = spawn(mrt("listen", "--topic", topic, "--duration", T, "--queue-size", "1000",
+                         qos={"ordered_by_sending_timestamp": True}), env, name="order_listener")
+    listener.wait_for("ready", T)
+    now = spawn(mrt("talk", "--topic", topic, "--count", "120", "--rate", "20", "--prefix", "now",
+                    "--node-name", "talker_now", "--wait-subscribers", "1", "--linger", "2"), env)
+    now.wait_for(lambda e: e.get("event") == "sent" and e["seq"] == 5, T)
+    late = spawn(mrt("talk", "--topic", topic, "--count", "40", "--rate", "20", "--prefix", "late",
+                     "--node-name", "talker_late", "--wait-subscribers", "1", "--linger", "1",
+                     "--clock-offset", "-0.3"), env)
+    late.wait_for("done", T)
+    now.wait_for("done", T)
+    # every message reached the subscription (received counts the dropped ones too); before an SHM offer said
+    # which channel it held, the listener's link to "now" was made anew when "late" came and went, and a message
+    # in the old channel was lost, counted nowhere
+    try:
+        stats = listener.wait_for(lambda e: e.get("event") == "status" and e["statistics"]["received"] >= 160,
+                                  T)["statistics"]
+    finally:
+        got = received(listener)
+        print("never arrived:", sorted(set(f"now {i}" for i in range(120)) - set(got)))
+    n_now, n_late = sum(1 for x in got if x.startswith("now")), sum(1 for x in got if x.startswith("late"))
+    assert set(transports(listener)) == {"SHM"}
+    print(f"order by source on SHM: now={n_now}/120 late={n_late}/40, statistics {stats}")
+    assert n_now == 120, n_now
+    assert n_late <= 3, got  # only while "now" is silent could one slip through
+    assert stats["dropped_out_of_order"] == 40 - n_late, stats  # every drop counted
+
+
 def test_a_killed_publisher_is_noticed_and_its_restart_reconnects_over_shm(ros_master: harness.RosMaster,
                                                                          spawn: harness.Spawner, mode: str) -> None:
     env = shm_env(ros_master, mode)

@@ -12,6 +12,7 @@ import argparse
 import hashlib
 import json
 import logging
+import os
 import sys
 import time
 from typing import Any, Dict
@@ -53,14 +54,21 @@ def fill(msg: Any, text: str, i: int, stamp: bool, clock_offset: float = 0.0) ->
 
 def play_clock_offset(pub: Any, offset: float) -> None:
     """Play a publisher whose clock is ``offset`` seconds off (a lagging host) without touching the
-    system clock: this peer's DDS writes carry shifted source timestamps. Test-only, so it lives here."""
+    system clock: this peer's DDS and shared-memory writes carry shifted source timestamps. Test-only, so it
+    lives here."""
     from cyclonedds._clayer import ddspy_write_ts
 
+    shift = int(offset * 1e9)
+    if os.environ.get("MICROS_RT_DISABLE_SHM", "0") != "1":
+        from micros_rt.transports.shm import channel as shm_channel
+
+        send = shm_channel.ShmChannel.try_send
+        shm_channel.ShmChannel.try_send = (  # type: ignore[method-assign]
+            lambda self, body, source_ns=0: send(self, body, source_ns or time.time_ns() + shift))
     writer = pub._pub.dds
     if writer is None:
-        return  # no DDS writer (hints, or DDS off): --stamp shifts the Header stamps only
-    ref, shift = writer._ref, int(offset * 1e9)
-
+        return  # no DDS writer (hints, DDS off or not yet opened)
+    ref = writer._ref
     writer._write = lambda data: ddspy_write_ts(ref, data, time.time_ns() + shift)
 
 
@@ -168,8 +176,8 @@ def main() -> int:
     ap.add_argument("--callback-sleep", type=float, default=0.0,
                     help="listen: seconds every callback sleeps after printing (a slow subscriber)")
     ap.add_argument("--clock-offset", type=float, default=0.0,
-                    help="talk: add this many seconds to every DDS source timestamp and --stamp Header stamp "
-                         "(a host whose clock is off)")
+                    help="talk: add this many seconds to every DDS and SHM source timestamp and --stamp Header "
+                         "stamp (a host whose clock is off)")
     ap.add_argument("--log-debug", action="store_true", help="print micros_rt DEBUG log records too")
     ap.add_argument("--data-json", default=None,
                     help='talk: JSON dict of field values, e.g. \'{"data": "x {i}"}\' (see set_fields)')
@@ -267,7 +275,9 @@ def main() -> int:
             time.sleep(0.02)
         dds_writer = getattr(getattr(pub, "_pub", None), "dds", None)
         emit("done", connections=pub.get_num_connections(),
-             dds_wanted=None if dds_writer is None else bool(dds_writer._writer.wanted))
+             dds_wanted=None if dds_writer is None else bool(dds_writer._writer.wanted),
+             statistics=dataclasses_asdict(pub.statistics()),
+             shm_not_taken=getattr(getattr(pub._pub, "shm", None), "not_taken", None))
     else:
         hints = None
         if args.hints:
@@ -324,7 +334,7 @@ def main() -> int:
             time.sleep(0.05)
             if time.monotonic() - last_status > 0.5:
                 last_status = time.monotonic()
-                emit("status", transports=sub.connection_transports())
+                emit("status", transports=sub.connection_transports(), statistics=dataclasses_asdict(sub.statistics()))
         if slow is not None:
             emit("slow_statistics", **dataclasses_asdict(slow.statistics()))
         emit("done", transports=sub.connection_transports(), latency_count=sub.latency.count,

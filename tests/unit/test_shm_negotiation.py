@@ -33,6 +33,10 @@ def test_offer_and_answer_round_trip() -> None:
     a = ShmAnswer(channel="micros_rt/0000abcd00000001deadbeef", latch=True,
                   qos=AdvertiseQoSOptions(msg_valid_period=2.0), node="/talker", pid=4242)
     assert ShmAnswer.from_xmlrpc(a.to_xmlrpc()[1]) == a
+    # a subscriber asking again names the channel it reads; an older subscriber's offer has no such key
+    held = offer(pid=77, held="micros_rt/0000abcd00000001deadbeef")
+    assert ShmOffer.from_xmlrpc(held.to_xmlrpc()[1]) == held
+    assert "held" not in o.to_xmlrpc()[1] and ShmOffer.from_xmlrpc(o.to_xmlrpc()[1]).held == ""
 
 
 @pytest.mark.parametrize("params,field", [

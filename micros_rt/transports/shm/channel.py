@@ -185,6 +185,7 @@ class ShmWriter:
         #: why this publication stopped offering SHM (a channel could not be made or written), or None
         self.failed: Optional[str] = None
         self.dropped = 0
+        self.not_taken = 0  # of them: an attached subscriber's channel did not take the sample (KEEP_LAST)
         self._lock = threading.Lock()
         self._channels: Dict[str, ShmChannel] = {}
         self._active: Tuple[ShmChannel, ...] = ()
@@ -223,6 +224,11 @@ class ShmWriter:
                 del self._channels[channel.subscriber]
                 self._active = tuple(self._channels.values())
         channel.close()
+
+    def channel_for(self, subscriber: str) -> Optional[ShmChannel]:
+        """The open channel of ``subscriber`` (its caller id), if any."""
+        with self._lock:
+            return self._channels.get(subscriber)
 
     def channels(self) -> Tuple[ShmChannel, ...]:
         return self._active
@@ -270,6 +276,8 @@ class ShmWriter:
                 if not ch.attached():
                     continue  # not attached yet (or gone): housekeeping decides
                 if not self.lossless:
+                    self.dropped += 1  # an attached subscriber that did not take it: counted, never silent
+                    self.not_taken += 1
                     continue
                 if not send_with_backoff(ch.try_send, body, PUBLISH_BLOCK_TIMEOUT, lambda: ch.closed or self.closed):
                     if ch.closed or self.closed:

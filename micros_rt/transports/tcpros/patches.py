@@ -95,8 +95,9 @@ class PublicationHook(Protocol):
 class SubscriptionHook(Protocol):
     """What the subscriber side of the negotiation asks a micros_rt subscription."""
 
-    def offered_protocols(self) -> List[List[Any]]:
-        """Protocol entries to offer, in preference order, e.g. [['DDS', {...}], ['TCPROS']]."""
+    def offered_protocols(self, held_shm: str = "") -> List[List[Any]]:
+        """Protocol entries to offer, in preference order, e.g. [['DDS', {...}], ['TCPROS']]; ``held_shm``: the
+        shared-memory channel already read from this publisher."""
 
     def connect_dds(self, pub_uri: str, answer: DDSAnswer) -> Tuple[int, str, int]:
         """Create the DDS pseudo-connection after the publisher accepted DDS."""
@@ -351,9 +352,11 @@ def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
         existing = next((c for c in list(sub.connections) if c.endpoint_id == pub_uri), None)
         if existing is not None and not isinstance(existing, DDSConnection):
             return 1, already, 0
-        # An existing DDS link is asked again: the publisher may have unregistered and advertised the
-        # topic anew (same node, same URI, a new DDS writer) faster than its old writer was seen to go.
-        protocols = hook.offered_protocols()
+        # An existing DDS or SHM link is asked again: the publisher may have unregistered and advertised the
+        # topic anew (same node, same URI, a new DDS writer or SHM channel) faster than the old one was seen to
+        # go. An SHM link says which channel it holds, so that a publisher still writing it keeps it.
+        held = existing.peer_guid if existing is not None and existing.transport_type == SHM else ""
+        protocols = hook.offered_protocols(held)
         if not protocols:
             return 0, "ERROR: no protocol allowed by the TransportHints", 0
         code, msg, result = _request_topic(pub_uri, topic, protocols)
@@ -361,7 +364,7 @@ def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
             # the publisher would take DDS and this subscription has no DDS reader yet (ROS 2 visibility off):
             # open it and ask again; without one, ask for the rest
             hook.open_dds()
-            protocols = hook.offered_protocols()
+            protocols = hook.offered_protocols(held)
             code, msg, result = _request_topic(pub_uri, topic, protocols)
             if code > 0 and DDSOpenFirst.is_one(result):
                 return 0, "DDS reader could not be opened", 0
