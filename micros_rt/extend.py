@@ -8,18 +8,18 @@ itself (a DDS writer with a tag of its own, a reader it feeds).
   ``init_node``.
 - :func:`register_info_section` / :func:`unregister_info_section`: a section of the program's own state in
   the node's ``microsRtInfo`` answer, which ``micros-rt graph`` and ``micros-rt topic`` show.
-- :class:`Lane`: put in front of a :class:`~micros_rt.transports.base.BackPressuredWriter` so that
-  back-pressure on one topic never holds the caller (KEEP_LAST samples superseded before they left are
-  dropped and counted, as a publication does).
+- :func:`sender_for` (a :class:`Lane`): put in front of a :class:`~micros_rt.transports.base.BackPressuredWriter`
+  so that back-pressure on one topic never holds the caller, with a publication's rule (KEEP_LAST samples
+  superseded before they left, and those older than the lifespan, are dropped and counted).
 - :class:`TimeoutTransport`: an :mod:`xmlrpc.client` transport with a timeout of its own (rospy sets a
   process-wide socket timeout), for XML-RPC calls to other nodes and masters.
 
 >>> import micros_rt
->>> from micros_rt.extend import Lane, dds_backend, register_info_section
+>>> from micros_rt.extend import dds_backend, register_info_section, sender_for
 >>> micros_rt.init_node("my_program")                                        # doctest: +SKIP
 >>> backend = dds_backend()                                                  # doctest: +SKIP
 >>> writer = backend.open_writer(spec, micros_rt.AdvertiseQoSOptions())     # doctest: +SKIP
->>> sender = Lane(writer, topic=spec.topic, depth=10)                       # doctest: +SKIP
+>>> sender = sender_for(writer, topic=spec.topic, queue_size=10, options=micros_rt.AdvertiseQoSOptions())  # doctest: +SKIP
 >>> register_info_section("my_program", lambda: {"sent": sender.delayed})   # doctest: +SKIP
 """
 
@@ -27,8 +27,8 @@ from __future__ import annotations
 
 from .core.introspection import register_section as register_info_section
 from .core.introspection import unregister_section as unregister_info_section
-from .core.lanes import Lane
+from .core.lanes import Lane, sender_for
 from .core.runtime import dds_backend
 from .transports.tcpros.xmlrpc import TimeoutTransport
 
-__all__ = ["Lane", "TimeoutTransport", "dds_backend", "register_info_section", "unregister_info_section"]
+__all__ = ["Lane", "TimeoutTransport", "dds_backend", "register_info_section", "sender_for", "unregister_info_section"]

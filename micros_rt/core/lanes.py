@@ -32,8 +32,9 @@ import threading
 import time
 from typing import Any, Deque, Optional, Tuple
 
-from ..transports.base import BackPressuredWriter, send_with_backoff
 from ..log import nonblocking_logger
+from ..qos import is_lossless
+from ..transports.base import BackPressuredWriter, TransportWriter, send_with_backoff
 
 __all__ = ["Lane", "LANE_IDLE_EXIT", "LANE_CLOSE_FLUSH", "max_age_for"]
 
@@ -55,6 +56,16 @@ def max_age_for(options: Any) -> float:
     if options.using_best_effort_protocol and budget > 0:
         age = min(age, budget)
     return age
+
+
+def sender_for(writer: TransportWriter, *, topic: str, queue_size: Optional[int], options: Any) -> TransportWriter:
+    """What a publication (or a program driving a writer itself, the relay) sends through: a back-pressured
+    writer behind a lane that keeps the newest ``queue_size`` (lossless, ``None``/0: ``publish()`` waits
+    instead) and drops samples older than ``options``' lifespan (:func:`max_age_for`); any other writer as is."""
+    if not isinstance(writer, BackPressuredWriter):
+        return writer
+    return Lane(writer, topic=topic, depth=None if is_lossless(queue_size) else queue_size,
+                max_age=max_age_for(options))
 
 
 class Lane:

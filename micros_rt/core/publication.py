@@ -17,11 +17,11 @@ import rospy.topics
 
 from ..transports.tcpros import patches
 from ..transports.tcpros.writer import TcprosWriter
-from .lanes import Lane, max_age_for
+from .lanes import Lane, sender_for
 from .registry import EndpointRegistry
 from ..transports.tcpros.patches import short
 from .stats import PublisherStatistics
-from ..transports.base import BackPressuredWriter, EndpointSpec, ProfileBackend, TransportWriter
+from ..transports.base import EndpointSpec, ProfileBackend, TransportWriter
 from ..exceptions import MicrosRtError
 from ..negotiation import (
     MAX_PENDING_DDS_OFFERS,
@@ -139,11 +139,8 @@ class _Publication:
     def _build_senders(self) -> None:
         """The DDS writer, then the mirrors, each behind a lane when it can say "no room now" (DDS): one topic's
         back-pressure never holds another topic's publish(), and a KEEP_LAST publish() never waits (as rospy's)."""
-        depth = None if is_lossless(self.queue_size) else self.queue_size
-        self.senders = tuple(
-            Lane(w, topic=self.topic, depth=depth, max_age=max_age_for(self.options))
-            if isinstance(w, BackPressuredWriter) else w
-            for w in ((self.dds,) if self.dds is not None else ()) + self.mirrors)
+        self.senders = tuple(sender_for(w, topic=self.topic, queue_size=self.queue_size, options=self.options)
+                             for w in ((self.dds,) if self.dds is not None else ()) + self.mirrors)
         self.lanes = tuple(s for s in self.senders if isinstance(s, Lane))
 
     def _ensure_dds(self) -> None:

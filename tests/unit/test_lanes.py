@@ -332,3 +332,28 @@ def test_max_age_is_the_lifespan_and_for_best_effort_also_the_budget() -> None:
     assert max_age_for(AdvertiseQoSOptions(msg_valid_period=0.5, latency_budget=0.1,
                                            using_best_effort_protocol=True)) == 0.1
     assert max_age_for(AdvertiseQoSOptions(using_best_effort_protocol=True)) == math.inf  # no budget: no limit
+
+
+def test_sender_for_is_the_one_rule_of_publications_and_the_relay() -> None:
+    # the relay's exports built their lane without the rule's lifespan (issue 36: relay.py against
+    # publication.py); both now go through sender_for
+    import inspect
+
+    from micros_rt.bridges.relay import relay
+    from micros_rt.core import publication
+    from micros_rt.core.lanes import sender_for
+    from micros_rt.qos import AdvertiseQoSOptions
+
+    class Plain:
+        protocol = "X"
+
+    plain = Plain()
+    assert sender_for(plain, topic="/t", queue_size=5, options=None) is plain  # type: ignore[arg-type,comparison-overlap]
+    for module in (relay, publication):
+        assert "sender_for(" in inspect.getsource(module) and "Lane(" not in inspect.getsource(module)
+    options = AdvertiseQoSOptions(msg_valid_period=0.25)
+    lane = sender_for(_Valve(), topic="/t", queue_size=0, options=options)
+    try:
+        assert isinstance(lane, Lane) and lane.max_age == 0.25 and lane.depth is None  # lossless: waits, keeps all
+    finally:
+        lane.close()

@@ -42,11 +42,11 @@ import roslib.message
 import rospy
 
 import micros_rt
-from micros_rt.extend import Lane, dds_backend, register_info_section, unregister_info_section
+from micros_rt.extend import Lane, dds_backend, register_info_section, sender_for, unregister_info_section
 from micros_rt.qos import DURATION_MAX, SubscribeQoSOptions
 from micros_rt.log import nonblocking_logger
 from micros_rt.qos.topic_rules import best_match
-from micros_rt.transports.base import BackPressuredWriter, EndpointSpec, PushReader, TransportWriter
+from micros_rt.transports.base import EndpointSpec, PushReader, TransportWriter
 
 from .config import ExportRule, ImportRule, RelayConfig, ServiceImport
 from .msgtypes import (TypeLearningError, class_from_definition, definition_field, installed_class, learn_from_publisher,
@@ -91,8 +91,9 @@ class _Export:
                "def": definition_field(data_class)}  # importers without the type's package build it from this
         spec = EndpointSpec(self.outside, data_class, rule.queue_size, rule.latch, tag)
         writer = relay.backend.open_writer(spec, rule.options)
-        self.sender: TransportWriter = (Lane(writer, topic=self.outside, depth=rule.queue_size)
-                                        if isinstance(writer, BackPressuredWriter) else writer)
+        # the publication's own rule: the newest queue_size kept, nothing older than the rule's lifespan sent
+        self.sender: TransportWriter = sender_for(writer, topic=self.outside, queue_size=rule.queue_size,
+                                                  options=rule.options)
         self.sub = relay.nh.subscribe(topic, data_class, self._on_message, rule.queue_size)
 
     def _on_message(self, msg: Any) -> None:
