@@ -5,7 +5,7 @@ for stock peers) and, when DDS is available, one DataWriter
 (:mod:`micros_rt.core.publication`). Each subscription owns a rospy subscriber and,
 when its TransportHints allow DDS, a DataReader (:mod:`micros_rt.core.subscription`).
 Which one carries data from a given publisher is decided per publisher in
-``requestTopic`` (see :mod:`micros_rt.core.rospy_compat`).
+``requestTopic`` (see :mod:`micros_rt.transports.tcpros.patches`).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Test harness: real rosmaster, real peer processes, loopback-only DDS.
 
-Everything here starts real things (see DESIGN.md, "What works means here"):
+Everything here starts real things (the team's rule: real peers, not mocks):
 
 * ``RosMaster``  - Debian's ``rosmaster --core`` on a free 127.0.0.1 port, private ROS_HOME/ROS_LOG_DIR.
 * ``Peer``       - a subprocess printing one JSON object per stdout line (tests/peers/*.py).

@@ -2,8 +2,7 @@
 :mod:`.subscription`), the lanes between ``publish()`` and the transports (:mod:`.lanes`), the one admission
 path and delivery thread (:mod:`.delivery`, :mod:`.writers`), statistics (:mod:`.stats`), the endpoint
 registry (:mod:`.registry`), process state (:mod:`.runtime`), the introspection API the tools read
-(:mod:`.introspection`), and the only module that reaches rospy's internals (:mod:`.rospy_compat`, which also
-holds TCPROS as a transport).
+(:mod:`.introspection`). TCPROS and rospy's internals are a transport (:mod:`micros_rt.transports.tcpros`).
 
 Nothing here is public API: import from :mod:`micros_rt`.
 """

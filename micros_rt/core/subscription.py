@@ -1,8 +1,8 @@
 """A micros_rt subscription: per topic and process, the rospy subscriber (master registration, TCPROS),
 back-end readers (DDS), and the delivery thread that runs the callbacks.
 
-The concerns live apart: waking (:mod:`._delivery`), exactly-once per writer (:mod:`._writers`), what
-the subscriber enforces (:mod:`.qos.enforcement`), counters and latency (:mod:`._stats`). This module
+The concerns live apart: waking (:mod:`.delivery`), exactly-once per writer (:mod:`.writers`), what
+the subscriber enforces (:mod:`micros_rt.qos.enforcement`), counters and latency (:mod:`.stats`). This module
 joins them: samples in, callbacks out, every message either delivered or counted in one drop counter.
 """
 

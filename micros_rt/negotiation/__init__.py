@@ -1,6 +1,6 @@
 """Protocol negotiation: TransportHints, the typed DDS offer/answer, the publisher's decision and the
 protocol-order loop. Pure: nothing here touches rospy or creates DDS entities
-(:mod:`micros_rt.core.rospy_compat` adapts it to rospy's ``requestTopic``)."""
+(:mod:`micros_rt.transports.tcpros.patches` adapts it to rospy's ``requestTopic``)."""
 
 from .choose import Choice, NegotiatedTransport, choose_protocol, dds_transport
 from .decide import MAX_VERDICTS, PublicationFacts, Verdict, decide, decide_shm, remember_verdict

@@ -1,6 +1,7 @@
 """Mapping of micros_rt QoS options (plus rospy's queue_size/latch) onto Cyclone DDS ``Qos`` objects.
 
-Pure functions: no entity is created here. The table (see DESIGN.md):
+Pure functions: no entity is created here. Which policy each option maps to is the QoS catalogue's
+(``dds_policy`` in :data:`micros_rt.qos.options.OPTIONS`); how a value becomes that policy is here:
 
 ============================== =====================================================================
 option                         DDS policy

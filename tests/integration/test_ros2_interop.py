@@ -3,7 +3,7 @@
 Every test runs two processes: tests/peers/mrt_peer.py (project venv, rospy + Cyclone DDS) and
 tests/peers/ros2_peer.py (.venv-ros2, rclpy + Fast DDS), both with ros_master.env (loopback DDS, this
 run's ROS_DOMAIN_ID). Messages are described once in ROS 1 form; :func:`to_ros2` applies the mapping
-rules (DESIGN.md, wire format): Header.seq dropped, time/duration secs/nsecs -> sec/nanosec, field
+rules (docs/ros2.md, "Type mapping rules"): Header.seq dropped, time/duration secs/nsecs -> sec/nanosec, field
 names lower-cased (CameraInfo D K R P -> d k r p). uint8[] fields travel as
 ``{"$bytes": {"len", "seed"}}`` and come back as ``{"bytes_len", "sha256", "head"}`` from both peers.
 """
