@@ -25,7 +25,7 @@ from . import threadprio
 from .delivery import Inbox
 from .registry import EndpointRegistry
 from .stats import LatencyStats, SubscriberStatistics
-from .writers import DELIVER, HOLD, Accepted, WriterState, WriterTable
+from .exactly_once import DELIVER, HOLD, Accepted, WriterState, WriterTable
 from ..transports.base import SOURCE_ORDER, TIME_FILTER, EndpointSpec, Feed, ProfileBackend, PushInfo, PushReader, TransportReader
 from ..exceptions import MicrosRtError
 from ..negotiation import DDS, SHM, TCPROS, DDSAnswer, DDSOffer, ShmAnswer, ShmOffer, TransportHints

@@ -16,6 +16,7 @@ later (a restarted exporter) too; the publisher's own writer, idle for this subs
 from __future__ import annotations
 
 import collections
+import enum
 import threading
 from dataclasses import dataclass, field
 from typing import Any, Deque, Dict, List, Optional, Set, Tuple
@@ -24,9 +25,18 @@ from ..transports.tcpros.patches import DDSConnection
 from ..transports.base import RemoteWriter
 from ..qos import AdvertiseQoSOptions, ClockSkewCheck
 
-__all__ = ["Accepted", "WriterState", "WriterTable", "DELIVER", "HOLD", "DROP", "HOLD_SECONDS"]
+__all__ = ["Accepted", "Admission", "WriterState", "WriterTable", "DELIVER", "HOLD", "DROP", "HOLD_SECONDS"]
 
-DELIVER, HOLD, DROP = 0, 1, 2
+
+class Admission(enum.IntEnum):
+    """What a subscription does with a DDS writer's sample (:meth:`WriterTable.decide`)."""
+
+    DELIVER = 0   # negotiated with this node, or a ROS 2 writer
+    HOLD = 1      # a micros_rt writer whose negotiation has not answered yet
+    DROP = 2      # another graph's, or a delegating publisher's own writer
+
+
+DELIVER, HOLD, DROP = Admission.DELIVER, Admission.HOLD, Admission.DROP
 #: How long samples of a not-yet-negotiated writer wait for the negotiation's answer.
 HOLD_SECONDS = 5.0
 
@@ -105,7 +115,7 @@ class WriterTable:
             self._by_handle[key] = state
         return state
 
-    def decide(self, state: WriterState) -> int:
+    def decide(self, state: WriterState) -> Admission:
         if state.tag is None or state.negotiated:
             return DELIVER
         if state.tag.get("graph") != self.graph:
