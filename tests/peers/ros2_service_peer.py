@@ -4,7 +4,7 @@
     ros2_service_peer.py call --plan '[{"name": "/mrt/set_bool", "type": "std_srvs/srv/SetBool",
                                         "args": {"data": true}, "count": 100, "timeout": 2, "wait": 10}]'
 
-A step's "echo_check" (for an echoing server, test_msgs/BasicTypes) counts responses that differ from the request in
+A step's "start_at" (time.time() value) holds its calls until then; "echo_check" (for an echoing server, test_msgs/BasicTypes) counts responses that differ from the request in
 the summary's "mismatches". The same server modes and events as tests/peers/ros1_service_peer.py ("silent": never answers; "fail": SetBool
 raises for False, which in rclpy ends the server's spin, so it is not used here). Environment as ros2_peer.py
 (loopback-only Fast DDS, this run's ROS_DOMAIN_ID).
@@ -22,7 +22,7 @@ from typing import Any, Dict, List
 
 import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 
 
 #: set when the peer stops: a "silent" callback returns then, so that the process exits cleanly (Fast DDS
@@ -97,18 +97,20 @@ def call(args: argparse.Namespace, node: Any, executor: Any) -> None:
             continue
         emit("available", label=label, elapsed=time.monotonic() - t0)
         request = fill(cls.Request(), step.get("args", {}))
+        if "start_at" in step:  # several peers start calling together (wall clock, seconds since the epoch)
+            time.sleep(max(0.0, float(step["start_at"]) - time.time()))
         emit("calling", label=label)
         times: List[float] = []
         errors: List[str] = []
         last = None
         count = int(step.get("count", 1))
         mismatches = 0
-        for _ in range(count):
+        failed_at: List[int] = []
+        for i in range(count):
             t0 = time.perf_counter()
             future = client.call_async(request)
-            done = threading.Event()
-            future.add_done_callback(lambda _f: done.set())
-            if done.wait(step.get("timeout") or 10.0) and future.result() is not None:
+            executor.spin_until_future_complete(future, timeout_sec=step.get("timeout") or 10.0)
+            if future.done() and future.result() is not None:
                 times.append(time.perf_counter() - t0)
                 last = fields(future.result())
                 if step.get("echo_check") and last != fields(request):
@@ -116,6 +118,7 @@ def call(args: argparse.Namespace, node: Any, executor: Any) -> None:
             else:
                 client.remove_pending_request(future)
                 errors.append(f"no response within {step.get('timeout') or 10.0} s")
+                failed_at.append(i)
         if count == 1:
             if last is not None:
                 emit("response", label=label, fields=last, elapsed=times[0])
@@ -124,7 +127,7 @@ def call(args: argparse.Namespace, node: Any, executor: Any) -> None:
         else:
             emit("summary", label=label, ok=len(times), errors=errors[:3], n_errors=len(errors),
                  p50_us=percentile(times, 0.5) * 1e6, p99_us=percentile(times, 0.99) * 1e6, last=last,
-                 mismatches=mismatches)
+                 mismatches=mismatches, failed_at=failed_at[:10])
     emit("done")
 
 
@@ -140,31 +143,24 @@ def main() -> None:
     args = parser.parse_args()
     rclpy.init()
     node = rclpy.create_node(f"ros2_service_{args.mode}_{os.getpid()}")
-    executor = MultiThreadedExecutor(num_threads=4)
+    # a server runs its callbacks on several threads (a "silent" one blocks only itself); a client waits for each
+    # answer with spin_until_future_complete on one thread, as rclpy's examples do
+    executor = MultiThreadedExecutor(num_threads=4) if args.mode == "serve" else SingleThreadedExecutor()
     executor.add_node(node)
-    finished = threading.Event()
-
-    def work() -> None:
-        try:
-            if args.mode == "serve":
-                serve(args, node)
-                STOP.wait(args.seconds)
-                emit("done")
-            else:
-                call(args, node, executor)
-        finally:
-            finished.set()
-
-    # the executor spins in the main thread (a clean exit there lets Fast DDS remove its /dev/shm segments)
-    threading.Thread(target=work, daemon=True).start()
     try:
-        while not finished.is_set():
-            executor.spin_once(timeout_sec=0.1)
+        if args.mode == "serve":
+            serve(args, node)
+            end = time.monotonic() + args.seconds
+            while time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.1)
+            emit("done")
+        else:
+            call(args, node, executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        STOP.set()
-        executor.shutdown(timeout_sec=1.0)
+        STOP.set()  # a "silent" callback returns now, so that the process exits cleanly (Fast DDS then
+        executor.shutdown(timeout_sec=1.0)  # removes its shared-memory segments)
         node.destroy_node()
         rclpy.try_shutdown()
 
