@@ -22,7 +22,7 @@ from typing import Any, Dict, List
 
 import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 
 
 #: set when the peer stops: a "silent" callback returns then, so that the process exits cleanly (Fast DDS
@@ -109,7 +109,9 @@ def call(args: argparse.Namespace, node: Any, executor: Any) -> None:
         for i in range(count):
             t0 = time.perf_counter()
             future = client.call_async(request)
-            executor.spin_until_future_complete(future, timeout_sec=step.get("timeout") or 10.0)
+            done = threading.Event()
+            future.add_done_callback(lambda _f: done.set())
+            done.wait(step.get("timeout") or 10.0)
             if future.done() and future.result() is not None:
                 times.append(time.perf_counter() - t0)
                 last = fields(future.result())
@@ -143,24 +145,34 @@ def main() -> None:
     args = parser.parse_args()
     rclpy.init()
     node = rclpy.create_node(f"ros2_service_{args.mode}_{os.getpid()}")
-    # a server runs its callbacks on several threads (a "silent" one blocks only itself); a client waits for each
-    # answer with spin_until_future_complete on one thread, as rclpy's examples do
-    executor = MultiThreadedExecutor(num_threads=4) if args.mode == "serve" else SingleThreadedExecutor()
+    # callbacks on several threads (a "silent" server callback blocks only itself); a client's calls are made
+    # from a worker thread and wait for their future's done callback: rclpy's spin_until_future_complete took
+    # ~50 ms per call here (p50 of 1,000 calls against ~2 ms this way)
+    executor = MultiThreadedExecutor(num_threads=4)
     executor.add_node(node)
+    finished = threading.Event()
+
+    def work() -> None:
+        try:
+            if args.mode == "serve":
+                serve(args, node)
+                STOP.wait(args.seconds)
+                emit("done")
+            else:
+                call(args, node, executor)
+        finally:
+            finished.set()
+
+    # the executor spins in the main thread: a clean exit there lets Fast DDS remove its /dev/shm segments
+    threading.Thread(target=work, daemon=True).start()
     try:
-        if args.mode == "serve":
-            serve(args, node)
-            end = time.monotonic() + args.seconds
-            while time.monotonic() < end:
-                executor.spin_once(timeout_sec=0.1)
-            emit("done")
-        else:
-            call(args, node, executor)
+        while not finished.is_set():
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        STOP.set()  # a "silent" callback returns now, so that the process exits cleanly (Fast DDS then
-        executor.shutdown(timeout_sec=1.0)  # removes its shared-memory segments)
+        STOP.set()  # a "silent" callback returns now
+        executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
         rclpy.try_shutdown()
 
