@@ -86,7 +86,8 @@ quiet "bytecode compile" "$VENV/bin/python" -m compileall -q -j 0 micros_rt
 
 # ---------------------------------------------------------------- .venv-ros2 (rclpy, NO system site packages)
 VENV2=.venv-ros2
-ROS2_PACKAGES=("ros-jazzy-rclpy[fastrtps]" ros-jazzy-std-msgs ros-jazzy-geometry-msgs ros-jazzy-sensor-msgs)
+ROS2_PACKAGES=("ros-jazzy-rclpy[fastrtps]" ros-jazzy-std-msgs ros-jazzy-geometry-msgs ros-jazzy-sensor-msgs
+               ros-jazzy-std-srvs ros-jazzy-test-msgs)
 # Check inside the same loopback-only environment the tests use: init rclpy and create a node.
 ros2_ok() {
     [[ -x "$VENV2/bin/python" ]] || return 1
@@ -96,7 +97,7 @@ ros2_ok() {
         ROS_DOMAIN_ID=$((201 + $$ % 30)) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST \
         FASTRTPS_DEFAULT_PROFILES_FILE="$REPO_ROOT/tests/peers/fastdds_loopback.xml" \
         timeout 60 "$VENV2/bin/python" -c '
-import rclpy, std_msgs.msg, geometry_msgs.msg, sensor_msgs.msg
+import rclpy, std_msgs.msg, geometry_msgs.msg, sensor_msgs.msg, std_srvs.srv, test_msgs.srv
 rclpy.init()
 n = rclpy.create_node("micros_rt_setup_check")
 n.destroy_node()
