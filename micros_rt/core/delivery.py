@@ -87,11 +87,11 @@ class Inbox:
     def _wait_shm(self, timeout: float) -> None:
         """On the delivery thread: attach new links, let go of closed ones, then wait on all of them."""
         from ..transports.shm.channel import wake_events
-        from ..transports.shm.host import iceoryx2
+        from ..transports.shm.host import iceoryx2, wait_set
 
         iox2 = iceoryx2()
         if self._iox is None:
-            waitset = iox2.WaitSetBuilder.new().create(iox2.ServiceType.Ipc)
+            waitset = wait_set()
             listener, notifier = wake_events()
             guard = waitset.attach_notification(listener)
             self._iox = (waitset, listener, notifier, guard, iox2.Duration.from_secs_f64)

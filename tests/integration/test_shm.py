@@ -10,6 +10,7 @@ import os
 import pwd
 import re
 import shutil
+import signal
 import subprocess
 import tempfile
 import time
@@ -73,6 +74,25 @@ def test_shm_tcpros_and_dds_on_one_topic_each_message_once(ros_master: harness.R
     assert info.returncode == 0, info.stderr
     assert re.search(r"/mrt_\w+ -> /mrt_\w+: SHM", info.stdout), info.stdout
     assert re.search(r"-> /stock_listener\w*: TCPROS", info.stdout), info.stdout
+
+
+def test_ctrl_c_stops_a_shm_node_at_once_while_its_peer_runs(ros_master: harness.RosMaster,
+                                                            spawn: harness.Spawner) -> None:
+    # iceoryx2's wait set took SIGINT and SIGTERM for itself: a listener whose delivery thread waited on it ran
+    # on after Ctrl-C until SIGKILL (every test_shm teardown took 10 s), which left its shared memory behind
+    env = shm_env(ros_master)
+    listener = spawn(mrt("listen", "--topic", "/shm/ctrl_c", "--duration", T), env, name="ctrl_c_listener")
+    listener.wait_for("ready", T)
+    talker = spawn(mrt("talk", "--topic", "/shm/ctrl_c", "--count", 100000, "--rate", 50, "--linger", T), env)
+    listener.wait_for_count("recv", 10, T)
+    assert set(transports(listener)) == {"SHM"}
+    t0 = time.monotonic()
+    listener.proc.send_signal(signal.SIGINT)
+    listener.proc.wait(T)
+    stopped = time.monotonic() - t0
+    print(f"SHM listener stopped {stopped:.2f} s after SIGINT, exit code {listener.proc.returncode}")
+    assert listener.proc.returncode == 0 and stopped < 5.0, (listener.proc.returncode, stopped)
+    assert talker.alive()  # and its publisher goes on
 
 
 def test_order_by_sending_time_on_shm(ros_master: harness.RosMaster, spawn: harness.Spawner) -> None:

@@ -13,7 +13,7 @@ import os
 import threading
 from typing import Any, Mapping, Optional
 
-__all__ = ["MIN_FREE_BYTES", "cleanup_dead_nodes", "close_node", "process_alive", "host_identity", "iceoryx2", "shm_node", "unavailable_reason"]
+__all__ = ["MIN_FREE_BYTES", "cleanup_dead_nodes", "close_node", "process_alive", "host_identity", "iceoryx2", "shm_node", "unavailable_reason", "wait_set"]
 
 #: ``/dev/shm`` with less room than this is not used (a full tmpfs makes iceoryx2 fail mid-stream).
 MIN_FREE_BYTES = 64 << 20
@@ -109,12 +109,22 @@ def shm_node() -> Any:
     with _lock:
         if _node is None:
             iox2 = _module
-            builder = iox2.NodeBuilder.new()
-            mode = getattr(iox2.SignalHandlingMode, "Disabled", None)
-            if mode is not None:
-                builder = builder.signal_handling_mode(mode)  # SIGINT/SIGTERM stay rospy's
-            _node = builder.create(iox2.ServiceType.Ipc)
+            _node = _without_signal_handling(iox2.NodeBuilder.new()).create(iox2.ServiceType.Ipc)
         return _node
+
+
+def _without_signal_handling(builder: Any) -> Any:
+    """An iceoryx2 builder that leaves SIGINT/SIGTERM to rospy: by default iceoryx2's node and wait set install
+    handlers of their own that take the signal (a node then kept running after Ctrl-C until SIGKILL, which left
+    its shared memory behind)."""
+    mode = getattr(iceoryx2().SignalHandlingMode, "Disabled", None)
+    return builder.signal_handling_mode(mode) if mode is not None else builder
+
+
+def wait_set() -> Any:
+    """An iceoryx2 wait set (for a delivery thread) that leaves SIGINT/SIGTERM to rospy."""
+    iox2 = iceoryx2()
+    return _without_signal_handling(iox2.WaitSetBuilder.new()).create(iox2.ServiceType.Ipc)
 
 
 def process_alive(pid: int) -> bool:
