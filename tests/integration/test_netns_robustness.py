@@ -66,7 +66,10 @@ def stream(hosts: Hosts, spawn: harness.Spawner, topic: str, count: int, rate: f
 def test_reliable_delivers_everything_in_order_through_30_percent_loss(lossy_pair: Hosts,
                                                                        spawn: harness.Spawner) -> None:
     t0 = time.monotonic()
-    s = stream(lossy_pair, spawn, "/lossy_reliable", 10_000, 1000)
+    # the listener waits 45 s of silence (not 15) before it reports: at 30 % loss both ways, Cyclone's repair of
+    # the last samples can pause that long when heartbeats and acknowledgements are lost in a row (a full run
+    # here: 9,806 of 10,000 when the listener gave up after 15 s); a writer that really lost data still fails
+    s = stream(lossy_pair, spawn, "/lossy_reliable", 10_000, 1000, recv_extra=("--idle", 45))
     print(f"\nreliable, 30% UDP loss both ways: {s['distinct']}/10000 delivered, {s['duplicates']} duplicates, "
           f"{s['out_of_order']} out of order, {time.monotonic() - t0:.1f} s")
     assert s["transports"] == ["DDS"]
