@@ -268,8 +268,8 @@ def main() -> int:
                 pub.publish(fill(data_class(), text, i, args.stamp, args.clock_offset))
             emit("sent", seq=i, data=text, connections=pub.get_num_connections())
             next_t = start + (i + 1) * period
-            while time.monotonic() < next_t:
-                time.sleep(min(0.005, next_t - time.monotonic()) if next_t > time.monotonic() else 0)
+            while (left := next_t - time.monotonic()) > 0:
+                time.sleep(min(0.005, left))
         end = time.monotonic() + args.linger
         while time.monotonic() < end and not micros_rt.is_shutdown():
             time.sleep(0.02)
