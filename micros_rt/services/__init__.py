@@ -29,6 +29,7 @@ __all__ = [
     "Ros2Unavailable",
     "advertise_service",
     "service_client",
+    "ros2_gateway",
     "close_gateway",
     "dds_service_topics",
     "srv_mapping",
@@ -37,6 +38,13 @@ __all__ = [
 
 def _process_gateway() -> Ros2Gateway:
     return _gateway.gateway(patches.caller_id())
+
+
+def ros2_gateway() -> Ros2Gateway:
+    """This process's ROS 2 helper, started on first use (:class:`Ros2Unavailable`, in words, when it cannot be):
+    for a program that serves or calls services on the ROS 2 side only, with its own ROS 1 side (the relay's
+    ``ros2:`` section). ``advertise(name, ros2_type, handler)``, ``prepare_client``, ``server_ready``, ``call``."""
+    return _process_gateway()
 
 
 def advertise_service(resolved_name: str, srv_class: Any, handler: Callable[[Any], Any], *,

@@ -19,7 +19,7 @@ import os
 import json
 import sys
 import threading
-from typing import Any, List
+from typing import Any, Dict, List, Optional
 
 from ...cli import CommandError
 
@@ -77,9 +77,11 @@ def main(argv: List[str]) -> int:
     priorities = export_priorities(config)
     split = len(priorities) > 1 and not args.one_process and args.exports_of is None
     if args.check:
+        ros2_out = sum(1 for e in config.ros2 if e.direction == "export")
         print(f"{args.config}: OK: graph {config.graph}, {len(config.exports)} export rules, "
               f"{len(config.imports)} imports"
-              + (f"; exports in {len(priorities)} processes ({', '.join(p.name for p in priorities)})" if split else ""))
+              + (f"; exports in {len(priorities)} processes ({', '.join(p.name for p in priorities)})" if split else "")
+              + (f"; ROS 2: {ros2_out} exports, {len(config.ros2) - ros2_out} imports" if config.ros2 else ""))
         return 0
 
     import micros_rt
@@ -92,7 +94,12 @@ def main(argv: List[str]) -> int:
         # only exports below HIGH cross the link from here: keep what this process queues in it short
         # (before init_node starts DDS; a value the user set stays)
         os.environ.setdefault("MICROS_RT_SEND_BUFFER", str(send_buffer_for(config.link_bandwidth)))
-    micros_rt.init_node(args.name or f"relay_{config.graph}", argv=[sys.argv[0], *ros_args])
+    profile = _ros2_profile(config) if args.exports_of is None else None
+    try:
+        micros_rt.init_node(args.name or f"relay_{config.graph}", argv=[sys.argv[0], *ros_args], qos_profile=profile)
+    finally:
+        if profile is not None:
+            os.unlink(profile)
     node = micros_rt.node_info().name
     if args.exports_of is not None:   # a child: one priority's exports, nothing else
         share = Share(exports=frozenset([int(TransportPriority.parse(args.exports_of))]), imports=False,
@@ -132,6 +139,40 @@ def main(argv: List[str]) -> int:
             _emit("stats", **(children.merge(relay.snapshot()) if children else relay.snapshot()))
     micros_rt.shutdown("relay stopped")
     return 0
+
+
+def _ros2_profile(config: Any) -> Optional[str]:
+    """A QoS profile (a temporary file, read by ``init_node``) that keeps the ROS 1 publications of ``ros2:``
+    imports off DDS: ROS 2 subscribers read the original publisher, not a second copy from the relay. The
+    profile ``MICROS_RT_QOS_PROFILE`` names, if any, is kept and extended."""
+    import tempfile
+
+    import yaml
+
+    import micros_rt
+
+    names = sorted({e.ros1_name for e in config.ros2 if e.direction == "import"})
+    if not names:
+        return None
+    data: Dict[str, Any] = {}
+    given = os.environ.get("MICROS_RT_QOS_PROFILE") or ""
+    if given:
+        try:
+            micros_rt.QoSProfile.load(given)   # its errors name its own file and line
+            with open(given, encoding="utf-8") as f:
+                data = yaml.safe_load(f) or {}
+        except (OSError, yaml.YAMLError, micros_rt.MicrosRtError) as exc:
+            raise CommandError(f"{given} (MICROS_RT_QOS_PROFILE): {exc}") from None
+    publishers = data.setdefault("publishers", {}) or {}
+    data["publishers"] = publishers
+    for name in names:
+        entry = publishers.get(name) or {}
+        entry["transport_hints"] = ["TCPROS"]
+        publishers[name] = entry
+    fd, path = tempfile.mkstemp(prefix="micros_rt_relay_profile_", suffix=".yaml")
+    with os.fdopen(fd, "w") as f:
+        yaml.safe_dump(data, f)
+    return path
 
 
 if __name__ == "__main__":

@@ -16,6 +16,9 @@ the line and the key.
     import_services:                  # other graphs' services, offered in this graph
       /robot_b/add_two_ints: {timeout: 5, as: /b/add_two_ints}
     link_bandwidth: 40Mbit            # the slow link the exports cross (optional; see below)
+    ros2:                             # between this graph and ROS 2 (same DDS domain), names unchanged
+      export: {/chatter: {}, /set_flag: {}}          # ROS 1 topics or services, offered to ROS 2
+      import: {/ros2_chatter: {}, /ros2_trigger: {as: /trigger}}   # ROS 2 ones, offered in this graph
 
 An export's options are :class:`~micros_rt.AdvertiseQoSOptions` keys (the DDS writer's QoS on the link) plus
 ``max_rate`` (Hz, applied before the link: newer messages within 1/max_rate of the last one sent are not
@@ -28,10 +31,16 @@ exports cross. The relay process that carries only exports below HIGH then asks 
 (:func:`send_buffer_for`): what it has queued in the link never exceeds about twice that, so HIGH exports
 (another process, another socket) wait at most a few milliseconds behind it on a link that does not honour
 DSCP.
+
+``ros2:`` entries (:class:`Ros2Entry`) name a topic or a service, which the relay finds out at run time (see
+:mod:`.ros2`). An ``export`` entry takes the export options above plus ``as`` (its ROS 2 name) and ``timeout``
+(seconds a service call may take); an ``import`` entry the import options plus ``timeout``. ``latch`` left out
+follows the other side (a latching ROS 1 publisher, a transient_local ROS 2 writer).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import re
@@ -47,7 +56,7 @@ from ...qos.topic_rules import TopicPattern
 from ...qos.yamlconfig import (compose, expect_mapping, is_null, location, mapping_items, node_value, parse_qos_options,
                                sub_mapping)
 
-__all__ = ["ExportRule", "ImportRule", "RelayConfig", "RelayConfigError", "ServiceImport", "load_config",
+__all__ = ["ExportRule", "ImportRule", "RelayConfig", "RelayConfigError", "Ros2Entry", "ServiceImport", "load_config",
            "parse_config", "send_buffer_for"]
 
 _GRAPH_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
@@ -88,6 +97,32 @@ class ServiceImport:
 
 
 @dataclass(frozen=True)
+class Ros2Entry:
+    """One entry of the ``ros2:`` section: a topic or a service (decided at run time) carried one way between
+    this graph and ROS 2."""
+
+    direction: str                        # "export" (ROS 1 -> ROS 2) or "import" (ROS 2 -> ROS 1)
+    name: str                             # the key: a ROS 1 name (export) or a ROS 2 name (import)
+    target: str                           # its name on the other side (``as``, else the same)
+    where: str                            # <file>:<line> of the key, for messages at run time
+    export_options: AdvertiseQoSOptions = field(default_factory=AdvertiseQoSOptions)
+    import_options: Optional[SubscribeQoSOptions] = None
+    max_rate: float = math.inf
+    queue_size: Optional[int] = DEFAULT_QUEUE_SIZE
+    latch: Optional[bool] = None          # None: as the other side's publisher/writer is
+    timeout: float = 10.0                 # seconds a forwarded service call may take
+    topic_keys: Tuple[str, ...] = ()      # options given that only a topic has (said when it is a service)
+
+    @property
+    def ros1_name(self) -> str:
+        return self.name if self.direction == "export" else self.target
+
+    @property
+    def ros2_name(self) -> str:
+        return self.target if self.direction == "export" else self.name
+
+
+@dataclass(frozen=True)
 class RelayConfig:
     graph: str
     exports: Tuple[ExportRule, ...]
@@ -96,6 +131,7 @@ class RelayConfig:
     export_services: Tuple[str, ...] = ()
     import_services: Tuple[ServiceImport, ...] = ()
     link_bandwidth: Optional[float] = None   #: bits per second of the link the exports cross, if given
+    ros2: Tuple[Ros2Entry, ...] = ()         #: the ``ros2:`` section's entries, exports first
 
     def outside_name(self, topic: str) -> str:
         """The name an exported ``topic`` has outside this graph: ``/<graph><topic>``."""
@@ -136,6 +172,7 @@ def _parse(root: yaml.Node, source: str) -> RelayConfig:
     export_services: List[str] = []
     service_nodes: List[Tuple[yaml.ScalarNode, yaml.Node]] = []
     link_bandwidth: Optional[float] = None
+    ros2_node: Optional[yaml.Node] = None
     for key_node, body in mapping_items(root, source, ""):
         key = key_node.value
         if key == "graph":
@@ -163,9 +200,11 @@ def _parse(root: yaml.Node, source: str) -> RelayConfig:
                 link_bandwidth = parse_bandwidth(node_value(body) if isinstance(body, yaml.ScalarNode) else body)
             except ValueError as exc:
                 raise RelayConfigError(f"{location(source, body)}: link_bandwidth: {exc}") from None
+        elif key == "ros2":
+            ros2_node = body
         else:
             raise RelayConfigError(f"{location(source, key_node)}: unknown key {key!r}; expected 'graph', 'export', "
-                                   f"'import', 'export_services', 'import_services', 'link_bandwidth'")
+                                   f"'import', 'export_services', 'import_services', 'link_bandwidth', 'ros2'")
     if graph is None:
         raise RelayConfigError(f"{source}:1: graph: missing; name this graph (e.g. 'graph: robot_a'): exported "
                                f"topics are /<graph>/<topic> outside it")
@@ -182,8 +221,94 @@ def _parse(root: yaml.Node, source: str) -> RelayConfig:
                                    f"both published as {incoming.local}")
         locals_seen[incoming.local] = incoming.outside
     services = tuple(_service_import(k, v, source, graph) for k, v in service_nodes)
+    ros2 = _ros2_section(ros2_node, source) if ros2_node is not None else ()
+    for entry in ros2:
+        if entry.direction == "import" and entry.ros1_name in locals_seen:
+            raise RelayConfigError(f"{entry.where}: ros2.import[{entry.name!r}]: {entry.ros1_name} is also what "
+                                   f"the import of {locals_seen[entry.ros1_name]} publishes in this graph; give one "
+                                   f"another name with 'as:'")
     return RelayConfig(graph, tuple(exports), tuple(imports), source, tuple(export_services), services,
-                       link_bandwidth)
+                       link_bandwidth, ros2)
+
+
+_ROS2_EXPORT_KEYS = ("as", "max_rate", "queue_size", "latch", "timeout")
+_ROS2_IMPORT_KEYS = ("as", "queue_size", "latch", "timeout")
+
+
+def _ros2_section(node: yaml.Node, source: str) -> Tuple[Ros2Entry, ...]:
+    if is_null(node):
+        return ()
+    expect_mapping(node, source, "ros2", "a mapping with 'export' and/or 'import'")
+    entries: List[Ros2Entry] = []
+    for key_node, body in mapping_items(node, source, "ros2"):
+        direction = key_node.value
+        if direction not in ("export", "import"):
+            raise RelayConfigError(f"{location(source, key_node)}: ros2.{direction}: unknown key; expected 'export' "
+                                   f"(ROS 1 topics and services offered to ROS 2) or 'import' (ROS 2 ones offered "
+                                   f"in this graph)")
+        if is_null(body):
+            continue
+        expect_mapping(body, source, f"ros2.{direction}", "a mapping of topic or service names to options")
+        entries += [_ros2_entry(direction, k, v, source) for k, v in mapping_items(body, source, f"ros2.{direction}")]
+    entries.sort(key=lambda e: e.direction != "export")
+    seen: Dict[Tuple[str, str], Ros2Entry] = {}
+    for entry in entries:
+        for side, name in (("ROS 1", entry.ros1_name), ("ROS 2", entry.ros2_name)):
+            other = seen.get((side, name))
+            if other is not None:
+                raise RelayConfigError(f"{entry.where}: ros2.{entry.direction}[{entry.name!r}]: {name} ({side} side) "
+                                       f"is also the name of ros2.{other.direction}[{other.name!r}] ({other.where}); a "
+                                       f"name is carried one way only, so nothing goes back where it came from")
+            seen[(side, name)] = entry
+    return tuple(entries)
+
+
+def _ros2_entry(direction: str, key_node: yaml.ScalarNode, body: yaml.Node, source: str) -> Ros2Entry:
+    name = key_node.value
+    path = f"ros2.{direction}[{name!r}]"
+    where = location(source, key_node)
+    if not isinstance(name, str) or not _TOPIC_NAME.match(name):
+        raise RelayConfigError(f"{where}: ros2.{direction}: {name!r} is not a global topic or service name (e.g. "
+                               f"/chatter); globs are not accepted here")
+    own = _ROS2_EXPORT_KEYS if direction == "export" else _ROS2_IMPORT_KEYS
+    mine, qos_node = _split(body, source, path, own)
+    target = name
+    if "as" in mine:
+        node, value = mine["as"]
+        if not isinstance(value, str) or not _TOPIC_NAME.match(value):
+            raise RelayConfigError(f"{location(source, node)}: {path}.as: {value!r} is invalid: expected a global "
+                                   f"name (e.g. /robot/chatter)")
+        target = value
+    timeout = 10.0
+    if "timeout" in mine:
+        node, value = mine["timeout"]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+            raise RelayConfigError(f"{location(source, node)}: {path}.timeout: {value!r} is invalid: expected "
+                                   f"seconds, a number above 0")
+        timeout = float(value)
+    latch: Optional[bool] = _flag(mine, "latch", source, path) if "latch" in mine else None
+    given = [k.value for k, _v in qos_node.value] if isinstance(qos_node, yaml.MappingNode) else []
+    topic_keys = tuple(k for k in ("max_rate", "queue_size", "latch") if k in mine) + tuple(given)
+    if direction == "export":
+        max_rate = math.inf
+        if "max_rate" in mine:
+            node, value = mine["max_rate"]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+                raise RelayConfigError(f"{location(source, node)}: {path}.max_rate: {value!r} is invalid: expected "
+                                       f"messages per second, a number above 0")
+            max_rate = float(value)
+        options = parse_qos_options(AdvertiseQoSOptions, qos_node, source, path)
+        return Ros2Entry("export", name, target, where, export_options=options, max_rate=max_rate,
+                         queue_size=_queue_size(mine, source, path), latch=latch, timeout=timeout,
+                         topic_keys=topic_keys)
+    sub: Optional[SubscribeQoSOptions] = None
+    if given:
+        sub = parse_qos_options(SubscribeQoSOptions, qos_node, source, path)
+        if "ordered_by_sending_timestamp" not in given:
+            # ROS 2 writers offer BY_RECEPTION_TIMESTAMP: a BY_SOURCE reader would never match them
+            sub = dataclasses.replace(sub, ordered_by_sending_timestamp=False)
+    return Ros2Entry("import", name, target, where, import_options=sub, queue_size=_queue_size(mine, source, path),
+                     latch=latch, timeout=timeout, topic_keys=topic_keys)
 
 
 def _service_names(node: yaml.Node, source: str) -> List[str]:

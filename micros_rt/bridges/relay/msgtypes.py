@@ -39,7 +39,7 @@ from micros_rt.transports.dds.types import register_message_classes
 from .services import ServiceCallError, encode_header, read_header
 
 __all__ = ["TypeLearningError", "class_from_definition", "definition_field", "installed_class",
-           "learn_from_publisher", "raw_service_class"]
+           "learn_from_publisher", "publisher_header", "raw_service_class"]
 
 _lock = threading.Lock()
 _built: Dict[Tuple[str, str], Type[genpy.Message]] = {}   # (type, md5) -> class built at run time
@@ -123,21 +123,28 @@ def class_from_definition(type_name: str, md5: str, definition: str, *,
 def learn_from_publisher(master: Any, topic: str, *, caller_id: str, timeout: float = 5.0) -> Type[genpy.Message]:
     """The class of ``topic``'s type, built from the definition one of its publishers sends (``master``:
     ``rospy.get_master()``)."""
+    header = publisher_header(master, topic, caller_id=caller_id, timeout=timeout)
+    return class_from_definition(header.get("type", ""), header.get("md5sum", ""),
+                                 header.get("message_definition", ""))
+
+
+def publisher_header(master: Any, topic: str, *, caller_id: str, timeout: float = 5.0,
+                     skip: Tuple[str, ...] = ()) -> Dict[str, str]:
+    """The TCPROS connection header of one publisher of ``topic`` (``type``, ``md5sum``,
+    ``message_definition``, ``latching``, ...), asked as ``rostopic`` does; publishers named in ``skip`` (and
+    ``caller_id``) are not asked. :class:`TypeLearningError` when none answers."""
     code, msg, state = master.getSystemState()
     if code != 1:
         raise TypeLearningError(f"the master did not answer getSystemState: {msg}")
     publishers: List[str] = next((list(nodes) for name, nodes in state[0] if name == topic), [])
     failures = []
     for node in publishers:
-        if node == caller_id:
+        if node == caller_id or node in skip:
             continue
         try:
-            header = _publisher_header(master, node, topic, caller_id, timeout)
+            return _publisher_header(master, node, topic, caller_id, timeout)
         except (TypeLearningError, ServiceCallError) as exc:
             failures.append(f"{node}: {exc}")
-            continue
-        return class_from_definition(header.get("type", ""), header.get("md5sum", ""),
-                                     header.get("message_definition", ""))
     raise TypeLearningError(f"no publisher of {topic} gave its type's definition"
                             + (f" ({'; '.join(failures)})" if failures else " (none is registered)"))
 

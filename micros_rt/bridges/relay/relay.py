@@ -17,6 +17,9 @@ DDS back end, the lane and the node's info section) and the DDS transport:
   (``Publisher.delegate_dds``) and read it straight, with no hop through this process, unless its QoS cannot
   serve them (then this publication's DDS writer does).
 
+- **ros2**: the ``ros2:`` section's topics and services between this graph and ROS 2 nodes of the DDS domain
+  (:mod:`.ros2`), set up by the same poll loop, carried by the first process.
+
 Loops: an import never takes its own graph's exports (``relay=`` must name the import's origin graph, and
 the configuration refuses ``/<own graph>/...``), and an export drops messages this relay published itself
 (an import re-exported under another name would otherwise go round), counted as ``looped``.
@@ -51,6 +54,7 @@ from micros_rt.transports.base import EndpointSpec, PushReader, TransportWriter
 from .config import ExportRule, ImportRule, RelayConfig, ServiceImport
 from .msgtypes import (TypeLearningError, class_from_definition, definition_field, installed_class, learn_from_publisher,
                        raw_service_class)
+from .ros2 import GraphState, Ros2Side
 from .services import ANNOUNCE_TOPIC, ServiceCallError, call_service, probe_service
 
 __all__ = ["Relay", "Share"]
@@ -312,6 +316,8 @@ class Relay:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="micros_rt relay", daemon=True)
         self._lock = threading.Lock()
+        #: the ``ros2:`` section (the first process carries it, with the imports)
+        self.ros2 = Ros2Side(self, config.ros2) if config.ros2 and share.imports else None
 
     def start(self) -> "Relay":
         register_info_section("relay", self.info)   # what the micros-rt tools show of this relay
@@ -338,6 +344,7 @@ class Relay:
         """One round: export topics that appeared, import topics whose exporter was discovered."""
         local_types = dict(rospy.get_published_topics())
         import_names = {rule.local for rule in self.config.imports}
+        import_names |= {e.ros1_name for e in self.config.ros2 if e.direction == "import"}
         for topic, type_name in sorted(local_types.items()):
             if topic in self.exports or topic in import_names:
                 continue
@@ -355,6 +362,8 @@ class Relay:
             self._try(name, lambda: self._export_service(name))
         if self.config.import_services:
             self._import_services()
+        if self.ros2 is not None:
+            self.ros2.poll(GraphState.ask(rospy.get_master()), self._try)
 
     def _try(self, topic: str, make: Callable[[], Optional[str]]) -> None:
         try:
@@ -489,18 +498,24 @@ class Relay:
         with self._lock:
             exports, imports = list(self.exports.values()), list(self.imports.values())
             services: List[Any] = [*self.service_exports.values(), *self.service_imports.values()]
-        return {"graph": self.config.graph, "exports": [e.stats() for e in exports],
-                "imports": [i.stats() for i in imports],
-                "services": [s.stats() for s in services], "not_carried": dict(self._refused)}
+        snapshot = {"graph": self.config.graph, "exports": [e.stats() for e in exports],
+                    "imports": [i.stats() for i in imports],
+                    "services": [s.stats() for s in services], "not_carried": dict(self._refused)}
+        if self.ros2 is not None:
+            snapshot["ros2"] = self.ros2.stats()
+        return snapshot
 
     def info(self) -> Dict[str, Any]:
         """The ``relay`` section of this node's ``microsRtInfo``: the graph, this process's place among the
         relay's processes, and what it carries (each export and import with its QoS and counters)."""
         with self._lock:
             exports, imports = list(self.exports.values()), list(self.imports.values())
-        return {"graph": self.config.graph, "node": self.node, "parent": self.share.parent,
+        info = {"graph": self.config.graph, "node": self.node, "parent": self.share.parent,
                 "children": list(self.share.children), "exports": [e.info() for e in exports],
                 "imports": [i.info() for i in imports], "not_carried": dict(self._refused)}
+        if self.ros2 is not None:
+            info["ros2"] = self.ros2.stats()
+        return info
 
     def close(self) -> None:
         unregister_info_section("relay")
@@ -514,6 +529,8 @@ class Relay:
             self.imports.clear()
             self.service_exports.clear()
             self.service_imports.clear()
+        if self.ros2 is not None:
+            self.ros2.close()
         for endpoint in endpoints:
             try:
                 endpoint.close()

@@ -1,0 +1,163 @@
+"""The relay's ``ros2:`` section (issue 35, deliverable 3): stock ROS 1 nodes and ROS 2 nodes through
+``micros-rt relay``, topics and services both ways, latched topics as transient_local both ways, ``/clock``.
+
+Processes (all real, shared by the tests of this file): a rosmaster of its own; ``micros-rt relay`` with the
+minimal configuration of the issue (plus a latched topic each way and ``/clock``);
+tests/peers/stock_relay_peer.py, a stock rospy node (/usr/bin/python3, no micros_rt) that publishes ``/chatter``,
+``/clock`` and the latched ``/ros1_latched``, serves ``/set_flag`` and subscribes to ``/ros2_chatter``;
+tests/peers/ros2_relay_peer.py, an rclpy node (.venv-ros2, Fast DDS on loopback) that publishes ``/ros2_chatter``
+and the transient_local ``/ros2_latched``, serves ``/ros2_trigger`` and subscribes to ``/chatter`` and ``/clock``;
+and the stock ``rostopic`` and ``rosservice`` tools.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+from typing import Any, Callable, Dict, Iterator, List, Optional
+
+import pytest
+
+import harness
+
+pytestmark = pytest.mark.integration
+
+CLI = str(harness.REPO_ROOT / ".venv" / "bin" / "micros-rt")
+ROSSERVICE = "/usr/bin/rosservice"
+
+CONFIG = """\
+graph: robot
+ros2:
+  export: {/chatter: {}, /set_flag: {}, /ros1_latched: {}, /clock: {}}   # ROS 1 topic or service, to ROS 2
+  import: {/ros2_chatter: {}, /ros2_trigger: {}, /ros2_latched: {}}  # ROS 2 topic or service, offered to ROS 1
+"""
+T = 30.0   # generous bound on any one wait (the 2-core machine may be busy)
+
+
+class Setup:
+    def __init__(self, master: harness.RosMaster, relay: harness.Peer, stock: harness.Peer, ros2: harness.Peer,
+                 stock_dir: Path, ros2_dir: Path) -> None:
+        self.master, self.relay, self.stock, self.ros2 = master, relay, stock, ros2
+        self.stock_dir, self.ros2_dir = stock_dir, ros2_dir
+
+    def ros2_entry(self, direction: str, name: str, ready: Callable[[Dict[str, Any]], bool]) -> Dict[str, Any]:
+        """The relay's counters of ``ros2:`` entry ``name`` once ``ready(counters)`` holds."""
+        def match(event: Dict[str, Any]) -> bool:
+            if event.get("event") != "stats":
+                return False
+            return any(e.get("direction") == direction and e.get("name") == name and ready(e)
+                       for e in event.get("ros2", []))
+
+        event = self.relay.wait_for(match, timeout=T)
+        return next(e for e in event["ros2"] if e.get("direction") == direction and e.get("name") == name)
+
+
+@pytest.fixture(scope="module")
+def setup(dds_domain: int, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Setup]:
+    work = tmp_path_factory.mktemp("relay_ros2")
+    master = harness.RosMaster(workdir=work / "master", domain_id=dds_domain)
+    master.start()
+    peers: List[harness.Peer] = []
+    try:
+        config = work / "relay.yaml"
+        config.write_text(CONFIG)
+        stock_dir, ros2_dir = work / "stock", work / "ros2"
+        stock_dir.mkdir()
+        ros2_dir.mkdir()
+        env = dict(master.env)
+        # all three start at once: their start-up (imports, DDS discovery) overlaps
+        relay = harness.Peer([CLI, "relay", "--config", str(config), "--json", "--stats-period", "0.3",
+                              "--poll-period", "0.3"], env, name="relay")
+        peers.append(relay)
+        stock = harness.Peer([harness.STOCK_PYTHON, str(harness.PEERS_DIR / "stock_relay_peer.py"),
+                              "--trigger-dir", str(stock_dir)], env, name="stock_peer")
+        peers.append(stock)
+        ros2 = harness.Peer([harness.ROS2_PYTHON, str(harness.PEERS_DIR / "ros2_relay_peer.py"),
+                             "--trigger-dir", str(ros2_dir)], env, name="ros2_peer")
+        peers.append(ros2)
+        for peer in peers:
+            peer.wait_for("ready", timeout=T)
+        yield Setup(master, relay, stock, ros2, stock_dir, ros2_dir)
+    finally:
+        for peer in reversed(peers):
+            peer.stop()
+        master.cleanup()
+
+
+def _tool(master: harness.RosMaster, tool: str, *args: str, timeout: float = T) -> str:
+    cp = subprocess.run([harness.STOCK_PYTHON, tool, *args], env=master.env, stdin=subprocess.DEVNULL,
+                        capture_output=True, text=True, timeout=timeout)
+    assert cp.returncode == 0, f"{Path(tool).name} {' '.join(args)} exited {cp.returncode}:\n{cp.stdout}\n{cp.stderr}"
+    return cp.stdout
+
+
+def test_topics_both_ways_and_the_stock_tools(setup: Setup) -> None:
+    # ROS 1 -> ROS 2: the stock publisher's /chatter reaches the rclpy subscriber
+    heard = setup.ros2.wait_for(lambda e: e.get("event") == "recv" and e.get("topic") == "/chatter", timeout=T)
+    assert str(heard["data"]).startswith("ros1 ")
+    # /clock is carried (rosgraph_msgs/Clock is ROS 2's too): the stock node's clock, 1000 s + n * 0.1 s
+    tick = setup.ros2.wait_for("clock", timeout=T)
+    assert tick["sec"] >= 1000 and tick["nanosec"] % 100_000_000 == 0, tick
+    # ROS 2 -> ROS 1: the rclpy publisher's /ros2_chatter reaches the stock subscriber
+    heard = setup.stock.wait_for(lambda e: e.get("event") == "recv" and e.get("topic") == "/ros2_chatter", timeout=T)
+    assert str(heard["data"]).startswith("ros2 ")
+    # the imported topic is in the ROS 1 graph, for the stock tools
+    assert "/ros2_chatter" in _tool(setup.master, harness.ROSTOPIC, "list").split()
+    info = _tool(setup.master, harness.ROSTOPIC, "info", "/ros2_chatter")
+    assert "Type: std_msgs/String" in info and "/relay_robot" in info, info
+    echoed = _tool(setup.master, harness.ROSTOPIC, "echo", "-n", "2", "/ros2_chatter")
+    assert echoed.count('data: "ros2 ') == 2, echoed
+    out = setup.ros2_entry("export", "/chatter", lambda e: e.get("sent", 0) >= 5)
+    assert out["kind"] == "topic" and out["as"] == "/chatter" and out["latch"] is False
+    assert out["looped"] == 0 and out["dropped_queue_full"] == 0, out
+    incoming = setup.ros2_entry("import", "/ros2_chatter", lambda e: e.get("published", 0) >= 5)
+    assert incoming["kind"] == "topic" and incoming["refused"] == 0 and incoming["dropped_queue_full"] == 0, incoming
+    # no loops, no doubles: the relay does not publish its export back in ROS 1, nor its import on DDS (ROS 2 sees
+    # one publisher of each: the relay's writer of /chatter, the rclpy node of /ros2_chatter), and each message
+    # arrives once
+    publishers = harness.system_state(setup.master)["publishers"].get("/chatter", [])
+    assert [p for p in publishers if p.startswith("/relay")] == [], publishers
+    seen = setup.ros2.wait_for(lambda e: e.get("event") == "heard" and e.get("n", 0) >= 5, timeout=T)
+    assert seen["ros2_chatter_publishers"] == 1 and seen["chatter_publishers"] == 1, seen
+    for peer, topic in ((setup.ros2, "/chatter"), (setup.stock, "/ros2_chatter")):
+        data = [e["data"] for e in peer.events("recv") if e.get("topic") == topic]
+        assert len(data) == len(set(data)), (topic, data)
+
+
+def test_services_both_ways(setup: Setup) -> None:
+    # a stock `rosservice call` in ROS 1 reaches the rclpy server through the relay
+    answer = _tool(setup.master, ROSSERVICE, "call", "/ros2_trigger")
+    assert "success: True" in answer and "triggered" in answer, answer
+    setup.ros2.wait_for(lambda e: e.get("event") == "served" and e.get("name") == "/ros2_trigger", timeout=T)
+    # an rclpy client in ROS 2 reaches the stock rospy server through the relay
+    (setup.ros2_dir / "call.tmp").write_text(json.dumps({"name": "/set_flag", "count": 5, "data": True}))
+    (setup.ros2_dir / "call.tmp").rename(setup.ros2_dir / "call")
+    called = setup.ros2.wait_for("called", timeout=T)
+    assert called["ok"] == 5, called
+    assert called["last"]["success"] is True and "got True" in called["last"]["message"], called
+    assert setup.stock.wait_for_count("served", 5, timeout=T)
+    out = setup.ros2_entry("export", "/set_flag", lambda e: e.get("calls", 0) >= 5)
+    assert out["kind"] == "service" and out["failed"] == 0 and out["type"] == "std_srvs/SetBool", out
+    incoming = setup.ros2_entry("import", "/ros2_trigger", lambda e: e.get("calls", 0) >= 1)
+    assert incoming["kind"] == "service" and incoming["failed"] == 0 and incoming["type"] == "std_srvs/Trigger"
+
+
+def test_latched_late_joiners_both_ways(setup: Setup) -> None:
+    # the relay holds each latched message before the late subscribers come
+    out = setup.ros2_entry("export", "/ros1_latched", lambda e: e.get("sent", 0) >= 1)
+    assert out["latch"] is True, out
+    incoming = setup.ros2_entry("import", "/ros2_latched", lambda e: e.get("published", 0) >= 1)
+    assert incoming["latch"] is True, incoming
+    (setup.ros2_dir / "late").touch()
+    (setup.stock_dir / "late").touch()
+    late2 = setup.ros2.wait_for("late", timeout=T)
+    late1 = setup.stock.wait_for("late", timeout=T)
+    assert late2["data"] == f"ros1 latched {setup.stock.events('ready')[0]['pid']}", late2
+    assert late1["data"] == f"ros2 latched {setup.ros2.events('ready')[0]['pid']}", late1
+    print(f"late joiners: ROS 2 subscriber of the ROS 1 latched topic {late2['after_ms']:.0f} ms, "
+          f"stock ROS 1 subscriber of the ROS 2 transient_local topic {late1['after_ms']:.0f} ms")
+    assert late2["after_ms"] < 2000 and late1["after_ms"] < 2000, (late2, late1)
+    # and stock `rostopic echo` of the imported latched topic gets it at once
+    echoed = _tool(setup.master, harness.ROSTOPIC, "echo", "-n", "1", "/ros2_latched")
+    assert "ros2 latched" in echoed, echoed
