@@ -26,7 +26,9 @@ class CommandError(Exception):
 #: name -> (module implementing it, one line of help). Order is the order of ``micros-rt --help``.
 SUBCOMMANDS: dict[str, Tuple[str, str]] = {
     "run": ("micros_rt.cli.run", "run an unmodified rospy script with micros_rt underneath"),
-    "topic": ("micros_rt.cli.topic", "show a topic's links (info) or measure its latency (latency)"),
+    "topic": ("micros_rt.cli.topic", "list ROS 1 and ROS 2 topics (list), show a topic's links (info), measure its "
+              "latency (latency)"),
+    "node": ("micros_rt.cli.node", "list ROS 1 and ROS 2 nodes together (list)"),
     "graph": ("micros_rt.cli.graph", "draw the live graph, links coloured by protocol (--png, --dot)"),
     "doctor": ("micros_rt.cli.doctor", "check the master, network, DDS and profile set-up"),
     "profile": ("micros_rt.cli.profile", "check a YAML QoS profile (and what it matches on a live graph)"),

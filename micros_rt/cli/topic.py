@@ -1,5 +1,5 @@
-"""``micros-rt topic``: which protocol and QoS each link of a topic uses (``info``), and its latency
-(``latency``)."""
+"""``micros-rt topic``: the topics of ROS 1 and ROS 2 together (``list``), which protocol and QoS each link of a
+topic uses (``info``), and its latency (``latency``)."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from typing import Any, Dict, List, Optional
 
 from . import CommandError
 from ._args import ArgumentParser, dispatch
+from ._bothgraph import list_main
 from ._graphinfo import Master, resolve_topic, snapshot
 
 __all__ = ["main", "format_info", "info_data", "latency_report", "format_latency"]
@@ -21,7 +22,10 @@ __all__ = ["main", "format_info", "info_data", "latency_report", "format_latency
 
 def main(argv: List[str]) -> int:
     """``micros-rt topic <command> ...``."""
-    return dispatch("micros-rt topic", "a command-line tool for the links and latency of micros_rt topics.", {
+    intro = "a command-line tool for ROS 1 and ROS 2 topics and the links and latency of micros_rt topics."
+    return dispatch("micros-rt topic", intro, {
+        "list": (lambda rest: list_main("micros-rt topic list", "topics", rest),
+                 "list ROS 1 topics (master) and ROS 2 topics (DDS discovery), each marked ROS 1, ROS 2 or ROS 1+2"),
         "info": (info_main, "print every link of a topic: protocol, both sides' QoS, priority, why not DDS"),
         "latency": (latency_main, "measure a topic's rate, latency, drops, deadline and budget misses"),
     }, argv)
