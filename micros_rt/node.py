@@ -402,10 +402,35 @@ class NodeHandle:
 
         return service_client(self.resolve_name(service), srv_class, timeout=timeout, ros2=ros2)
 
+    # actions --------------------------------------------------------------
+    def offer_action_to_ros2(self, name: str, action_class: Any, *, ros2_type: Optional[str] = None,
+                             accept_timeout: float = 5.0) -> "ActionToRos2":
+        """Make the ROS 1 (actionlib) action server at ``name`` reachable by ROS 2 action clients: an rclpy action
+        server of the same name forwards their goals, cancels, feedback and results. ``action_class`` is what
+        actionlib takes (``FibonacciAction``); its ROS 2 type is ``pkg/action/Fibonacci`` unless ``ros2_type`` says
+        otherwise. A goal the ROS 1 server does not acknowledge within ``accept_timeout`` seconds is rejected.
+        See docs/actions.md."""
+        from .actions import offer_action_to_ros2
+
+        return offer_action_to_ros2(self.resolve_name(name), action_class, ros2_type=ros2_type,
+                                    accept_timeout=accept_timeout)
+
+    def offer_ros2_action(self, name: str, action_class: Any, *, ros2_type: Optional[str] = None,
+                          accept_timeout: float = 5.0) -> "ActionFromRos2":
+        """Make the ROS 2 action server of ``name`` reachable by ROS 1 (actionlib) clients: an actionlib server of
+        the same name in this process forwards their goals and cancels to it, and its feedback and results back.
+        A goal the ROS 2 server does not answer within ``accept_timeout`` seconds is rejected in words.
+        See docs/actions.md."""
+        from .actions import offer_ros2_action
+
+        return offer_ros2_action(self.resolve_name(name), action_class, ros2_type=ros2_type,
+                                 accept_timeout=accept_timeout)
+
 
 from typing import TYPE_CHECKING  # noqa: E402  (kept beside the service methods)
 
-if TYPE_CHECKING:  # the services package is imported on first use
+if TYPE_CHECKING:  # the services and actions packages are imported on first use
+    from .actions import ActionFromRos2, ActionToRos2
     from .services import ServiceClient, ServiceServer
 
 

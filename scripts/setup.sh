@@ -29,6 +29,7 @@ APT_PACKAGES=(
     python3-venv tcpdump nftables iproute2 python3-matplotlib python3-numpy
     python3-std-srvs python3-roslaunch python3-rosservice python3-dev gcc
     mosquitto mosquitto-clients libmsgpack-dev graphviz openssl
+    python3-actionlib python3-actionlib-msgs
 )
 
 missing=()
@@ -48,7 +49,7 @@ for exe in /usr/bin/python3 /usr/bin/rosmaster /usr/bin/rostopic /usr/bin/rosnod
     [[ -x "$exe" ]] || die "$exe missing after package install"
 done
 quiet "stock rospy import check" env -u PYTHONPATH -u PYTHONHOME /usr/bin/python3 -c \
-    "import rospy, rosgraph, rostopic, roslaunch, std_msgs.msg, std_srvs.srv, geometry_msgs.msg, sensor_msgs.msg"
+    "import rospy, rosgraph, rostopic, roslaunch, std_msgs.msg, std_srvs.srv, geometry_msgs.msg, sensor_msgs.msg, actionlib, actionlib_msgs.msg"
 
 # ---------------------------------------------------------------- .venv (micros_rt, rospy visible)
 VENV=.venv
@@ -97,7 +98,7 @@ ros2_ok() {
         ROS_DOMAIN_ID=$((201 + $$ % 30)) ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST \
         FASTRTPS_DEFAULT_PROFILES_FILE="$REPO_ROOT/tests/peers/fastdds_loopback.xml" \
         timeout 60 "$VENV2/bin/python" -c '
-import rclpy, std_msgs.msg, geometry_msgs.msg, sensor_msgs.msg, std_srvs.srv, test_msgs.srv
+import rclpy, rclpy.action, std_msgs.msg, geometry_msgs.msg, sensor_msgs.msg, std_srvs.srv, test_msgs.srv, test_msgs.action
 rclpy.init()
 n = rclpy.create_node("micros_rt_setup_check")
 n.destroy_node()

@@ -36,6 +36,14 @@ _log = nonblocking_logger("rosout.micros_rt.services")
 # the helper's frame codes (ros2_helper.py)
 ADVERTISE, UNADVERTISE, CLIENT, READY, CALL, CANCEL, RESPONSE, FAIL = 1, 2, 3, 4, 5, 6, 7, 8
 STATUS, RESULT, ERROR, REQUEST, HELLO = 20, 21, 22, 23, 24
+# actions (micros_rt.actions), micros_rt -> helper: serve a ROS 1 action to ROS 2 (A_SERVE .. A_DONE), reach a
+# ROS 2 action server (A_CLIENT .. A_FORGET)
+A_SERVE, A_UNSERVE, A_VERDICT, A_FEEDBACK, A_DONE, A_CLIENT, A_SEND, A_CANCEL, A_READY, A_FORGET = range(9, 19)
+# helper -> micros_rt, each with {"name": action}: a ROS 2 client's goal and cancel; a ROS 2 server's answers
+G_GOAL, G_CANCEL, G_ACCEPTED, G_FEEDBACK, G_RESULT = range(25, 30)
+#: what an action sink gets when the helper is gone: ``sink(GONE, 0, {"error": words}, b"")``
+GONE = 0
+ACTION_EVENTS = frozenset((G_GOAL, G_CANCEL, G_ACCEPTED, G_FEEDBACK, G_RESULT))
 _HEAD = struct.Struct("<IBIH")
 
 HELPER = Path(__file__).resolve().parent / "ros2_helper.py"
@@ -88,6 +96,8 @@ class _Pending:
 
 #: ``handler(name, request_bytes) -> response_bytes`` for a ROS 2 client's request (raises to fail it)
 Handler = Callable[[bytes], bytes]
+#: ``sink(op, goal_key, meta, body)``: an action's frames from the helper, in order, on the socket's thread
+ActionSink = Callable[[int, int, Dict[str, Any], bytes], None]
 
 
 class Ros2Gateway:
@@ -105,10 +115,17 @@ class Ros2Gateway:
         self._lock = threading.Lock()
         self._send_lock = threading.Lock()
         self._handlers: Dict[str, Handler] = {}
+        self._action_sinks: Dict[str, ActionSink] = {}
+        #: action frames that named no action of this process (counted, never silent)
+        self.unrouted_action_frames = 0
         self._workers = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="micros_rt service")
         self.closed = False
         self._hello = _Pending()
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+        # blocking, whatever socket.setdefaulttimeout() says: rospy sets 60 s once a subscriber has connected
+        # (masterslave.py), which would hand the helper a non-blocking descriptor
+        ours.setblocking(True)
+        theirs.setblocking(True)
         self._sock = ours
         env, scratch = self._helper_env()
         try:
@@ -169,6 +186,9 @@ class Ros2Gateway:
                 if op == REQUEST:
                     self._workers.submit(self._serve, cid, meta.get("name", ""), body)
                     continue
+                if op in ACTION_EVENTS:
+                    self._route_action(op, cid, meta, body)
+                    continue
                 slot = self._hello if op == HELLO else self._pending.pop(cid, None)
                 if slot is not None:
                     slot.meta, slot.body = meta or {"ok": True}, body
@@ -182,10 +202,32 @@ class Ros2Gateway:
     def _fail_all(self, why: str) -> None:
         with self._lock:
             pending, self._pending = self._pending, {}
+            sinks, self._action_sinks = self._action_sinks, {}
         for slot in pending.values():
             slot.meta = {"ok": False, "error": why}
             slot.event.set()
         self._hello.event.set()
+        for name, sink in sinks.items():
+            self._call_sink(name, sink, GONE, 0, {"name": name, "error": why}, b"")
+
+    def _route_action(self, op: int, key: int, meta: Dict[str, Any], body: bytes) -> None:
+        name = str(meta.get("name", ""))
+        sink = self._action_sinks.get(name)
+        if sink is None:
+            self.unrouted_action_frames += 1
+            if self.unrouted_action_frames == 1:
+                _log.warning("micros_rt: the ROS 2 helper sent a frame (op %d) for action %s, which this process "
+                             "does not offer (counted in Ros2Gateway.unrouted_action_frames)", op, name)
+            return
+        self._call_sink(name, sink, op, key, meta, body)
+
+    @staticmethod
+    def _call_sink(name: str, sink: ActionSink, op: int, key: int, meta: Dict[str, Any], body: bytes) -> None:
+        try:
+            sink(op, key, meta, body)
+        except Exception as exc:  # a bridge's bug must not stop the socket's thread
+            _log.error("micros_rt: action %s: handling a frame (op %d) of the ROS 2 helper failed: %s: %s",
+                       name, op, type(exc).__name__, exc)
 
     def _serve(self, rid: int, name: str, body: bytes) -> None:
         handler = self._handlers.get(name)
@@ -262,6 +304,48 @@ class Ros2Gateway:
         if "error" in slot.meta:
             raise RuntimeError(str(slot.meta["error"]))
         return slot.body
+
+    # -- the API the actions use (micros_rt.actions) -------------------------------------------------------------
+    def new_key(self) -> int:
+        """A number for a goal sent to a ROS 2 action server, unique in this process."""
+        return next(self._ids)
+
+    def serve_action(self, name: str, ros2_type: str, sink: ActionSink) -> None:
+        """Host a ROS 2 action server of ``name``: its goals and cancels reach ``sink`` (G_GOAL, G_CANCEL), which
+        answers with :meth:`send_action` (A_VERDICT, A_FEEDBACK, A_DONE)."""
+        self._action_sinks[name] = sink
+        try:
+            self._status(A_SERVE, {"name": name, "type": ros2_type})
+        except Exception:
+            self._action_sinks.pop(name, None)
+            raise
+
+    def action_client(self, name: str, ros2_type: str, sink: ActionSink) -> None:
+        """Create the helper's ROS 2 action client of ``name``: goals go with :meth:`send_action` (A_SEND,
+        A_CANCEL, A_FORGET), the server's answers reach ``sink`` (G_ACCEPTED, G_FEEDBACK, G_RESULT)."""
+        self._action_sinks[name] = sink
+        try:
+            self._status(A_CLIENT, {"name": name, "type": ros2_type})
+        except Exception:
+            self._action_sinks.pop(name, None)
+            raise
+
+    def action_server_ready(self, name: str) -> bool:
+        """Whether the helper's action client of ``name`` has discovered a ROS 2 action server."""
+        return bool(self._status(A_READY, {"name": name}).get("ready"))
+
+    def withdraw_action(self, name: str) -> None:
+        """Stop serving or reaching ``name`` on ROS 2 (goals in flight there are aborted)."""
+        self._action_sinks.pop(name, None)
+        if not self.closed:
+            try:
+                self._status(A_UNSERVE, {"name": name})
+            except Ros2Unavailable:
+                pass
+
+    def send_action(self, op: int, key: int, meta: Dict[str, Any], body: bytes = b"") -> None:
+        """One frame of a goal to the helper; Ros2Unavailable when the helper is gone."""
+        self._send(op, key, meta, body)
 
     def close(self) -> None:
         """Stop the helper (its DDS entities go with it); harmless twice."""

@@ -13,20 +13,26 @@ application, so a Cyclone participant can neither answer a Fast DDS client nor t
 
 Frames, both ways: ``<I`` length of the rest, ``<BIH`` op, call id, meta length, then the meta (UTF-8 JSON)
 and a binary body (a serialized ROS 2 message, CDR with its encapsulation header).
+
+Actions (:mod:`micros_rt.actions`) live on a second node, ``<node>_actions``, spun by a multi-threaded executor of
+their own: an action server's execute callback holds a thread for its goal's life (rclpy 7's executor polls a
+coroutine that awaits a future in a busy loop, so goals do not await), and the service node keeps its single thread.
 """
 
 from __future__ import annotations
 
 import importlib
+import itertools
 import json
 import os
+import queue
 import socket
 import struct
 import sys
 import threading
 import time
 from collections import deque
-from typing import Any, Deque, Dict, Optional, Tuple
+from typing import Any, Deque, Dict, List, Optional, Tuple
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -34,8 +40,22 @@ from rclpy.serialization import deserialize_message, serialize_message
 
 # micros_rt -> helper
 ADVERTISE, UNADVERTISE, CLIENT, READY, CALL, CANCEL, RESPONSE, FAIL = 1, 2, 3, 4, 5, 6, 7, 8
+A_SERVE, A_UNSERVE, A_VERDICT, A_FEEDBACK, A_DONE, A_CLIENT, A_SEND, A_CANCEL, A_READY, A_FORGET = range(9, 19)
 # helper -> micros_rt
 STATUS, RESULT, ERROR, REQUEST, HELLO = 20, 21, 22, 23, 24
+G_GOAL, G_CANCEL, G_ACCEPTED, G_FEEDBACK, G_RESULT = range(25, 30)
+#: ops about goals in flight: handled on the socket's thread (setting up and tearing down go through the executor)
+_GOAL_OPS = (A_VERDICT, A_FEEDBACK, A_DONE, A_SEND, A_CANCEL, A_FORGET)
+#: action_msgs/GoalStatus codes
+_SUCCEEDED, _CANCELED, _ABORTED = 4, 5, 6
+#: threads of the actions' executor: each goal a ROS 2 client has running on a ROS 1 server holds one
+ACTION_THREADS = 16
+#: seconds between the last feedback published and the result: a client that takes both in one batch handles the
+#: result first and drops the feedback after it (rclpy's ActionClient does)
+FEEDBACK_GRACE = 0.02
+#: depth of the feedback publisher of served actions and of the feedback reader of reached ones (rclpy's default
+#: is 10): a burst of feedback, or an executor behind under load, does not overwrite feedback not yet taken
+FEEDBACK_DEPTH = 1000
 
 _HEAD = struct.Struct("<IBIH")
 #: how often pending calls are checked for a server that went away
@@ -43,17 +63,19 @@ _WATCH_PERIOD = 0.2
 
 
 def srv_class(ros2_type: str) -> Any:
-    """``pkg/srv/Name`` -> the rclpy service class; ImportError/AttributeError in words when it is missing."""
+    """``pkg/srv/Name`` (or ``pkg/action/Name``) -> the rclpy class; ImportError/AttributeError in words when it
+    is missing."""
     pkg, kind, name = ros2_type.split("/")
+    what = "action" if kind == "action" else "service"
     try:
         module = importlib.import_module(f"{pkg}.{kind}")
     except ImportError as exc:
         raise ImportError(f"the ROS 2 package {pkg!r} is not installed for {sys.executable} "
-                          f"(needed for the service type {ros2_type})") from exc
+                          f"(needed for the {what} type {ros2_type})") from exc
     try:
         return getattr(module, name)
     except AttributeError:
-        raise AttributeError(f"the ROS 2 package {pkg!r} has no service type {name!r} ({ros2_type})") from None
+        raise AttributeError(f"the ROS 2 package {pkg!r} has no {what} type {name!r} ({ros2_type})") from None
 
 
 class Helper:
@@ -72,6 +94,8 @@ class Helper:
         self.by_response: Dict[int, int] = {}                         # id(response object) -> request id
         self.next_request = 1
         self.node.create_timer(_WATCH_PERIOD, self.watch)
+        self.node_name = node_name
+        self._actions: Optional["Actions"] = None
 
     # -- frames -----------------------------------------------------------------------------------------------
     def send(self, op: int, cid: int, meta: Optional[Dict[str, Any]] = None, body: bytes = b"") -> None:
@@ -95,6 +119,11 @@ class Helper:
                 body = rest[meta_len:]
                 if op in (RESPONSE, FAIL):
                     self.answer(op, cid, meta, body)  # no executor needed: send_response is thread-safe
+                elif op in _GOAL_OPS:
+                    try:
+                        self.actions().goal_op(op, cid, meta, body)
+                    except Exception as exc:  # the socket's thread must go on
+                        sys.stderr.write(f"micros_rt ROS 2 helper: a goal's frame (op {op}) failed: {exc}\n")
                 else:
                     self.inbox.append((op, cid, meta, body))
                     self.wake.trigger()
@@ -153,6 +182,30 @@ class Helper:
             found = self.calls.pop(cid, None)
             if found is not None:
                 found[1].remove_pending_request(found[2])
+        elif op == A_SERVE:
+            self.actions().serve(name, meta["type"])
+            self.send(STATUS, cid, {"ok": True})
+        elif op == A_CLIENT:
+            self.actions().client(name, meta["type"])
+            self.send(STATUS, cid, {"ok": True})
+        elif op == A_READY:
+            found_client = self.actions().clients.get(name)
+            self.send(STATUS, cid, {"ok": True, "ready": bool(found_client and found_client[0].server_is_ready())})
+        elif op == A_UNSERVE:
+            self.actions().withdraw(name)
+            self.send(STATUS, cid, {"ok": True})
+
+    def actions(self) -> "Actions":
+        """The actions' node and executor, created on first use."""
+        with self.served_lock:
+            if self._actions is None:
+                base = self.node_name[: -len("_services")] if self.node_name.endswith("_services") else self.node_name
+                self._actions = Actions(self, base + "_actions")
+            return self._actions
+
+    def close_actions(self) -> None:
+        if self._actions is not None:
+            self._actions.close()
 
     def client(self, name: str, ros2_type: str) -> Tuple[Any, Any]:
         found = self.clients.get(name)
@@ -230,9 +283,299 @@ class Helper:
             sys.stderr.write(f"micros_rt ROS 2 helper: cannot send a response: {exc}\n")
 
 
+class _Served:
+    """A ROS 2 client's goal on a ROS 1 server: the verdict micros_rt gives, then feedback and result, in order."""
+
+    __slots__ = ("name", "verdict", "accepted", "items", "handle")
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.verdict = threading.Event()
+        self.accepted = False
+        self.items: "queue.Queue[Tuple[int, int, bytes]]" = queue.Queue()   # (op, status, body)
+        self.handle: Any = None
+
+
+class _Sent:
+    """A ROS 1 client's goal on a ROS 2 server (micros_rt's key): the rclpy goal handle once accepted."""
+
+    __slots__ = ("name", "client", "handle", "cancel_requested")
+
+    def __init__(self, name: str, client: Any) -> None:
+        self.name = name
+        self.client = client
+        self.handle: Any = None
+        self.cancel_requested = False
+
+
+class Actions:
+    """The helper's actions, on a node of their own (``<node>_actions``) and a multi-threaded executor.
+
+    Served (a ROS 1 server offered to ROS 2 clients): an rclpy ActionServer; its goal callback sends the goal to
+    micros_rt (G_GOAL) and waits for the ROS 1 server's verdict (A_VERDICT); its execute callback publishes the
+    feedback micros_rt forwards (A_FEEDBACK) until the result (A_DONE); a cancel goes to micros_rt (G_CANCEL).
+    Reached (a ROS 2 server offered to ROS 1 clients): an rclpy ActionClient; micros_rt's goals (A_SEND) go out and
+    the answers come back (G_ACCEPTED, G_FEEDBACK, G_RESULT). Client work runs in one exclusive callback group, so a
+    goal's response is never taken before its future is registered (rclpy's ActionClient has no lock for that).
+    """
+
+    def __init__(self, helper: Helper, node_name: str) -> None:
+        # imported here: a process that uses services only does not pay for them
+        from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+        from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+        from rclpy.executors import MultiThreadedExecutor
+        from rclpy.qos import QoSProfile
+
+        self.ActionClient, self.ActionServer, self.QoSProfile = ActionClient, ActionServer, QoSProfile
+        self.CancelResponse, self.GoalResponse = CancelResponse, GoalResponse
+        self.helper = helper
+        self.node = rclpy.create_node(node_name)
+        self.serve_group = ReentrantCallbackGroup()
+        self.client_group = MutuallyExclusiveCallbackGroup()
+        self.lock = threading.Lock()
+        self.servers: Dict[str, Any] = {}
+        self.clients: Dict[str, Tuple[Any, Any]] = {}          # name -> (rclpy ActionClient, action class)
+        self.keys = itertools.count(1)
+        self.served: Dict[int, _Served] = {}                   # helper's key -> goal of a ROS 2 client
+        self.by_request: Dict[int, int] = {}                   # id(goal request message) -> helper's key
+        self.sent: Dict[int, _Sent] = {}                       # micros_rt's key -> goal on a ROS 2 server
+        self.waiting: Dict[int, Tuple[str, bytes]] = {}        # micros_rt's key -> goal for a server not yet found
+        self.client_inbox: Deque[Tuple[int, int, Dict[str, Any], bytes]] = deque()
+        self.client_wake = self.node.create_guard_condition(self.drain_clients, callback_group=self.client_group)
+        self.node.create_timer(_WATCH_PERIOD, self.watch, callback_group=self.client_group)
+        self.dropped = 0
+        self.executor = MultiThreadedExecutor(num_threads=ACTION_THREADS)
+        self.executor.add_node(self.node)
+        threading.Thread(target=self.spin, name="micros_rt actions", daemon=True).start()
+
+    def spin(self) -> None:
+        try:
+            self.executor.spin()
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+
+    def close(self) -> None:
+        for slot in list(self.served.values()):
+            slot.verdict.set()
+            slot.items.put((A_DONE, _ABORTED, b""))
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+
+    def drop(self, what: str) -> None:
+        self.dropped += 1
+        if self.dropped == 1 or self.dropped % 100 == 0:
+            sys.stderr.write(f"micros_rt ROS 2 helper: dropped {what} ({self.dropped} action frames dropped so far)\n")
+
+    # -- set-up (on the service node's executor thread) ---------------------------------------------------------
+    def serve(self, name: str, ros2_type: str) -> None:
+        if name in self.servers:
+            return
+        cls = srv_class(ros2_type)
+        self.servers[name] = self.ActionServer(
+            self.node, cls, name, execute_callback=lambda handle: self.execute(name, cls, handle),
+            goal_callback=lambda request: self.on_goal(name, request),
+            cancel_callback=lambda handle: self.on_cancel(name, handle),
+            callback_group=self.serve_group, feedback_pub_qos_profile=self.QoSProfile(depth=FEEDBACK_DEPTH))
+
+    def client(self, name: str, ros2_type: str) -> Tuple[Any, Any]:
+        found = self.clients.get(name)
+        if found is None:
+            cls = srv_class(ros2_type)
+            client = self.ActionClient(self.node, cls, name, callback_group=self.client_group,
+                                       feedback_sub_qos_profile=self.QoSProfile(depth=FEEDBACK_DEPTH))
+            found = self.clients[name] = (client, cls)
+        return found
+
+    def withdraw(self, name: str) -> None:
+        server = self.servers.pop(name, None)
+        if server is not None:
+            for slot in [g for g in self.served.values() if g.name == name]:
+                slot.verdict.set()
+                slot.items.put((A_DONE, _ABORTED, b""))
+            server.destroy()
+        client = self.clients.pop(name, None)
+        if client is not None:
+            for key in [k for k, g in self.sent.items() if g.name == name]:
+                self.sent.pop(key, None)
+            client[0].destroy()
+
+    # -- frames about goals (on the socket's thread) ------------------------------------------------------------
+    def goal_op(self, op: int, key: int, meta: Dict[str, Any], body: bytes) -> None:
+        if op in (A_SEND, A_CANCEL, A_FORGET):
+            self.client_inbox.append((op, key, meta, body))
+            self.client_wake.trigger()
+            return
+        slot = self.served.get(key)
+        if slot is None:
+            self.drop(f"{'feedback' if op == A_FEEDBACK else 'an answer'} for a goal that is over (key {key})")
+            return
+        if op == A_VERDICT:
+            slot.accepted = bool(meta.get("accepted"))
+            slot.verdict.set()
+        else:
+            slot.items.put((op, int(meta.get("status", _ABORTED)), body))
+
+    # -- serving ROS 2 clients (executor threads; a goal's callbacks may block) --------------------------------
+    def on_goal(self, name: str, request: Any) -> Any:
+        key = next(self.keys)
+        slot = _Served(name)
+        with self.lock:
+            self.served[key] = slot
+            self.by_request[id(request)] = key   # the goal handle keeps this very message as its request
+        self.helper.send(G_GOAL, key, {"name": name}, serialize_message(request))
+        while not slot.verdict.wait(0.5):        # micros_rt answers within its accept_timeout
+            if not rclpy.ok():
+                break
+        if slot.accepted:
+            return self.GoalResponse.ACCEPT
+        with self.lock:
+            self.served.pop(key, None)
+            self.by_request.pop(id(request), None)
+        return self.GoalResponse.REJECT
+
+    def on_cancel(self, name: str, handle: Any) -> Any:
+        key = self.by_request.get(id(handle.request))
+        if key is None:
+            return self.CancelResponse.REJECT
+        self.helper.send(G_CANCEL, key, {"name": name})
+        return self.CancelResponse.ACCEPT
+
+    def execute(self, name: str, cls: Any, handle: Any) -> Any:
+        key = self.by_request.get(id(handle.request))
+        slot = self.served.get(key) if key is not None else None
+        last_feedback = 0.0
+        try:
+            while slot is not None:
+                try:
+                    op, status, body = slot.items.get(timeout=0.5)
+                except queue.Empty:
+                    if rclpy.ok():
+                        continue
+                    break
+                if op == A_FEEDBACK:
+                    try:
+                        handle.publish_feedback(deserialize_message(body, cls.Feedback))
+                        last_feedback = time.monotonic()
+                    except Exception as exc:
+                        self.drop(f"a feedback of {name} that does not fit {cls.__name__}.Feedback ({exc})")
+                    continue
+                wait = last_feedback + FEEDBACK_GRACE - time.monotonic()
+                if wait > 0:
+                    time.sleep(wait)
+                try:
+                    result = deserialize_message(body, cls.Result) if body else cls.Result()
+                except Exception as exc:
+                    sys.stderr.write(f"micros_rt ROS 2 helper: the result of a goal of {name} does not fit "
+                                     f"{cls.__name__}.Result ({exc}); the goal ends aborted\n")
+                    result, status = cls.Result(), _ABORTED
+                if status == _SUCCEEDED:
+                    handle.succeed()
+                elif status == _CANCELED and handle.is_cancel_requested:
+                    handle.canceled()
+                else:
+                    handle.abort()   # ROS 2 cannot cancel a goal nobody asked to cancel: it ends aborted
+                return result
+            handle.abort()
+            return cls.Result()
+        finally:
+            with self.lock:
+                if key is not None:
+                    self.served.pop(key, None)
+                self.by_request.pop(id(handle.request), None)
+
+    # -- reaching ROS 2 servers (the client group: one thread at a time) ----------------------------------------
+    def drain_clients(self) -> None:
+        while self.client_inbox:
+            op, key, meta, body = self.client_inbox.popleft()
+            name = str(meta.get("name", ""))
+            try:
+                if op == A_SEND:
+                    self.send_goal(key, name, body)
+                elif op == A_CANCEL:
+                    slot = self.sent.get(key)
+                    if slot is not None and slot.handle is not None:
+                        slot.handle.cancel_goal_async()
+                    elif slot is not None:
+                        slot.cancel_requested = True   # cancelled as soon as it is accepted
+                elif op == A_FORGET:                   # micros_rt gave up waiting for the goal response
+                    self.waiting.pop(key, None)
+                    slot = self.sent.pop(key, None)
+                    if slot is not None and slot.handle is not None:
+                        slot.handle.cancel_goal_async()
+            except Exception as exc:
+                self.helper.send(G_RESULT, key, {"name": name, "status": _ABORTED,
+                                                 "error": f"the ROS 2 helper failed on the goal: {exc}"})
+
+    def send_goal(self, key: int, name: str, body: bytes) -> None:
+        found = self.clients.get(name)
+        if found is None:
+            raise LookupError(f"no ROS 2 action client of {name} in the helper")
+        client, cls = found
+        if not client.server_is_ready():
+            self.waiting[key] = (name, body)   # sent once discovery finds the server; micros_rt bounds the wait
+            return
+        try:
+            goal = deserialize_message(body, cls.Goal)
+        except Exception as exc:
+            self.helper.send(G_ACCEPTED, key, {"name": name, "accepted": False, "error": (
+                f"the goal does not fit the ROS 2 type {cls.__module__.split('.')[0]}/action/{cls.__name__} "
+                f"Goal: {exc}")})
+            return
+        slot = self.sent[key] = _Sent(name, client)
+
+        def feedback(message: Any) -> None:
+            self.helper.send(G_FEEDBACK, key, {"name": name}, serialize_message(message.feedback))
+
+        future = client.send_goal_async(goal, feedback_callback=feedback)
+        future.add_done_callback(lambda f: self.goal_answered(key, slot, f))
+
+    def goal_answered(self, key: int, slot: _Sent, future: Any) -> None:
+        handle = future.result()
+        if self.sent.get(key) is not slot:          # forgotten (micros_rt stopped waiting): do not leave it running
+            if handle is not None and handle.accepted:
+                handle.cancel_goal_async()
+            return
+        if handle is None or not handle.accepted:
+            self.sent.pop(key, None)
+            self.helper.send(G_ACCEPTED, key, {"name": slot.name, "accepted": False,
+                                               "error": f"the ROS 2 action server of {slot.name} rejected the goal"})
+            return
+        slot.handle = handle
+        self.helper.send(G_ACCEPTED, key, {"name": slot.name, "accepted": True})
+        if slot.cancel_requested:
+            handle.cancel_goal_async()
+        handle.get_result_async().add_done_callback(lambda f: self.result_done(key, slot, f))
+
+    def result_done(self, key: int, slot: _Sent, future: Any) -> None:
+        if self.sent.pop(key, None) is None:
+            return
+        response = future.result()
+        self.helper.send(G_RESULT, key, {"name": slot.name, "status": int(response.status)},
+                         serialize_message(response.result))
+
+    def watch(self) -> None:
+        """Send goals whose server discovery has found since; end goals whose ROS 2 server went away (discovery
+        lost it), rather than leaving them to hang."""
+        for key, (name, body) in list(self.waiting.items()):
+            found = self.clients.get(name)
+            if found is None or found[0].server_is_ready():
+                self.waiting.pop(key, None)
+                try:
+                    self.send_goal(key, name, body)
+                except Exception as exc:
+                    self.helper.send(G_RESULT, key, {"name": name, "status": _ABORTED,
+                                                     "error": f"the ROS 2 helper failed on the goal: {exc}"})
+        gone: List[Tuple[int, _Sent]] = [(k, g) for k, g in list(self.sent.items()) if not g.client.server_is_ready()]
+        for key, slot in gone:
+            if self.sent.pop(key, None) is not None:
+                self.helper.send(G_RESULT, key, {"name": slot.name, "status": _ABORTED, "error": (
+                    f"the ROS 2 action server of {slot.name} went away during the goal")})
+
+
 def main() -> None:
     fd, node_name = int(sys.argv[1]), sys.argv[2]
     sock = socket.socket(fileno=fd)
+    sock.setblocking(True)   # the descriptor may come non-blocking (a default timeout in the micros_rt process)
     rclpy.init(args=[])
     helper = Helper(sock, node_name)
     executor = SingleThreadedExecutor()
@@ -244,6 +587,7 @@ def main() -> None:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        helper.close_actions()
         executor.shutdown(timeout_sec=1.0)
         helper.node.destroy_node()
         rclpy.try_shutdown()
