@@ -64,7 +64,8 @@ def graph(ros_master: harness.RosMaster) -> Iterator[Dict[str, harness.Peer]]:
                                 "--to-ros2", f"{P}/r1/fib", f"{P}/r1/dying",
                                 "--from-ros2", f"{P}/r2/fib", f"{P}/r2/silent",
                                 "--expect", f"{P}/r2/fib", f"{P}/r2/silent",
-                                "--accept-timeout", str(ACCEPT_TIMEOUT)], env, name="mrt_action_bridge"),
+                                "--accept-timeout", str(ACCEPT_TIMEOUT),
+                                "--call-in-process", f"{P}/r2/fib"], env, name="mrt_action_bridge"),
     }
     try:
         for peer in peers.values():
@@ -112,6 +113,10 @@ def test_actionlib_client_drives_rclpy_server(graph: Dict[str, harness.Peer], sp
     latency = cancel_latency(client, graph["r2"], "cancel", f"{P}/r2/fib")
     print(f"actionlib -> rclpy: 100/100 feedback, cancel reached the ROS 2 server in {latency * 1e3:.1f} ms")
     assert 0 <= latency < CANCEL_BOUND, latency
+    # actionlib's client inside the micros_rt process itself reaches the ROS 2 server the same way
+    inside = graph["bridge"].wait_for("in_process_result", T)
+    assert (inside["status"], inside["feedback"], inside["feedback_in_order"], inside["sequence_ok"]) == \
+        (3, 100, True, True), inside
 
 
 def test_bad_input_reaches_the_caller_in_words(graph: Dict[str, harness.Peer], spawn: Any) -> None:

@@ -18,7 +18,9 @@ bounds the wait for the result (then "result" has status_name "TIMEOUT"). Finall
 
 bridge: micros_rt's NodeHandle.offer_action_to_ros2 (each --to-ros2 name, whose ROS 1 server must come up first)
 and offer_ros2_action (each --from-ros2 name; "--expect" names the ones whose ROS 2 server is waited for). Events:
-"ready", then "stats" {name: statistics()} whenever they change.
+"wrong_type" {message} (offering a goal class instead of the action), "ready", then for each --call-in-process name
+a goal of order 100 from stock actionlib's SimpleActionClient in this very process: "in_process_result" {status,
+text, feedback, feedback_in_order, sequence_ok}; then "stats" {name: statistics()} whenever they change.
 """
 
 from __future__ import annotations
@@ -148,6 +150,21 @@ def bridge(args: argparse.Namespace) -> None:
     except TypeError as exc:
         emit("wrong_type", message=str(exc))
     emit("ready", types={name: offer.ros2_type for name, offer in offers.items()})
+    for name in args.call_in_process:   # stock actionlib's client in this micros_rt process, on an offered name
+        import actionlib
+
+        received: List[int] = []
+        client = actionlib.SimpleActionClient(name, action)
+        t0 = time.monotonic()
+        client.wait_for_server(rospy.Duration(20.0))
+        client.send_goal(part("Goal")(order=100), feedback_cb=lambda fb: received.append(fb.sequence[0]))
+        finished = client.wait_for_result(rospy.Duration(20.0))
+        result = client.get_result() if finished else None
+        emit("in_process_result", name=name, status=client.get_state() if finished else -1,
+             text=client.get_goal_status_text(), feedback=len(received),
+             feedback_in_order=received == list(range(len(received))),
+             sequence_ok=result is not None and list(result.sequence) == fibonacci(100),
+             elapsed=time.monotonic() - t0)
     last: Dict[str, Any] = {}
     end = time.monotonic() + args.seconds
     while not rospy.is_shutdown() and time.monotonic() < end:
@@ -174,6 +191,7 @@ def main() -> None:
     b.add_argument("--from-ros2", nargs="*", default=[])
     b.add_argument("--expect", nargs="*", default=[])
     b.add_argument("--accept-timeout", type=float, default=5.0)
+    b.add_argument("--call-in-process", nargs="*", default=[])
     b.add_argument("--seconds", type=float, default=120.0)
     args = parser.parse_args()
     {"serve": serve, "call": call, "bridge": bridge}[args.mode](args)
