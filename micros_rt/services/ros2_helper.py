@@ -346,7 +346,8 @@ class Actions:
         self.dropped = 0
         self.executor = MultiThreadedExecutor(num_threads=ACTION_THREADS)
         self.executor.add_node(self.node)
-        threading.Thread(target=self.spin, name="micros_rt actions", daemon=True).start()
+        self.thread = threading.Thread(target=self.spin, name="micros_rt actions", daemon=True)
+        self.thread.start()
 
     def spin(self) -> None:
         try:
@@ -359,6 +360,9 @@ class Actions:
             slot.verdict.set()
             slot.items.put((A_DONE, _ABORTED, b""))
         self.executor.shutdown(timeout_sec=1.0)
+        # the spinning thread must be out of rclpy before the node goes and the process exits (else a C++
+        # std::terminate at exit, seen when the helper closed right after the actions' node started)
+        self.thread.join(timeout=2.0)
         self.node.destroy_node()
 
     def drop(self, what: str) -> None:
