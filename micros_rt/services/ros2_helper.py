@@ -49,7 +49,9 @@ _GOAL_OPS = (A_VERDICT, A_FEEDBACK, A_DONE, A_SEND, A_CANCEL, A_FORGET)
 #: action_msgs/GoalStatus codes
 _SUCCEEDED, _CANCELED, _ABORTED = 4, 5, 6
 #: threads of the actions' executor: each goal a ROS 2 client has running on a ROS 1 server holds one
-ACTION_THREADS = 16
+ACTION_THREADS = 64
+#: goals of ROS 2 clients at once per process; more are rejected, so that threads stay free for cancels
+MAX_SERVED_GOALS = ACTION_THREADS - 4
 #: seconds between the last feedback published and the result: a client that takes both in one batch handles the
 #: result first and drops the feedback after it (rclpy's ActionClient does)
 FEEDBACK_GRACE = 0.02
@@ -424,6 +426,10 @@ class Actions:
         key = next(self.keys)
         slot = _Served(name)
         with self.lock:
+            if len(self.served) >= MAX_SERVED_GOALS:
+                sys.stderr.write(f"micros_rt ROS 2 helper: a ROS 2 client's goal of {name} is rejected: "
+                                 f"{MAX_SERVED_GOALS} goals of ROS 2 clients are running already\n")
+                return self.GoalResponse.REJECT
             self.served[key] = slot
             self.by_request[id(request)] = key   # the goal handle keeps this very message as its request
         self.helper.send(G_GOAL, key, {"name": name}, serialize_message(request))
