@@ -278,6 +278,8 @@ def child_env(transport, master_uri, domain):
                                 "MICROS_RT"))}
     env.update(ROS_MASTER_URI=master_uri, ROS_IP="127.0.0.1", ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED="1",
                ROS_HOME=str(Path(tempfile.gettempdir()) / "micros_rt_bench_roshome"))
+    if transport.startswith("micros_rt_"):
+        env["PYTHONPATH"] = str(REPO)  # this checkout's micros_rt, whichever one the venv installed (editable)
     if transport.startswith("micros_rt_") and not transport.startswith("micros_rt_shm"):
         env["MICROS_RT_DISABLE_SHM"] = "1"  # these measure the DDS plane (and TCPROS) between local processes
     if transport == "micros_rt_shm_local":

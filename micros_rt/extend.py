@@ -8,11 +8,16 @@ itself (a DDS writer with a tag of its own, a reader it feeds).
   ``init_node``.
 - :func:`register_info_section` / :func:`unregister_info_section`: a section of the program's own state in
   the node's ``microsRtInfo`` answer, which ``micros-rt graph`` and ``micros-rt topic`` show.
-- :func:`sender_for` (a :class:`Lane`): put in front of a :class:`~micros_rt.transports.base.BackPressuredWriter`
+- :func:`sender_for` (a :class:`SendQueue`): put in front of a :class:`~micros_rt.transports.base.BackPressuredWriter`
   so that back-pressure on one topic never holds the caller, with a publication's rule (KEEP_LAST samples
   superseded before they left, and those older than the lifespan, are dropped and counted).
 - :class:`TimeoutTransport`: an :mod:`xmlrpc.client` transport with a timeout of its own (rospy sets a
   process-wide socket timeout), for XML-RPC calls to other nodes and masters.
+- :func:`register_negotiated_transport` (a :class:`NegotiatedTransport`: a protocol name and the makers of its
+  :class:`PublicationSide` and :class:`SubscriptionSide`): a transport ``requestTopic`` negotiates as it does
+  shared memory and DDS, offered on the topics made from then on and chosen by name in TransportHints
+  (``TransportHints.from_names(["MINE", "TCPROS"])``) or a profile's ``transport_hints``
+  (``tests/contract/test_negotiated_toy.py`` is one, whole).
 
 >>> import micros_rt
 >>> from micros_rt.extend import dds_backend, register_info_section, sender_for
@@ -26,9 +31,15 @@ itself (a DDS writer with a tag of its own, a reader it feeds).
 from __future__ import annotations
 
 from .core.introspection import register_section as register_info_section
+from .core.negotiated import NegotiatedTransport
+from .core.negotiated import register as register_negotiated_transport
+from .core.negotiated import unregister as unregister_negotiated_transport
 from .core.introspection import unregister_section as unregister_info_section
-from .core.lanes import Lane, sender_for
+from .core.send_queue import SendQueue, sender_for
 from .core.runtime import dds_backend
+from .transports.negotiated import PublicationHost, PublicationSide, SubscriptionHost, SubscriptionSide
 from .transports.tcpros.xmlrpc import TimeoutTransport
 
-__all__ = ["Lane", "TimeoutTransport", "dds_backend", "register_info_section", "sender_for", "unregister_info_section"]
+__all__ = ["NegotiatedTransport", "PublicationHost", "PublicationSide", "SendQueue", "SubscriptionHost",
+           "SubscriptionSide", "TimeoutTransport", "dds_backend", "register_info_section",
+           "register_negotiated_transport", "sender_for", "unregister_info_section", "unregister_negotiated_transport"]

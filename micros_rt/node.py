@@ -24,6 +24,8 @@ import rospy
 from .core import introspection as _introspection
 from .transports.tcpros import patches
 from .core.publication import Publisher, _Publication
+from .core import negotiated
+from .transports.negotiated import PublicationSide
 from .core.runtime import (_graph_id, _log, _node, _require_node, dds_backend, ros2_visible, start_dds_early,
                            wait_dds_started)
 from .core.reader_subscription import OpenReader, ReaderSubscription
@@ -36,6 +38,7 @@ from .transports.dds.participant import close_participant
 from .transports.shm.host import close_node as close_shm_node
 from .exceptions import NodeNotInitializedError, QoSTypeError
 from .negotiation.hints import TransportHints
+from .negotiation.decide import Verdict
 from .negotiation.protocol import DDS, SHM, TCPROS
 from .qos import (
     AdvertiseQoSOptions,
@@ -267,25 +270,20 @@ class NodeHandle:
 
         node_profile = _node.profile
         served = node_profile.advertise_transports(resolved) if node_profile else None
-        off_dds = None
-        if node_profile is not None and served is not None and DDS not in served:
-            off_dds = (f"topic {resolved}: the publisher's profile ({node_profile.source}) keeps it off DDS "
-                       f"(transport_hints: [{TCPROS}]); using TCPROS")
 
-        off_shm = None
-        if node_profile is not None and served is not None and SHM not in served:
-            off_shm = (f"topic {resolved}: the publisher's profile ({node_profile.source}) serves "
-                       f"{', '.join(served)} only (transport_hints), not shared memory")
+        def refusal(protocol: str) -> Optional[Verdict]:
+            # the profile's transport_hints may keep the topic off a negotiated transport: subscribers hear why
+            if node_profile is None or served is None or protocol in served:
+                return None
+            return Verdict(False, "profile", f"topic {resolved}: the publisher's profile ({node_profile.source}) "
+                                             f"keeps it off {protocol} (transport_hints: [{', '.join(served)}]); "
+                                             f"the subscriber's next protocol is used")
 
         def create() -> _Publication:
-            eager = ros2_visible(_node.profile)
-            pub = _Publication(resolved, data_class, queue_size, latch, effective,
-                               dds=dds_backend() if eager and not off_dds else None, tag=_tag(),
-                               extra=_profile_backends(), pacer=_node.pacer, off_dds=off_dds)
-            pub.off_shm = off_shm
-            if not eager and not off_dds:
-                pub.lazy_dds = dds_backend  # the DDS writer comes with the first subscriber that takes DDS
-            return pub
+            # the negotiated transports' sides, in the registry's order (core/negotiated.py)
+            sides = tuple(_publication_side(t, refusal(name)) for name, t in negotiated.TRANSPORTS.items())
+            return _Publication(resolved, data_class, queue_size, latch, effective, tag=_tag(), sides=sides,
+                                extra=_profile_backends(), pacer=_node.pacer)
 
         pub = _node.publications.acquire(resolved, create, reuse)
         return Publisher(pub, _node.publications)
@@ -366,12 +364,12 @@ class NodeHandle:
         created: List[_Subscription] = []
 
         def create() -> _Subscription:
-            eager = ros2_visible(_node.profile)
-            new = _Subscription(resolved, data_class, queue_size, effective, hints,
-                                dds=dds_backend() if eager and hints.allows_dds else None, tag=_tag(),
-                                graph=_node.graph, extra=_profile_backends(), lifespan=lifespan)
-            if not eager and hints.allows_dds:
-                new.lazy_dds = dds_backend  # the DDS reader comes with the first publisher that takes DDS
+            # the negotiated transports the hints allow (core/negotiated.py); with ROS 2 visibility off, the DDS
+            # reader comes with the first publisher that takes DDS
+            dds = dds_backend() if ros2_visible(_node.profile) and hints.allows_dds else None
+            sides = {name: t.subscription for name, t in negotiated.TRANSPORTS.items()}
+            new = _Subscription(resolved, data_class, queue_size, effective, hints, dds=dds, tag=_tag(),
+                                graph=_node.graph, sides=sides, extra=_profile_backends(), lifespan=lifespan)
             new.callbacks = ((callback, callback_args),)  # before start(): a latched message may come at once
             created.append(new)
             return new
@@ -432,6 +430,11 @@ from typing import TYPE_CHECKING  # noqa: E402  (kept beside the service methods
 if TYPE_CHECKING:  # the services and actions packages are imported on first use
     from .actions import ActionFromRos2, ActionToRos2
     from .services import ServiceClient, ServiceServer
+
+
+def _publication_side(transport: negotiated.NegotiatedTransport,
+                      refusal: Optional[Verdict]) -> Callable[[_Publication], PublicationSide]:
+    return lambda pub: transport.publication(pub, refusal)
 
 
 def _profile_backends() -> Tuple[ProfileBackend, ...]:

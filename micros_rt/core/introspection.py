@@ -88,13 +88,14 @@ def _links(topic: str, *, publisher: bool) -> List[Dict[str, Any]]:
 def _publication_info(pub: Any) -> Dict[str, Any]:
     with pub.lock:
         verdicts = {sub: _verdict_dict(v) for sub, v in pub.verdicts.items()}
-        matched = {sub: conn.seen for sub, conn in pub.connections.items()}
     links = _links(pub.topic, publisher=True)
     for link in links:
-        if link["protocol"] == "DDS":
-            link["matched"] = matched.get(link["subscriber"], False)
+        side = pub.sides.get(link["protocol"])
+        states = side.link_states() if side is not None else None
+        if states is not None:
+            link["matched"] = states.get(link["subscriber"], False)
     stats = pub.statistics()
-    dds = pub.dds
+    dds = getattr(pub.sides.get("DDS"), "dds", None)
     return {"topic": pub.topic, "type": pub.data_class._type, "latch": pub.latch, "queue_size": pub.queue_size,
             "qos": pub.options.to_dict(), "dds_topic": dds.dds_topic if dds is not None else None,
             "links": links, "verdicts": verdicts,
@@ -106,7 +107,7 @@ def _subscription_info(sub: Any) -> Dict[str, Any]:
     stats = sub.statistics()
     return {"topic": sub.topic, "type": sub.data_class._type, "queue_size": sub.queue_size,
             "qos": sub.effective.to_dict(), "qos_given": sub.options is not None,
-            "hints": list(sub.hints.protocols), "dds_reader": sub.reader is not None,
+            "hints": list(sub.hints.protocols), "dds_reader": bool(sub.readers),
             "links": _links(sub.topic, publisher=False),
             "statistics": dataclasses.asdict(stats), "latency": sub.stats.summary()}
 

@@ -1,9 +1,12 @@
-"""A micros_rt subscription: per topic and process, the rospy subscriber (master registration, TCPROS),
-back-end readers (DDS), and the delivery thread that runs the callbacks.
+"""A micros_rt subscription: per topic and process, the TCPROS reader (rospy's subscriber: master
+registration, stock peers), the negotiated transports' sides (shared memory, DDS:
+:mod:`micros_rt.transports.negotiated`), the readers they and the profile's feeds (MQTT) hand messages to, and
+the delivery thread that runs the callbacks.
 
-The concerns live apart: waking (:mod:`.delivery`), exactly-once per writer (:mod:`.writers`), what
-the subscriber enforces (:mod:`micros_rt.qos.enforcement`), counters and latency (:mod:`.stats`). This module
-joins them: samples in, callbacks out, every message either delivered or counted in one drop counter.
+The concerns live apart: waking (:mod:`.delivery`), exactly-once per DDS writer
+(:mod:`micros_rt.transports.dds.exactly_once`), what the subscriber enforces (:mod:`micros_rt.qos.enforcement`),
+counters and latency (:mod:`.stats`). This module joins them: samples in, callbacks out, every message either
+delivered or counted in one drop counter.
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ import math
 import os
 import threading
 import time
-from typing import TYPE_CHECKING, Any, Callable, Deque, Dict, List, Optional, Set, Tuple, Type
+from typing import TYPE_CHECKING, Any, Callable, Deque, Dict, List, Mapping, Optional, Set, Tuple, Type
 
 import genpy
 import rospy
@@ -25,12 +28,14 @@ from . import threadprio
 from .delivery import Inbox
 from .registry import EndpointRegistry
 from .stats import LatencyStats, SubscriberStatistics
-from .exactly_once import DELIVER, HOLD, Accepted, WriterState, WriterTable
-from ..transports.base import SOURCE_ORDER, TIME_FILTER, EndpointSpec, Feed, ProfileBackend, PushInfo, PushReader, TransportReader
-from ..exceptions import MicrosRtError
-from ..negotiation import DDS, SHM, TCPROS, DDSAnswer, DDSOffer, ShmAnswer, ShmOffer, TransportHints
+from ..transports.dds.exactly_once import DELIVER, HOLD, WriterState, WriterTable
+from ..transports.base import (SOURCE_ORDER, TIME_FILTER, EndpointSpec, Feed, ProfileBackend, PushInfo, PushReader,
+                               ReaderBackend, TransportReader)
+from ..transports.negotiated import SubscriptionSide
+from ..negotiation import TCPROS, TransportHints
 from ..qos import (
     UNBOUNDED_QUEUE_DEPTH,
+    AdvertiseQoSOptions,
     DeadlineMissed,
     DeadlineMonitor,
     SourceOrder,
@@ -44,8 +49,7 @@ from ..qos import (
 from ..log import nonblocking_logger
 
 if TYPE_CHECKING:
-    from ..transports.dds.backend import DDSBackend, DDSTopicReader
-    from ..transports.shm.channel import ShmLink
+    from ..transports.dds.backend import DDSBackend
 
 __all__ = ["Subscriber", "DeadlineMissed", "LatencyStats"]
 
@@ -53,14 +57,18 @@ _log = nonblocking_logger("rosout.micros_rt")
 _TAKE_BATCH = 256
 _RETAKE_SECONDS = 0.005  # with a bounded queue, take new samples at least this often between callbacks
 
+#: how a node makes one negotiated transport's side of a subscription (the subscription is its host)
+SubscriptionSideFactory = Callable[["_Subscription"], SubscriptionSide]
+
 
 class _Subscription:
     """Per topic and process: rospy subscriber, DDS reader(s) and the delivery thread."""
 
     def __init__(self, topic: str, data_class: Type[genpy.Message], queue_size: Optional[int],
                  options: Optional[SubscribeQoSOptions], hints: TransportHints, *,
-                 dds: Optional[DDSBackend], tag: Dict[str, str], graph: str,
-                 extra: Tuple[ProfileBackend, ...] = (), lifespan: float = math.inf) -> None:
+                 dds: "Optional[DDSBackend]", tag: Dict[str, str], graph: str,
+                 sides: Mapping[str, SubscriptionSideFactory] = {}, extra: Tuple[ProfileBackend, ...] = (),
+                 lifespan: float = math.inf) -> None:
         self.topic = topic
         #: the subscriber's own msg_valid_period (seconds): a message older than this by its source stamp is
         #: dropped (``dropped_expired``) whatever its publisher offers; the shorter of the two applies
@@ -93,28 +101,24 @@ class _Subscription:
         self.priority: Optional[TransportPriority] = None
         self._thread_priority: Optional[TransportPriority] = None
         self._high_entered = False
-        self._dds = dds if hints.allows_dds else None
-        #: with ROS 2 visibility off: opens the process's DDS back end when a first publisher would take DDS
-        self.lazy_dds: "Optional[Callable[[], Optional[DDSBackend]]]" = None
-        self._dds_opening = threading.Lock()
+        #: the process's DDS back end when the subscription opens its DDS reader at once (None: not, or lazily)
+        self.dds = dds = dds if hints.allows_dds else None
         # With shared memory, the delivery thread waits on an iceoryx2 wait set (its SHM links' listeners: one
         # thread wake per message), and DDS readers wake it per sample from Cyclone's thread; else on Cyclone's.
         from ..transports import shm
 
-        self.inbox = Inbox(None if self._dds is None or (hints.allows_shm and shm.unavailable_reason() is None)
-                           else self._dds.participant)
-        self.readers: Tuple[DDSTopicReader, ...] = ()
-        self.reader: Optional[DDSTopicReader] = None
-        self.tl_reader: Optional[DDSTopicReader] = None
-        self._followed: Dict[Tuple[str, bool], DDSTopicReader] = {}  # (topic, latched) -> reader (_follow)
-        if self._dds is not None:
-            try:
-                self.reader = self._open_reader(latched=False)
-            except MicrosRtError as exc:
-                _log.warning("micros_rt: topic %s will use TCPROS only: %s", topic, exc)
-        if hints.protocols == (DDS,) and self.reader is None:
-            _log.warning("micros_rt: topic %s: TransportHints allow only DDS, but DDS is unavailable; "
-                         "nothing will be received", topic)
+        self.inbox = Inbox(None if dds is None or (hints.allows_shm and shm.unavailable_reason() is None)
+                           else dds.participant)
+        #: pulled readers (DDS), taken by the delivery thread; the first decodes for all
+        self.readers: Tuple[ReaderBackend, ...] = ()
+        self._duplicates = False  # two readers may see one sample (a latched reader beside the topic's)
+        self._polled_inlet: Optional[PushReader] = None  # the pushed reader of links the delivery thread polls
+        #: the negotiated transports the hints allow, by protocol name (each its side of the subscription)
+        self.sides: Dict[str, SubscriptionSide] = {
+            protocol: make(self) for protocol, make in sides.items() if protocol in hints.protocols}
+        if not hints.allows_tcp and all(side.offer("") is None for side in self.sides.values()):
+            _log.warning("micros_rt: topic %s: TransportHints allow only %s, and none is available here; "
+                         "nothing will be received", topic, "/".join(hints.protocols))
         self.thread = threading.Thread(target=self._run, name=f"micros_rt delivery {topic}", daemon=True)
         self.tcpros: Optional[TcprosReader] = None
         # pushed readers: TCPROS (rospy's receive thread per connection waits for room: back-pressure to
@@ -122,10 +126,8 @@ class _Subscription:
         # is shared by every MQTT topic of the process, so it never waits; the oldest is dropped, counted)
         self.tcp_in = PushReader(TCPROS, self.depth or UNBOUNDED_QUEUE_DEPTH, self.inbox.wake, blocking=True,
                                  links=self._tcpros_links)
-        # shared memory: one link thread per publisher that chose SHM for us, each waiting for room as TCPROS's
-        self.shm_in = PushReader(SHM, self.depth or UNBOUNDED_QUEUE_DEPTH, self.inbox.wake, blocking=True)
-        self.shm_links: Dict[str, "ShmLink"] = {}  # publisher URI -> link
-        self.pushed: Tuple[PushReader, ...] = (self.tcp_in, self.shm_in)
+        self.pushed: Tuple[PushReader, ...] = (self.tcp_in,) + tuple(r for side in self.sides.values()
+                                                                      for r in side.pushed())
         self._pushed_dropped = 0  # drops of non-blocking pushed readers already reported in a burst
         self._extra = extra
         self.feeds: Tuple[Feed, ...] = ()
@@ -152,188 +154,65 @@ class _Subscription:
         tcpros = self.tcpros
         return {} if tcpros is None else tcpros.transports()
 
-    def _open_reader(self, *, latched: bool, topic: Optional[str] = None) -> DDSTopicReader:
-        """A DDS reader of this subscription's topic (or of ``topic``, another name of its data) feeding
-        the delivery thread."""
-        assert self._dds is not None
-        spec = EndpointSpec(topic or self.topic, self.data_class, self.queue_size, latched, self.tag)
-        # a delivery thread that waits on no Cyclone wait set (a reader opened later) is woken per sample
-        reader = self._dds.open_reader(spec, self.options, self._matches_changed, self._incompatible,
-                                       wake_on_data=self.inbox.waitset is None)
+    # -- the host of the negotiated sides -----------------------------------
+    def add_reader(self, reader: ReaderBackend, *, duplicate: bool) -> None:
         self.inbox.attach(reader)
         self.readers = self.readers + (reader,)
-        return reader
+        self._duplicates = self._duplicates or duplicate
 
-    def _matches_changed(self) -> None:
+    def reader_wakes(self) -> bool:
+        # a delivery thread that waits on no Cyclone wait set (a reader opened later) is woken per sample
+        return self.inbox.waitset is None
+
+    def matches_changed(self) -> None:
         # Cyclone thread: a writer matched or went (lease expired, deleted): look at once, not at the
         # next housekeeping round, so a dead publisher leaves the connections within the lease
         self._housekeeping_due = True
         self.inbox.wake()
 
-    def _incompatible(self, policy: int) -> None:
+    def incompatible(self, policy: int) -> None:
         # Cyclone thread: only log, never block. A ROS 2 (or foreign) writer whose QoS cannot match
         # ours would otherwise be silence.
         if policy not in self.incompatible_reported:
             self.incompatible_reported.add(policy)
             _log.warning("micros_rt: %s", describe_incompatible_policy(policy, topic=self.topic, side="subscriber"))
 
+    def raise_priority(self, qos: Optional[AdvertiseQoSOptions]) -> None:
+        if qos is not None and (self.priority is None or qos.transport_priority > self.priority):
+            # taken on by the delivery thread, at its next wake
+            self.priority = TransportPriority(qos.transport_priority)
+
+    def wake(self) -> None:
+        self.inbox.wake()
+
+    def poll_link(self, link: Any, inlet: PushReader) -> bool:
+        """For a side whose links the delivery thread can wait on itself (shared memory): attach ``link``, True
+        when it does (its messages then go through ``inlet``'s admission); False: the link's own thread must
+        hand them to ``inlet``."""
+        self._polled_inlet = inlet
+        return self.inbox.attach_shm(link)
+
     # -- negotiation (rospy's connect threads) ----------------------------
-    def offered_protocols(self, held_shm: str = "") -> List[List[Any]]:
+    def offered_protocols(self, held: Tuple[str, str] = ("", "")) -> List[List[Any]]:
+        """The entries for ``requestTopic`` in the hints' order; ``held``: (protocol, peer) of the link this
+        subscription already has to the publisher asked."""
         out: List[List[Any]] = []
         for proto in self.hints.protocols:
-            reader, dds = self.reader, self._dds
-            if proto == SHM:
-                from ..transports import shm
-
-                if shm.unavailable_reason() is None:
-                    out.append(ShmOffer(host=shm.host_identity(), md5=self.data_class._md5sum,
-                                        type_name=self.data_class._type, qos=self.effective,
-                                        pid=os.getpid(), held=held_shm).to_xmlrpc())
-            elif proto == DDS and reader is None and self.lazy_dds is not None:
-                from ..transports.dds.participant import domain_id_from_env
-
-                out.append(DDSOffer(domain=domain_id_from_env(), topic="", type_name="", md5=self.data_class._md5sum,
-                                    qos=self.effective, reader="", participant="", graph=self.writers.graph,
-                                    lazy=True).to_xmlrpc())
-            elif proto == DDS and reader is not None and dds is not None:
-                out.append(DDSOffer(domain=dds.domain_id, topic=reader.dds_topic, type_name=reader.dds_type.type_name,
-                                    md5=self.data_class._md5sum, qos=self.effective, reader=reader.guid,
-                                    participant=dds.participant.guid, graph=self.writers.graph,
-                                    follow=True).to_xmlrpc())
+            side = self.sides.get(proto)
+            if side is not None:
+                entry = side.offer(held[1] if held[0] == proto else "")
+                if entry is not None:
+                    out.append(entry)
             elif proto == TCPROS:
                 out.append([TCPROS])
         return out
 
-    def open_dds(self) -> bool:
-        """With ROS 2 visibility off: open this subscription's DDS reader now (a publisher would take DDS; rospy's
-        connect thread). True when there is one."""
-        with self._dds_opening:
-            if self.reader is None and self.lazy_dds is not None and not self.closed:
-                backend = self.lazy_dds()
-                self.lazy_dds = None
-                if backend is not None:
-                    self._dds = backend
-                    try:
-                        self.reader = self._open_reader(latched=False)
-                        _log.info("micros_rt: topic %s: DDS reader made for a publisher that takes DDS", self.topic)
-                    except MicrosRtError as exc:
-                        _log.warning("micros_rt: topic %s will use TCPROS only: %s", self.topic, exc)
-        return self.reader is not None
+    def negotiated_sides(self) -> Mapping[str, SubscriptionSide]:
+        return self.sides
 
-    def connect_dds(self, pub_uri: str, answer: DDSAnswer) -> Tuple[int, str, int]:
-        if self.closed:
-            return 0, "subscriber closed", 0
-        if answer.latch:
-            with self.lock:  # two latched publishers connecting at once must not make two readers
-                if self.tl_reader is None and self._dds is not None:
-                    try:
-                        self.tl_reader = self._open_reader(latched=True)
-                    except MicrosRtError as exc:
-                        _log.warning("micros_rt: topic %s: no latched message over DDS: %s", self.topic, exc)
-        dds_topic = self.reader.dds_topic if self.reader else self.topic
-        if answer.via and answer.topic and answer.topic != self.topic:
-            # the relay's writers write the topic under its outside name: read it there too
-            dds_topic = self._follow(answer.topic, answer.latch)
-            if not dds_topic:
-                return 0, f"cannot read {answer.topic} over DDS", 0
-        source = (f"straight from the writers of graph {answer.via}'s relay (now {answer.writer}), no hop through "
-                  f"{answer.node or pub_uri}") if answer.via else f"from writer {answer.writer}"
-        conn = patches.DDSConnection(self.topic, pub_uri, "i", f"DDS connection on topic {dds_topic} {source}",
-                                    peer_guid=answer.writer, on_close=self.writers.connection_closed)
-        accepted = Accepted(pub_uri, answer.node, answer.latch, conn)
-        self.writers.accept(answer.writer, accepted, answer.qos)
-        if answer.via:
-            self.writers.delegate(answer.via, accepted, answer.qos)
-        if answer.qos is not None and (self.priority is None or answer.qos.transport_priority > self.priority):
-            # taken on by the delivery thread, woken below
-            self.priority = TransportPriority(answer.qos.transport_priority)
-        if not patches.add_pseudo_connection(self.topic, conn, publisher=False):
-            conn.close()
-            return 0, "subscriber closed", 0
-        _log.debug("micros_rt: topic %s: receiving from %s over DDS", self.topic, pub_uri)
-        self.inbox.wake()
-        return 1, f"Connected topic[{self.topic}] over DDS", 0
-
-    def connect_shm(self, pub_uri: str, answer: ShmAnswer) -> Tuple[int, str, int]:
-        """Open the shared-memory link to the channel the publisher made for this subscription."""
-        from ..transports.shm.channel import ShmLink
-
-        if self.closed:
-            return 0, "subscriber closed", 0
-        node = answer.node or pub_uri
-        header = {"callerid": node, "topic": self.topic, "type": self.data_class._type,
-                  "md5sum": self.data_class._md5sum, "transport": SHM}
-        conn = patches.DDSConnection(self.topic, pub_uri, "i", f"SHM connection on channel {answer.channel} from "
-                                    f"{node}", peer_guid=answer.channel, on_close=self._shm_connection_closed,
-                                    transport=SHM)
-        put: Callable[[Any, int, Any], None] = self.shm_in.put
-        if answer.latch:
-            queue_put = self.shm_in.put
-
-            def put_latched(msg: Any, source_ns: int, link: Any) -> None:
-                conn.latch = msg  # for callbacks added later (replay_latched), as rospy keeps it per connection
-                queue_put(msg, source_ns, link)
-
-            put = put_latched
-
-        def dropped(n: int) -> None:
-            self.shm_in.dropped += n
-
-        try:
-            link = ShmLink(self.topic, answer.channel, self.data_class, header=header, qos=answer.qos, put=put,
-                           on_drop=dropped, on_gone=lambda _link: self._shm_link_gone(conn), peer_pid=answer.pid)
-        except MicrosRtError as exc:
-            _log.warning("micros_rt: %s; the publisher %s is asked again", exc, pub_uri)
-            return 0, str(exc), 0
-        with self.lock:
-            old = self.shm_links.get(pub_uri)
-            self.shm_links[pub_uri] = link
-        if old is not None:
-            old.close()
-        if not self.inbox.attach_shm(link):
-            link.start_thread()  # the delivery thread waits on Cyclone's wait set: the link wakes it
-        if answer.qos is not None and (self.priority is None or answer.qos.transport_priority > self.priority):
-            self.priority = TransportPriority(answer.qos.transport_priority)
-        if not patches.add_pseudo_connection(self.topic, conn, publisher=False):
-            conn.close()
-            return 0, "subscriber closed", 0
-        _log.debug("micros_rt: topic %s: receiving from %s over shared memory", self.topic, pub_uri)
-        self.inbox.wake()
-        return 1, f"Connected topic[{self.topic}] over SHM", 0
-
-    def _shm_connection_closed(self, conn: patches.DDSConnection) -> None:
-        with self.lock:
-            link = self.shm_links.get(conn.endpoint_id)
-            if link is not None and link.channel == conn.peer_guid:
-                del self.shm_links[conn.endpoint_id]
-            else:
-                link = None
-        if link is not None:
-            link.close()
-
-    def _shm_link_gone(self, conn: patches.DDSConnection) -> None:
-        """The publisher's end went (unregistered, or its process died): drop the connection, so that rospy
-        connects again when the master names the publisher anew (a restart)."""
-        if self.closed or conn.done:
-            return
-        _log.debug("micros_rt: topic %s: SHM publisher %s is gone", self.topic, conn.endpoint_id)
-        patches.remove_pseudo_connection(self.topic, conn, publisher=False)
-        conn.close()
-
-    def _follow(self, topic: str, latched: bool) -> str:
-        """A reader of ``topic`` (another ROS name of this subscription's data, a relay's outside name) for
-        delegated writers that write there; opened once, closed with the subscription. Its DDS topic name,
-        or "" when DDS refuses it (the publisher then serves this subscriber over TCPROS)."""
-        with self.lock:
-            reader = self._followed.get((topic, latched))
-            if reader is None and self._dds is not None and not self.closed:
-                try:
-                    reader = self._open_reader(latched=latched, topic=topic)
-                except MicrosRtError as exc:
-                    _log.warning("micros_rt: topic %s: cannot read %s over DDS: %s", self.topic, topic, exc)
-                    return ""
-                self._followed[(topic, latched)] = reader
-        return reader.dds_topic if reader is not None else ""
+    def open_first(self, protocol: str) -> bool:
+        side = self.sides.get(protocol)
+        return side is not None and side.open_first()
 
     # -- delivery thread ---------------------------------------------------
     def _run(self) -> None:
@@ -386,11 +265,11 @@ class _Subscription:
                 last_take = time.monotonic() if bounded else 0.0
                 while queue:
                     data, info, state = queue.popleft()
-                    self._deliver_dds(data, info, state)
+                    self._deliver_pulled(data, info, state)
                     if bounded and time.monotonic() - last_take > _RETAKE_SECONDS:
                         break  # take again: the newest queue_size are what ROS delivers
             for link in self.inbox.links:  # shared-memory links the delivery thread waits on itself
-                if link.drain(self._deliver_shm, _TAKE_BATCH) >= _TAKE_BATCH:
+                if link.drain(self._deliver_polled, _TAKE_BATCH) >= _TAKE_BATCH:
                     more = True
             for inlet in pushed:
                 batch = inlet.take(_TAKE_BATCH)
@@ -407,10 +286,10 @@ class _Subscription:
                     self._report_burst()
                 return
 
-    def _admit(self, reader: DDSTopicReader, batch: Any) -> None:
+    def _admit(self, reader: ReaderBackend, batch: Any) -> None:
         """Exactly-once and queue_size: each valid sample is queued, held or dropped (and counted)."""
         writers, queue, depth = self.writers, self.queue, self.depth
-        two_readers = self.tl_reader is not None
+        two_readers = self._duplicates
         for data, info in batch:
             if not info.valid_data:
                 continue
@@ -450,7 +329,7 @@ class _Subscription:
             held, state.held = state.held, collections.deque()
             for _t, data, info in held:
                 self.received += 1
-                self._deliver_dds(data, info, state)
+                self._deliver_pulled(data, info, state)
 
     def _count_pushed_drops(self) -> None:
         dropped = sum(r.dropped for r in self.pushed)
@@ -491,10 +370,12 @@ class _Subscription:
             return
         self._deliver(msg, source_ns, qos.latency_budget if qos is not None else 0.0)
 
-    def _deliver_shm(self, msg: Any, source_ns: int, link: Any) -> None:
-        self._deliver_pushed(self.shm_in, msg, PushInfo(source_ns, link))
+    def _deliver_polled(self, msg: Any, source_ns: int, link: Any) -> None:
+        inlet = self._polled_inlet
+        assert inlet is not None
+        self._deliver_pushed(inlet, msg, PushInfo(source_ns, link))
 
-    def _deliver_dds(self, data: bytes, info: Any, state: WriterState) -> None:
+    def _deliver_pulled(self, data: bytes, info: Any, state: WriterState) -> None:
         qos = state.qos
         if not self._admit_enforced(self.readers[0], info.source_timestamp, qos, sent_ns=info.source_timestamp):
             return
@@ -676,12 +557,9 @@ class _Subscription:
         for state in self.writers.accepted_states():
             if state.accepted is not None:
                 state.accepted.conn.close()
-        with self.lock:
-            links, self.shm_links = list(self.shm_links.values()), {}
-        for link in links:
-            link.close()
+        for side in self.sides.values():
+            side.close()
         readers, self.readers = self.readers, ()
-        self.reader = self.tl_reader = None
         for reader in readers:
             reader.close()
         if self.thread.is_alive():

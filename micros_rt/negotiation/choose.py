@@ -14,7 +14,7 @@ from typing import Any, Callable, List, Mapping, Optional, Tuple
 
 from .decide import Verdict
 from .messages import DDSAnswer, DDSOffer, MalformedNegotiationError
-from .protocol import DDS, NEGOTIATED_PROTOCOLS
+from .protocol import DDS, negotiated_protocols
 
 __all__ = ["Choice", "NegotiatedTransport", "choose_protocol", "dds_transport"]
 
@@ -88,7 +88,7 @@ def choose_protocol(protocols: object, *, negotiated: Mapping[str, NegotiatedTra
                 return choice
             choice.declined.append(verdict)
             continue
-        if name in NEGOTIATED_PROTOCOLS:
+        if name in negotiated_protocols():
             continue  # no such transport here (a stock publisher): skipped, as a stock node would
         if supports(name):
             choice.entry = entry

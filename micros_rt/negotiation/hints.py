@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Tuple
 
-from .protocol import DDS, DEFAULT_PROTOCOLS, SHM, TCPROS
+from .protocol import DDS, DEFAULT_PROTOCOLS, SHM, TCPROS, negotiated_protocols
 
 __all__ = ["TransportHints", "DDS", "SHM", "TCPROS", "DEFAULT_PROTOCOLS"]
 
@@ -41,12 +41,13 @@ class TransportHints:
 
     @classmethod
     def from_names(cls, names: "Tuple[str, ...] | list[str]") -> "TransportHints":
-        """Hints offering ``names`` (``"SHM"``, ``"DDS"``, ``"TCPROS"``) in that order (a YAML profile's
-        ``transport_hints``); ValueError names an unknown one."""
+        """Hints offering ``names`` (``"SHM"``, ``"DDS"``, ``"TCPROS"``, or a negotiated transport a program
+        registered) in that order (a YAML profile's ``transport_hints``); ValueError names an unknown one."""
         hints = cls()
+        known = negotiated_protocols() + (TCPROS,)
         for name in names:
-            if name not in (SHM, DDS, TCPROS):
-                raise ValueError(f"unknown transport {name!r}: expected {SHM!r}, {DDS!r} or {TCPROS!r}")
+            if name not in known:
+                raise ValueError(f"unknown transport {name!r}: expected one of {', '.join(map(repr, known))}")
             hints = hints._with(name)
         return hints
 
@@ -87,5 +88,7 @@ class TransportHints:
         return hash(self.protocols)
 
     def __repr__(self) -> str:
+        if any(p not in (SHM, DDS, TCPROS) for p in self._order):
+            return f"TransportHints.from_names({list(self._order)!r})"
         chain = "".join({SHM: ".shm()", DDS: ".dds()"}.get(p, ".tcp()") for p in self._order)
         return f"TransportHints(){chain}"

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from typing import Tuple
+import re
+from typing import List, Tuple
 
 __all__ = [
     "DDS",
@@ -10,6 +11,8 @@ __all__ = [
     "TCPROS",
     "DEFAULT_PROTOCOLS",
     "NEGOTIATED_PROTOCOLS",
+    "negotiated_protocols",
+    "register_protocol",
     "MAX_FIELD_CHARS",
     "MAX_PENDING_DDS_OFFERS",
     "UNMATCHED_READER_TIMEOUT",
@@ -23,6 +26,24 @@ TCPROS = "TCPROS"
 DEFAULT_PROTOCOLS: Tuple[str, ...] = (SHM, DDS, TCPROS)
 #: Protocols negotiated by micros_rt itself in ``requestTopic`` (a stock node skips their entries).
 NEGOTIATED_PROTOCOLS: Tuple[str, ...] = (SHM, DDS)
+_negotiated: List[str] = list(NEGOTIATED_PROTOCOLS)
+_NAME = re.compile(r"^[A-Z][A-Z0-9_]{1,31}$")
+
+
+def negotiated_protocols() -> Tuple[str, ...]:
+    """The built-in negotiated protocols and those a program registered (:func:`register_protocol`)."""
+    return tuple(_negotiated)
+
+
+def register_protocol(name: str) -> None:
+    """Know ``name`` as a negotiated protocol (TransportHints and profiles accept it); ValueError in words for
+    a name that is not upper case letters, digits and ``_``, or one of ROS 1's own."""
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise ValueError(f"a negotiated protocol's name is 2-32 upper case letters, digits or '_', got {name!r}")
+    if name in (TCPROS, "UDPROS"):
+        raise ValueError(f"{name} is ROS 1's own protocol, not one micros_rt negotiates")
+    if name not in _negotiated:
+        _negotiated.append(name)
 
 #: Longest string accepted in any field of a DDS offer or answer (names, GUIDs, graph ids, md5).
 MAX_FIELD_CHARS = 256

@@ -36,6 +36,7 @@ Cyclone 11 does enforce LatencyBudget RxO (verified: a 10 ms writer and a defaul
 
 from __future__ import annotations
 
+import functools
 import math
 
 from typing import TYPE_CHECKING, Any, Callable
@@ -73,8 +74,8 @@ UNBOUNDED_QUEUE_DEPTH: int = 1000
 
 #: Seconds a reliable KEEP_LAST writer's blocking ``send`` waits while Cyclone has more unacknowledged
 #: data than the writer's window. Not Cyclone's max_blocking_time (that is 0, :data:`WRITER_MAX_BLOCKING_TIME`):
-#: micros_rt waits in Python, and ``publish()`` of a KEEP_LAST topic does not wait at all (its lane keeps
-#: the newest ``queue_size`` and sends them when there is room, :mod:`micros_rt.core.lanes`).
+#: micros_rt waits in Python, and ``publish()`` of a KEEP_LAST topic does not wait at all (its send queue keeps
+#: the newest ``queue_size`` and sends them when there is room, :mod:`micros_rt.core.send_queue`).
 RELIABLE_MAX_BLOCKING_TIME: float = 1.0
 
 #: Cyclone's Reliability max_blocking_time for micros_rt writers: 0, never wait inside ``dds_write``.
@@ -136,8 +137,10 @@ def _user_data(user_data: bytes) -> list[object]:
     return [Policy.Userdata(data=data)] if data else []
 
 
+@functools.lru_cache(maxsize=None)
 def _policy_builders() -> dict[str, Callable[[Any, str], list[object]]]:
-    """How a value of an option becomes DDS policies, per DDS policy the catalogue names (``dds_policy``)."""
+    """How a value of an option becomes DDS policies, per DDS policy the catalogue names (``dds_policy``); made
+    once, on first use (cyclonedds is imported only by a node that uses DDS)."""
     from cyclonedds.qos import Policy
 
     return {

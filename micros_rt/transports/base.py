@@ -90,8 +90,8 @@ class TransportWriter(Protocol):
 
 @runtime_checkable
 class BackPressuredWriter(TransportWriter, Protocol):
-    """A writer that can say "not now" instead of blocking: the publication puts a lane in front of it
-    (:mod:`micros_rt.core.lanes`), so one topic's back-pressure never holds another topic's ``publish()``."""
+    """A writer that can say "not now" instead of blocking: the publication puts a send queue in front of
+    it (:mod:`micros_rt.core.send_queue`), so one topic's back-pressure never holds another topic's ``publish()``."""
 
     def try_send(self, prepared: Any) -> bool:
         """Send at once and return True, or return False (nothing sent) when the transport has no room
@@ -100,7 +100,7 @@ class BackPressuredWriter(TransportWriter, Protocol):
 
     def may_wait(self, prepared: Any) -> bool:
         """True when sending this sample can wait on the network (a large sample, many datagrams): a
-        KEEP_LAST lane then sends it from its own thread, so ``publish()`` does not wait."""
+        KEEP_LAST send queue then sends it from its own thread, so ``publish()`` does not wait."""
 
 
 #: The waits between tries of a writer with no room: from BACKOFF_FIRST, doubling, at most BACKOFF_MAX
@@ -120,7 +120,7 @@ def send_with_backoff(try_send: Callable[[Any], bool], prepared: Any, timeout: f
     when it has none), ``first`` seconds, doubling, at most ``most``. The waiting never holds the GIL:
     Cyclone's own blocking write does, and stalls the whole process (measured: a thread counting got 0.3 % of
     its rate while a write waited 1.5 s for a stopped reader's acknowledgements). The one retry loop: anything
-    retried with backoff (a lane's queued samples, a peer's XML-RPC call) goes through it.
+    retried with backoff (a send queue's samples, a peer's XML-RPC call) goes through it.
 
     >>> now = [0.0]
     >>> def pause(seconds: float) -> None: now[0] += seconds

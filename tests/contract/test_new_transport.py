@@ -3,7 +3,7 @@ is (MQTT's way), end to end through a real publication and subscription of the c
 
 The toy lives in this file. Plugging it in took: its module (here), one entry in
 ``micros_rt.transports.base.PROFILE_BACKENDS`` (monkeypatched here) and, for a YAML profile to carry its section,
-``micros_rt.qos.profiles`` (a test profile object stands in here). The core (publication, lanes, subscription,
+``micros_rt.qos.profiles`` (a test profile object stands in here). The core (publication, send queues, subscription,
 admission, statistics) was not touched: the toy's writer is one more writer of the publication's two-phase
 send, its feed one more pushed reader of the subscription's one admission path.
 """
@@ -24,7 +24,7 @@ from contract.fake_transport import FakeBus, FakeWriter
 from micros_rt.qos import AdvertiseQoSOptions, SubscribeQoSOptions
 from micros_rt.transports.base import PROFILE_BACKENDS, EndpointSpec, profile_backends
 
-SHM = "TOY_SHM"  # not the real SHM transport (micros_rt.transports.shm), whose pushed reader every subscription has
+SHM = "TOY_SHM"  # not the real SHM transport (micros_rt.transports.shm)
 
 
 class _ToyFeed:
@@ -99,11 +99,11 @@ def test_a_toy_shared_memory_transport_runs_end_to_end_through_publication_and_s
                         TransportHints().tcp(), dds=None, tag={}, graph="g", extra=(toy,))
     sub.callbacks = ((got.append, None),)
     sub.start()
-    pub = _Publication("/toy/chatter", String, 10, False, AdvertiseQoSOptions(), dds=None, tag={}, extra=(toy,))
+    pub = _Publication("/toy/chatter", String, 10, False, AdvertiseQoSOptions(), tag={}, extra=(toy,))
     pub.start()
     try:
         assert [w.protocol for w in pub.writers] == ["TCPROS", SHM]
-        assert [r.protocol for r in sub.pushed] == ["TCPROS", "SHM", SHM]
+        assert [r.protocol for r in sub.pushed] == ["TCPROS", SHM]
         for i in range(5):
             pub.publish(String(data=f"m{i}"))  # one burst: the subscription's time filter lets the first through
         wait_until(lambda: sub.statistics().received == 5, 10, "five messages over the toy transport")

@@ -117,7 +117,7 @@ def guid():
 go = threading.Event()
 def connect(k):
     go.wait()
-    impl.connect_dds("http://127.0.0.1:%d/" % (40000 + k),
+    impl.sides["DDS"].connect("http://127.0.0.1:%d/" % (40000 + k),
                      DDSAnswer(writer=guid(), participant=guid(), latch=True, qos=AdvertiseQoSOptions()))
 threads = [threading.Thread(target=connect, args=(k,)) for k in range(8)]
 for t in threads: t.start()

@@ -157,7 +157,7 @@ def main() -> int:
             stats = {"control": dataclasses.asdict(control_pub.statistics()),
                      "image": dataclasses.asdict(image_pub.statistics())}
             for name, p in (("control", control_pub), ("image", image_pub)):  # how often the link had no room
-                stats[name]["delayed"] = sum(lane.delayed for lane in getattr(p._pub, "lanes", ()))
+                stats[name]["delayed"] = sum(q.delayed for q in p._pub.send_queues())
         emit("published", control=counts["control"], image=counts.get("image", 0), seconds=elapsed,
              intended_control=int(args.control_rate * args.seconds), statistics=stats, links=links)
         time.sleep(5.0)  # let what is in flight arrive (the subscriber reports on its own)

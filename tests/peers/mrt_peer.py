@@ -52,6 +52,12 @@ def fill(msg: Any, text: str, i: int, stamp: bool, clock_offset: float = 0.0) ->
     return msg
 
 
+def side_writer(pub: Any, protocol: str) -> Any:
+    """The writer of a publisher's negotiated side (``DDS``, ``SHM``), None when it has none (yet)."""
+    side = pub._pub.sides.get(protocol) if pub._pub is not None else None
+    return None if side is None else side.writer
+
+
 def play_clock_offset(pub: Any, offset: float) -> None:
     """Play a publisher whose clock is ``offset`` seconds off (a lagging host) without touching the
     system clock: this peer's DDS and shared-memory writes carry shifted source timestamps. Test-only, so it
@@ -65,7 +71,7 @@ def play_clock_offset(pub: Any, offset: float) -> None:
         send = shm_channel.ShmChannel.try_send
         shm_channel.ShmChannel.try_send = (  # type: ignore[method-assign]
             lambda self, body, source_ns=0: send(self, body, source_ns or time.time_ns() + shift))
-    writer = pub._pub.dds
+    writer = side_writer(pub, "DDS")
     if writer is None:
         return  # no DDS writer (hints, DDS off or not yet opened)
     ref = writer._ref
@@ -241,7 +247,7 @@ def main() -> int:
             time.sleep(0.02)
 
         def dds_readers() -> int:
-            writer = getattr(getattr(pub, "_pub", None), "dds", None)
+            writer = side_writer(pub, "DDS")
             return int(writer.matched_count) if writer is not None else 0
 
         while dds_readers() < args.wait_dds_readers and time.monotonic() < deadline:
@@ -249,7 +255,7 @@ def main() -> int:
         if args.wait_dds_readers:
             from micros_rt.core.runtime import dds_backend
 
-            writer, backend = getattr(getattr(pub, "_pub", None), "dds", None), dds_backend()
+            writer, backend = side_writer(pub, "DDS"), dds_backend()
             # the participant the topic's writer is on, and the process's (another one: a priority participant)
             emit("dds_matched", n=dds_readers(), participant=writer.participant.guid if writer is not None else None,
                  process_participant=backend.participant.guid if backend is not None else None)
@@ -273,11 +279,11 @@ def main() -> int:
         end = time.monotonic() + args.linger
         while time.monotonic() < end and not micros_rt.is_shutdown():
             time.sleep(0.02)
-        dds_writer = getattr(getattr(pub, "_pub", None), "dds", None)
+        dds_writer = side_writer(pub, "DDS")
         emit("done", connections=pub.get_num_connections(),
              dds_wanted=None if dds_writer is None else bool(dds_writer._writer.wanted),
              statistics=dataclasses_asdict(pub.statistics()),
-             shm_not_taken=getattr(getattr(pub._pub, "shm", None), "not_taken", None))
+             shm_not_taken=getattr(side_writer(pub, "SHM"), "not_taken", None))
     else:
         hints = None
         if args.hints:

@@ -16,7 +16,7 @@ from unit.test_structure import _imports, _modules
 #: The modules a program may import. The public API: the package (``micros_rt/__init__.py``'s ``__all__``),
 #: its support modules and the exception tree, the QoS values and their YAML (profiles, the configuration
 #: parsing a bridge's file shares with them, topic rules, links), and the extension module (the process's DDS
-#: back end, info sections, lanes, XML-RPC with a timeout). A back end's own interface is the programs' too:
+#: back end, info sections, send queues, XML-RPC with a timeout). A back end's own interface is the programs' too:
 #: the one transport interface (``transports/base.py``) and each transport package's API that a bridge drives
 #: (MQTT's connection, codecs and parameters; the microcontroller link, its wire, errors and link spec; the
 #: DDS feed and names the relay uses).
@@ -109,7 +109,7 @@ def test_the_public_modules_exist() -> None:
 
 
 @pytest.mark.parametrize("source,found", [
-    ("from ...core.lanes import Lane\n", ["micros_rt.bridges.relay.relay imports micros_rt.core.lanes"]),
+    ("from ...core.send_queue import SendQueue\n", ["micros_rt.bridges.relay.relay imports micros_rt.core.send_queue"]),
     ("def f():\n    from micros_rt.core import runtime\n",
      ["micros_rt.bridges.relay.relay imports micros_rt.core.runtime"]),
     ("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import micros_rt.node\n",

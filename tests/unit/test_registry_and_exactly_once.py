@@ -1,4 +1,4 @@
-"""Unit tests of micros_rt.core.registry.EndpointRegistry and micros_rt.core.exactly_once.WriterTable (fake endpoints and
+"""Unit tests of micros_rt.core.registry.EndpointRegistry and micros_rt.transports.dds.exactly_once.WriterTable (fake endpoints and
 readers: no rospy, no DDS)."""
 
 from __future__ import annotations
@@ -9,10 +9,10 @@ from typing import Any, Dict, List, Optional
 
 import pytest
 
-from micros_rt.core import exactly_once as _writers
+from micros_rt.transports.dds import exactly_once as _writers
 from micros_rt.core.registry import EndpointRegistry
 from micros_rt.transports.tcpros.patches import DDSConnection
-from micros_rt.core.exactly_once import DELIVER, DROP, HOLD, Accepted, WriterTable
+from micros_rt.transports.dds.exactly_once import DELIVER, DROP, HOLD, Accepted, WriterTable
 from micros_rt.transports.base import RemoteWriter
 from micros_rt.qos import AdvertiseQoSOptions
 

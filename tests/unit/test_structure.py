@@ -130,5 +130,5 @@ def test_layers_import_only_downwards() -> None:
 
 def test_layer_check_finds_an_upward_import() -> None:
     graph = {"micros_rt.transports.dds.backend": {"micros_rt.core.runtime", "micros_rt.qos.options"},
-             "micros_rt.core.lanes": {"micros_rt.transports.base"}}
+             "micros_rt.core.send_queue": {"micros_rt.transports.base"}}
     assert _upward_imports(graph) == ["micros_rt.transports.dds.backend (transports) imports micros_rt.core.runtime (core)"]

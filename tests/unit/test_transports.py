@@ -194,7 +194,7 @@ def _publication_with(*writers: _FakeWriter) -> Any:
 
     from micros_rt.core.publication import _Publication
 
-    pub = _Publication("/fake", String, 10, False, AdvertiseQoSOptions(), dds=None, tag={})
+    pub = _Publication("/fake", String, 10, False, AdvertiseQoSOptions(), tag={})
     pub.tcpros = writers[0]  # type: ignore[assignment]
     pub.writers = writers
     return pub, rospy

@@ -1,13 +1,13 @@
 """The relay node: named topics of this ROS graph out to other graphs over DDS, and theirs in.
 
 A thin program on micros_rt's public API (:mod:`micros_rt`, and :mod:`micros_rt.extend` for the process's
-DDS back end, the lane and the node's info section) and the DDS transport:
+DDS back end, the send queue and the node's info section) and the DDS transport:
 
 - **export**: a micros_rt subscription of the local topic (TCPROS from stock roscpp/rospy publishers, DDS
   from micros_rt ones) whose callback sends each message on a DDS writer of ``/<graph><topic>`` with the
-  rule's QoS, behind the core's lane (:class:`~micros_rt.extend.Lane`: a KEEP_LAST sample superseded
+  rule's QoS, behind the core's send queue (:class:`~micros_rt.extend.SendQueue`: a KEEP_LAST sample superseded
   before it left is not sent, back-pressure never holds the callback). ``max_rate`` is applied before the
-  lane. The writer's micros_rt tag says ``relay=<graph>``, the ROS type and the QoS: ordinary micros_rt
+  send queue. The writer's micros_rt tag says ``relay=<graph>``, the ROS type and the QoS: ordinary micros_rt
   readers of other graphs ignore it (they deliver only negotiated writers, or those an importing relay
   names), ROS 2 nodes read it as any topic, and importing relays learn the type from it.
 - **import**: a :class:`~micros_rt.transports.dds.feed.DDSFeed` that keeps only samples of the exporting
@@ -45,7 +45,7 @@ import roslib.message
 import rospy
 
 import micros_rt
-from micros_rt.extend import Lane, dds_backend, register_info_section, sender_for, unregister_info_section
+from micros_rt.extend import SendQueue, dds_backend, register_info_section, sender_for, unregister_info_section
 from micros_rt.qos import DURATION_MAX, SubscribeQoSOptions
 from micros_rt.log import nonblocking_logger
 from micros_rt.qos.topic_rules import best_match
@@ -119,10 +119,10 @@ class _Export:
         self.sent += 1
 
     def stats(self) -> Dict[str, Any]:
-        lane_dropped = self.sender.dropped if isinstance(self.sender, Lane) else 0
+        superseded = self.sender.dropped if isinstance(self.sender, SendQueue) else 0
         return {"topic": self.topic, "as": self.outside, "received": self.received, "sent": self.sent,
                 "rate_capped": self.rate_capped, "looped": self.looped, "no_reader": self.no_reader,
-                "superseded": lane_dropped, "dropped_queue_full": self.sub.statistics().dropped_queue_full}
+                "superseded": superseded, "dropped_queue_full": self.sub.statistics().dropped_queue_full}
 
     def info(self) -> Dict[str, Any]:
         """This export in the node's ``microsRtInfo`` (section ``relay``), for the ``micros-rt`` tools."""

@@ -39,7 +39,7 @@ import roslib.message
 import rospy
 
 import micros_rt
-from micros_rt.extend import Lane, sender_for
+from micros_rt.extend import SendQueue, sender_for
 from micros_rt.log import nonblocking_logger
 from micros_rt.qos import SubscribeQoSOptions
 from micros_rt.transports.base import EndpointSpec, PushReader, TransportWriter
@@ -209,7 +209,7 @@ class _TopicOut:
                                     and "relay_ros2" not in e.tag) - {""}
 
     def stats(self) -> Dict[str, Any]:
-        lane_dropped = self.sender.dropped if isinstance(self.sender, Lane) else 0
+        lane_dropped = self.sender.dropped if isinstance(self.sender, SendQueue) else 0
         return {"direction": "export", "kind": "topic", "name": self.entry.name, "as": self.entry.ros2_name,
                 "latch": self.latch, "received": self.received, "sent": self.sent, "rate_capped": self.rate_capped,
                 "looped": self.looped, "on_ros2_already": self.on_ros2_already, "no_reader": self.no_reader,

@@ -116,7 +116,7 @@ class DDSTopicWriter:
         socket room behind a slow link), or any sample while its participant's transmit socket is congested
         (another topic of the same transport priority just waited: :mod:`~micros_rt.transports.dds.congestion`):
         a small sample's ``sendmsg`` would wait behind those fragments. On loopback a 900 KB write takes
-        ~0.5 ms and stays on the caller's thread, with no hop to the lane's."""
+        ~0.5 ms and stays on the caller's thread, with no hop to the send queue's."""
         congestion = self._congestion
         return (len(prepared) >= RELEASED_WRITE_MIN and congestion.network_bound(self._ref)) or congestion.active()
 

@@ -3,7 +3,7 @@
 Cyclone sends all data of a participant through one transmit socket per interface. A large write that waits
 for room in it (a slow link drains it) holds up every later write through the same socket, a small one's
 ``sendmsg`` included. :class:`SocketCongestion` remembers that, per participant: while it lasts, every write
-of that participant releases Python's GIL, and the lanes of its KEEP_LAST writers send from their own
+of that participant releases Python's GIL, and the send queues of its KEEP_LAST writers send from their own
 threads. Writers on another participant (another transport priority, see
 :func:`~micros_rt.transports.dds.participant.priority_participant`) have their own socket and are not held
 up by it.
@@ -24,7 +24,7 @@ RELEASED_WRITE_MIN = 16 * 1024
 
 #: A write through :meth:`SocketCongestion.write_released` that took longer than this (s) waited for room in a socket that a
 #: slow link drains: the participant's transmit socket is congested for :data:`CONGESTION_HOLD` seconds, and
-#: meanwhile every write of that participant releases the GIL and KEEP_LAST lanes send from their threads.
+#: meanwhile every write of that participant releases the GIL and KEEP_LAST send queues send from their threads.
 CONGESTED_WRITE = 0.005
 CONGESTION_HOLD = 0.1
 

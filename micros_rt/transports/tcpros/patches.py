@@ -30,7 +30,7 @@ import logging
 import threading
 import time
 import xmlrpc.client
-from typing import Any, Callable, Dict, Iterator, List, Optional, Protocol, Tuple
+from typing import TYPE_CHECKING, Any, Callable, Dict, Iterator, List, Mapping, Optional, Protocol, Tuple
 
 import genpy
 import rospy
@@ -41,8 +41,7 @@ import rospy.impl.registration
 import rospy.names
 import rospy.topics
 import rosgraph
-from ...negotiation import (DDS, SHM, TCPROS, DDSAnswer, DDSOffer, DDSOpenFirst, MalformedNegotiationError,
-                            RateLimitedLog, ShmAnswer, Verdict)
+from ...negotiation import (DDS, SHM, TCPROS, DDSOpenFirst, MalformedNegotiationError, RateLimitedLog, Verdict)
 from ...negotiation import NegotiatedTransport, choose_protocol
 from rospy.impl.registration import (
     RegManager,
@@ -55,6 +54,9 @@ from ...log import nonblocking_logger
 from ..base import send_with_backoff
 from .xmlrpc import TimeoutTransport
 
+if TYPE_CHECKING:
+    from ..negotiated import SubscriptionSide
+
 __all__ = [
     "DDSConnection",
     "MasterWatch",
@@ -63,6 +65,7 @@ __all__ = [
     "install",
     "caller_id",
     "add_pseudo_connection",
+    "attach_link",
     "add_node_api_method",
     "prompt_registration_poll",
     "bus_info",
@@ -95,18 +98,15 @@ class PublicationHook(Protocol):
 class SubscriptionHook(Protocol):
     """What the subscriber side of the negotiation asks a micros_rt subscription."""
 
-    def offered_protocols(self, held_shm: str = "") -> List[List[Any]]:
-        """Protocol entries to offer, in preference order, e.g. [['DDS', {...}], ['TCPROS']]; ``held_shm``: the
-        shared-memory channel already read from this publisher."""
+    def offered_protocols(self, held: Tuple[str, str] = ("", "")) -> List[List[Any]]:
+        """Protocol entries to offer, in preference order, e.g. [['SHM', {...}], ['DDS', {...}], ['TCPROS']];
+        ``held``: (protocol, peer) of the link already made to this publisher (an SHM channel, a DDS writer)."""
 
-    def connect_dds(self, pub_uri: str, answer: DDSAnswer) -> Tuple[int, str, int]:
-        """Create the DDS pseudo-connection after the publisher accepted DDS."""
+    def negotiated_sides(self) -> "Mapping[str, SubscriptionSide]":
+        """The negotiated transports' sides, by protocol name: how to read an answer and connect."""
 
-    def connect_shm(self, pub_uri: str, answer: ShmAnswer) -> Tuple[int, str, int]:
-        """Open the shared-memory link (and its pseudo-connection) after the publisher accepted SHM."""
-
-    def open_dds(self) -> bool:
-        """Open the DDS reader a lazy offer left out (a publisher answered DDSOpenFirst)."""
+    def open_first(self, protocol: str) -> bool:
+        """Open what a lazy offer left out (a publisher answered DDSOpenFirst); True when it is there now."""
 
 
 _find_publication: Callable[[str], Optional[PublicationHook]] = lambda topic: None
@@ -201,6 +201,20 @@ def remove_pseudo_connection(topic: str, conn: DDSConnection, *, publisher: bool
     impl = tm.get_publisher_impl(topic) if publisher else tm.get_subscriber_impl(topic)
     if impl is not None and conn in impl.connections:
         impl.remove_connection(conn)
+
+
+def attach_link(topic: str, old: Optional[DDSConnection], conn: DDSConnection, *, what: str, subscriber: str,
+                fallback: str) -> Optional[Verdict]:
+    """Put a subscriber's new link (DDS, SHM) into rospy's publisher connection list of ``topic`` in place of
+    ``old``; a Verdict in words when rospy has no publisher left to attach it to (the link is closed then)."""
+    if old is not None:
+        remove_pseudo_connection(topic, old, publisher=True)
+        old.close()
+    if add_pseudo_connection(topic, conn, publisher=True):
+        return None
+    conn.close()
+    return Verdict(False, "closing", f"topic {topic}: no rospy publisher to attach the {what} link of "
+                                     f"{subscriber} to (unregistered); using {fallback}")
 
 
 #: rospy's own endpoint classes, taken before anything can replace them: ``micros-rt run`` puts
@@ -354,8 +368,8 @@ def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
             return 1, already, 0
         # An existing DDS or SHM link is asked again: the publisher may have unregistered and advertised the
         # topic anew (same node, same URI, a new DDS writer or SHM channel) faster than the old one was seen to
-        # go. An SHM link says which channel it holds, so that a publisher still writing it keeps it.
-        held = existing.peer_guid if existing is not None and existing.transport_type == SHM else ""
+        # go. The offer says which peer the link holds, so that a publisher still writing there keeps it.
+        held = (existing.transport_type, existing.peer_guid) if existing is not None else ("", "")
         protocols = hook.offered_protocols(held)
         if not protocols:
             return 0, "ERROR: no protocol allowed by the TransportHints", 0
@@ -363,7 +377,7 @@ def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
         if code > 0 and DDSOpenFirst.is_one(result):
             # the publisher would take DDS and this subscription has no DDS reader yet (ROS 2 visibility off):
             # open it and ask again; without one, ask for the rest
-            hook.open_dds()
+            hook.open_first(DDS)
             protocols = hook.offered_protocols(held)
             code, msg, result = _request_topic(pub_uri, topic, protocols)
             if code > 0 and DDSOpenFirst.is_one(result):
@@ -383,25 +397,21 @@ def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
             _log.warning("micros_rt: publisher %s answered requestTopic for %s with %s; ignoring it",
                          pub_uri, topic, short(repr(result)))
             return 0, "ERROR: publisher returned invalid protocol choice", 0
-        # a negotiated transport's answer: (how it is read, the peer id it names, how the subscription connects)
-        negotiated: Dict[str, Tuple[Any, Callable[[Any], str], Callable[[str, Any], Tuple[int, str, int]], str]] = {
-            SHM: (ShmAnswer, lambda a: a.channel, hook.connect_shm, "shared memory"),
-            DDS: (DDSAnswer, lambda a: a.writer, hook.connect_dds, "DDS"),
-        }
-        if result[0] in negotiated:
-            answer_class, peer_of, connect, words = negotiated[result[0]]
+        # a negotiated transport's answer: its side of the subscription reads it and connects
+        side = hook.negotiated_sides().get(result[0])
+        if side is not None:
             try:
-                answer = answer_class.from_xmlrpc(result[1] if len(result) > 1 else None, source=f"publisher {pub_uri}")
+                answer = side.read_answer(result[1] if len(result) > 1 else None, f"publisher {pub_uri}")
             except MalformedNegotiationError as exc:
                 _log.warning("micros_rt: topic %s: publisher %s accepted %s with a malformed answer (%s); "
-                             "not connected to it", topic, pub_uri, words, exc)
+                             "not connected to it", topic, pub_uri, side.words, exc)
                 return 0, f"malformed {result[0]} answer", 0
             if existing is not None:
-                if existing.peer_guid == peer_of(answer):
+                if existing.peer_guid == side.peer_of(answer):
                     return 1, already, 0
                 remove_pseudo_connection(topic, existing, publisher=False)
                 existing.close()
-            return connect(pub_uri, answer)
+            return side.connect(pub_uri, answer)
         if existing is not None:
             return 1, already, 0  # keep the DDS or SHM link; a TCPROS answer now would be a second link
         for h in self.protocol_handlers:
@@ -455,7 +465,7 @@ def _wrapped_publisher_add_connection(original: Callable[..., Any]) -> Callable[
     # QueuedConnection); micros_rt publications mark the socket with their transport priority.
     def add_connection(self: Any, c: Any) -> Any:
         hook = _find_publication(getattr(self, "resolved_name", ""))
-        if hook is not None and getattr(c, "transport_type", "TCPROS") not in (DDS, SHM):
+        if hook is not None and not isinstance(c, DDSConnection):  # a negotiated transport's link is no socket
             try:
                 hook.on_tcpros_connection(c, transport_socket(c))
             except Exception:

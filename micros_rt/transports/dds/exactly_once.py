@@ -21,9 +21,9 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any, Deque, Dict, List, Optional, Set, Tuple
 
-from ..transports.tcpros.patches import DDSConnection
-from ..transports.base import RemoteWriter
-from ..qos import AdvertiseQoSOptions, ClockSkewCheck
+from ..tcpros.patches import DDSConnection
+from ..base import RemoteWriter
+from ...qos import AdvertiseQoSOptions, ClockSkewCheck
 
 __all__ = ["Accepted", "Admission", "WriterState", "WriterTable", "DELIVER", "HOLD", "DROP", "HOLD_SECONDS"]
 

@@ -1,14 +1,17 @@
-"""Per-topic lanes: between ``publish()`` and a transport writer that can say "no room now".
+"""Per-topic send queues: between ``publish()`` and a transport writer that can say "no room now".
+
+They keep topics apart, not priorities: transport priority is carried by the transports (DSCP marks, DDS
+participants per priority, link pacing) and by the receiving side's delivery threads.
 
 A transport priority is a promise about a topic, so back-pressure on one topic must never hold another.
-A lane sits in front of each :class:`~micros_rt.transports.base.BackPressuredWriter` of a publication
+A send queue sits in front of each :class:`~micros_rt.transports.base.BackPressuredWriter` of a publication
 (DDS today; any transport that implements ``try_send`` gets one) and keeps ``publish()`` the way
 rospy's is:
 
 - ``queue_size=N`` (KEEP_LAST): ``publish()`` never waits. When the writer has no room (a reliable
   subscriber behind a slow link has not acknowledged enough), or the sample is large enough that sending
   it waits on the network (a camera frame: hundreds of datagrams into a socket buffer that a slow link
-  drains), the lane keeps the newest N samples and a thread of its own sends them in order; a sample
+  drains), the send queue keeps the newest N samples and a thread of its own sends them in order; a sample
   superseded before it left is not sent, and is counted in ``Publisher.statistics().dropped`` (rospy's
   queued publisher drops the same way, per connection).
 - ``queue_size=None`` (lossless): ``publish()`` waits until the writer takes the sample, bounded, and
@@ -18,7 +21,7 @@ rospy's is:
 The fast path (no back-pressure, nothing queued) is one ``try_send`` on the caller's thread: no thread
 hop, no lock.
 
-Stale samples are not sent: a sample that waited in the lane longer than ``max_age`` (the topic's lifespan,
+Stale samples are not sent: a sample that waited in the send queue longer than ``max_age`` (the topic's lifespan,
 ``msg_valid_period``, and for a best-effort topic its ``latency_budget`` too, see :func:`max_age_for`) is
 dropped whole before it leaves, counted in ``expired`` (and in ``dropped``). A camera frame that could not
 leave while a radio link was full goes when it is still worth something, or not at all.
@@ -36,19 +39,19 @@ from ..log import nonblocking_logger
 from ..qos import is_lossless
 from ..transports.base import BackPressuredWriter, TransportWriter, send_with_backoff
 
-__all__ = ["Lane", "LANE_IDLE_EXIT", "LANE_CLOSE_FLUSH", "max_age_for"]
+__all__ = ["SendQueue", "QUEUE_IDLE_EXIT", "QUEUE_CLOSE_FLUSH", "max_age_for"]
 
 _log = nonblocking_logger("rosout.micros_rt")
 
-#: A lane's thread ends after this many seconds with nothing to send (it starts again when needed).
-LANE_IDLE_EXIT = 2.0
-#: At close, what a lane still holds gets this many seconds to leave; the rest is dropped and counted.
-LANE_CLOSE_FLUSH = 1.0
+#: A send queue's thread ends after this many seconds with nothing to send (it starts again when needed).
+QUEUE_IDLE_EXIT = 2.0
+#: At close, what a send queue still holds gets this many seconds to leave; the rest is dropped and counted.
+QUEUE_CLOSE_FLUSH = 1.0
 
 
 def max_age_for(options: Any) -> float:
     """How long a sample of a publication with ``options`` (:class:`~micros_rt.qos.AdvertiseQoSOptions`) may
-    wait in its lane: its lifespan, and for best effort also its latency budget (0: no budget, no limit)."""
+    wait in its send queue: its lifespan, and for best effort also its latency budget (0: no budget, no limit)."""
     if options is None:
         return math.inf
     age = float(options.msg_valid_period)
@@ -60,16 +63,16 @@ def max_age_for(options: Any) -> float:
 
 def sender_for(writer: TransportWriter, *, topic: str, queue_size: Optional[int], options: Any) -> TransportWriter:
     """What a publication (or a program driving a writer itself, the relay) sends through: a back-pressured
-    writer behind a lane that keeps the newest ``queue_size`` (lossless, ``None``/0: ``publish()`` waits
+    writer behind a send queue that keeps the newest ``queue_size`` (lossless, ``None``/0: ``publish()`` waits
     instead) and drops samples older than ``options``' lifespan (:func:`max_age_for`); any other writer as is."""
     if not isinstance(writer, BackPressuredWriter):
         return writer
-    return Lane(writer, topic=topic, depth=None if is_lossless(queue_size) else queue_size,
+    return SendQueue(writer, topic=topic, depth=None if is_lossless(queue_size) else queue_size,
                 max_age=max_age_for(options))
 
 
-class Lane:
-    """One publication's lane to one back-pressured writer (see the module's text)."""
+class SendQueue:
+    """One publication's send queue in front of one back-pressured writer (see the module's text)."""
 
     def __init__(self, writer: BackPressuredWriter, *, topic: str, depth: Optional[int],
                  max_age: float = math.inf) -> None:
@@ -80,17 +83,17 @@ class Lane:
         self.max_age = max_age                  # seconds a sample may wait here before it is not worth sending
         self.dropped = 0                        # superseded before they left (KEEP_LAST), or expired
         self.expired = 0                        # waited longer than max_age: dropped, not sent
-        self.delayed = 0                        # KEEP_LAST samples handed to the lane's thread
+        self.delayed = 0                        # KEEP_LAST samples handed to the send queue's thread
         self._queue: Deque[Tuple[Any, float]] = collections.deque()   # (prepared sample, when it came)
         self._active = False                    # samples wait here: publish() must queue behind them
-        self._inflight: Any = None              # the (sample, when) the lane's thread is trying to send
+        self._inflight: Any = None              # the (sample, when) the send queue's thread is trying to send
         self._superseded = False                # ... and newer ones pushed it out of the newest `depth`
         self._cond = threading.Condition()
         self._thread: Optional[threading.Thread] = None
         self._closed = False
         self._close_deadline = float("inf")
         self._burst = 0                         # dropped since the last report
-        self._sent_at = time.monotonic()        # when the lane's thread last sent (it ends when idle long)
+        self._sent_at = time.monotonic()        # when the send queue's thread last sent (it ends when idle long)
 
     def prepare(self, msg: Any) -> Any:
         return self.writer.prepare(msg)
@@ -103,7 +106,7 @@ class Lane:
             return
         if not self._active and not self.writer.may_wait(prepared) and self.writer.try_send(prepared):
             return
-        # no room, or a large sample whose sending waits on the network: the lane's thread sends it
+        # no room, or a large sample whose sending waits on the network: the send queue's thread sends it
         self.delayed += 1
         with self._cond:
             self._active = True
@@ -118,7 +121,7 @@ class Lane:
                 self.dropped += 1
                 self._burst += 1
             if self._thread is None:
-                self._thread = threading.Thread(target=self._run, name=f"micros_rt lane {self.topic}", daemon=True)
+                self._thread = threading.Thread(target=self._run, name=f"micros_rt send queue {self.topic}", daemon=True)
                 self._thread.start()
             else:
                 self._cond.notify()
@@ -133,7 +136,7 @@ class Lane:
         return True
 
     def _head(self) -> Any:
-        """The (sample, when) to try now, passing over the superseded and the stale; None when the lane holds
+        """The (sample, when) to try now, passing over the superseded and the stale; None when the send queue holds
         nothing (under the lock)."""
         if self._inflight is not None and not self._superseded and not self._stale(self._inflight):
             return self._inflight
@@ -147,14 +150,14 @@ class Lane:
         return None
 
     def _wait_for_work(self) -> bool:
-        """True when the lane holds a sample to send; False (the thread ends) once it is closed or has had
-        nothing to send for :data:`LANE_IDLE_EXIT` seconds."""
+        """True when the send queue holds a sample to send; False (the thread ends) once it is closed or has had
+        nothing to send for :data:`QUEUE_IDLE_EXIT` seconds."""
         with self._cond:
             while self._head() is None:
-                if self._closed or time.monotonic() - self._sent_at > LANE_IDLE_EXIT:
+                if self._closed or time.monotonic() - self._sent_at > QUEUE_IDLE_EXIT:
                     self._thread = None
                     return False
-                self._cond.wait(LANE_IDLE_EXIT / 4)
+                self._cond.wait(QUEUE_IDLE_EXIT / 4)
             return True
 
     def _try_head(self, _: Any) -> bool:
@@ -191,7 +194,7 @@ class Lane:
         return True
 
     def _flush_over(self) -> bool:
-        """True once the lane is closed and :data:`LANE_CLOSE_FLUSH` has passed: the retries stop."""
+        """True once the send queue is closed and :data:`QUEUE_CLOSE_FLUSH` has passed: the retries stop."""
         return self._closed and time.monotonic() > self._close_deadline
 
     def _run(self) -> None:
@@ -211,12 +214,12 @@ class Lane:
             return
 
     def close(self) -> None:
-        """Give what the lane holds :data:`LANE_CLOSE_FLUSH` seconds to leave, then close the writer."""
+        """Give what the send queue holds :data:`QUEUE_CLOSE_FLUSH` seconds to leave, then close the writer."""
         with self._cond:
-            self._close_deadline = time.monotonic() + LANE_CLOSE_FLUSH
+            self._close_deadline = time.monotonic() + QUEUE_CLOSE_FLUSH
             self._closed = True
             thread = self._thread
             self._cond.notify()
         if thread is not None and thread is not threading.current_thread():
-            thread.join(LANE_CLOSE_FLUSH + 1.0)
+            thread.join(QUEUE_CLOSE_FLUSH + 1.0)
         self.writer.close()

@@ -1,6 +1,6 @@
-"""Lanes (micros_rt/core/lanes.py) on a fake back-pressured writer: the fast path sends inline, a KEEP_LAST
-lane never makes publish() wait and sends the newest queue_size in order once there is room (superseded
-samples counted, not sent), a lossless lane waits and loses nothing, close gives what waits a bounded
+"""Send queues (micros_rt/core/send_queue.py) on a fake back-pressured writer: the fast path sends inline, a KEEP_LAST
+queue never makes publish() wait and sends the newest queue_size in order once there is room (superseded
+samples counted, not sent), a lossless queue waits and loses nothing, close gives what waits a bounded
 chance; and, with real Cyclone in this process, a writer whose subscriber stopped acknowledging no longer
 stalls the interpreter's other threads."""
 
@@ -16,8 +16,8 @@ import pytest
 import harness
 
 from micros_rt import PublishTimeoutError
-from micros_rt.core import lanes
-from micros_rt.core.lanes import Lane
+from micros_rt.core import send_queue
+from micros_rt.core.send_queue import SendQueue
 from micros_rt.transports.base import BACKOFF_FIRST, BackPressuredWriter, send_with_backoff
 
 
@@ -60,19 +60,19 @@ def test_the_fake_is_a_back_pressured_writer() -> None:
 
 def test_fast_path_sends_inline_without_a_thread() -> None:
     valve = _Valve()
-    lane = Lane(valve, topic="/t", depth=5)
+    queue = SendQueue(valve, topic="/t", depth=5)
     before = threading.active_count()
     for i in range(100):
-        lane.send(i)
-    assert valve.sent == list(range(100)) and lane.dropped == 0 and lane.delayed == 0
+        queue.send(i)
+    assert valve.sent == list(range(100)) and queue.dropped == 0 and queue.delayed == 0
     assert threading.active_count() == before
-    lane.close()
+    queue.close()
     assert valve.closed
 
 
 def test_a_large_sample_is_sent_from_the_lanes_thread() -> None:
     valve = _Valve()
-    lane = Lane(valve, topic="/t", depth=2)
+    queue = SendQueue(valve, topic="/t", depth=2)
     caller = threading.get_ident()
     senders: List[int] = []
     original = valve.try_send
@@ -82,96 +82,96 @@ def test_a_large_sample_is_sent_from_the_lanes_thread() -> None:
         return original(prepared)
 
     valve.try_send = record  # type: ignore[method-assign]
-    lane.send("small")
-    lane.send("large")
+    queue.send("small")
+    queue.send("large")
     harness.wait_until(lambda: valve.sent == ["small", "large"], 10)
     assert senders[0] == caller and senders[1] != caller
-    lane.close()
+    queue.close()
 
 
 def test_keep_last_lane_never_waits_and_sends_the_newest_in_order() -> None:
     valve = _Valve()
-    lane = Lane(valve, topic="/t", depth=3)
-    lane.send("a")
+    queue = SendQueue(valve, topic="/t", depth=3)
+    queue.send("a")
     valve.open.clear()
     t0 = time.monotonic()
     for i in range(10):
-        lane.send(i)                                   # no room: queued, never waits
+        queue.send(i)                                   # no room: queued, never waits
     assert time.monotonic() - t0 < 1.0
-    harness.wait_until(lambda: valve.tries > 3, 10, message="the lane's thread retries")
+    harness.wait_until(lambda: valve.tries > 3, 10, message="the queue's thread retries")
     valve.open.set()
     harness.wait_until(lambda: len(valve.sent) == 4, 10, message="the newest three sent")
     assert valve.sent == ["a", 7, 8, 9]
-    assert lane.dropped == 7 and lane.delayed == 10
-    lane.send("after")                                # the lane is empty again: in order, after the rest
+    assert queue.dropped == 7 and queue.delayed == 10
+    queue.send("after")                                # the queue is empty again: in order, after the rest
     harness.wait_until(lambda: valve.sent[-1] == "after", 10)
     assert valve.sent == ["a", 7, 8, 9, "after"]
-    lane.close()
+    queue.close()
 
 
 def test_keep_last_order_holds_while_the_thread_drains() -> None:
     valve = _Valve()
-    lane = Lane(valve, topic="/t", depth=1000)
+    queue = SendQueue(valve, topic="/t", depth=1000)
     valve.open.clear()
     for i in range(200):
-        lane.send(i)
+        queue.send(i)
     valve.open.set()
     for i in range(200, 2000):
-        lane.send(i)                                   # behind the queued ones, never before them
-    harness.wait_until(lambda: len(valve.sent) + lane.dropped == 2000, 20, message="all 2000 sent or dropped")
+        queue.send(i)                                   # behind the queued ones, never before them
+    harness.wait_until(lambda: len(valve.sent) + queue.dropped == 2000, 20, message="all 2000 sent or dropped")
     # a producer faster than the link loses the oldest (counted), never the order
     assert valve.sent == sorted(valve.sent) and len(set(valve.sent)) == len(valve.sent)
     assert valve.sent[-1] == 1999
-    lane.close()
+    queue.close()
 
 
 def test_the_lanes_thread_retries_in_the_one_loop_whose_pauses_span_superseded_samples(
         monkeypatch: pytest.MonkeyPatch) -> None:
     valve = _Valve()
     valve.open.clear()
-    lane = Lane(valve, topic="/t", depth=1)
+    queue = SendQueue(valve, topic="/t", depth=1)
     pauses: List[float] = []
 
-    def wait(seconds: float) -> None:       # on the lane's thread, between two tries
+    def wait(seconds: float) -> None:       # on the queue's thread, between two tries
         pauses.append(seconds)
         if len(pauses) == 3:
-            lane.send("b")                  # supersedes "a", which the thread is trying
+            queue.send("b")                  # supersedes "a", which the thread is trying
         elif len(pauses) in (6, 8):
             valve.open.set()
 
-    monkeypatch.setattr(lanes, "send_with_backoff", functools.partial(send_with_backoff, wait=wait))
-    lane.send("a")
+    monkeypatch.setattr(send_queue, "send_with_backoff", functools.partial(send_with_backoff, wait=wait))
+    queue.send("a")
     harness.wait_until(lambda: valve.sent == ["b"], 5.0, message="b sent")
     # one loop for "a" and then "b": the pauses go on doubling, they do not start again at "b"
-    assert pauses == [BACKOFF_FIRST * 2 ** i for i in range(6)] and lane.dropped == 1
+    assert pauses == [BACKOFF_FIRST * 2 ** i for i in range(6)] and queue.dropped == 1
     valve.open.clear()
-    lane.send("c")                          # no room: to the lane's thread, whose pauses start again
+    queue.send("c")                          # no room: to the queue's thread, whose pauses start again
     harness.wait_until(lambda: valve.sent == ["b", "c"], 5.0, message="c sent")
     assert pauses[6:] == [BACKOFF_FIRST, 2 * BACKOFF_FIRST]
-    lane.close()
+    queue.close()
 
 
 def test_lossless_lane_waits_for_room_and_loses_nothing() -> None:
     valve = _Valve()
-    lane = Lane(valve, topic="/t", depth=None)
+    queue = SendQueue(valve, topic="/t", depth=None)
     valve.open.clear()
     threading.Timer(0.3, valve.open.set).start()
     t0 = time.monotonic()
-    lane.send("x")
-    assert time.monotonic() - t0 >= 0.25 and valve.sent == ["x"] and lane.dropped == 0
-    lane.close()
+    queue.send("x")
+    assert time.monotonic() - t0 >= 0.25 and valve.sent == ["x"] and queue.dropped == 0
+    queue.close()
 
 
 def test_close_gives_waiting_samples_a_bounded_chance_then_counts_them() -> None:
     valve = _Valve()
-    lane = Lane(valve, topic="/t", depth=5)
+    queue = SendQueue(valve, topic="/t", depth=5)
     valve.open.clear()
     for i in range(5):
-        lane.send(i)
+        queue.send(i)
     t0 = time.monotonic()
-    lane.close()
+    queue.close()
     assert time.monotonic() - t0 < 5.0
-    assert valve.sent == [] and lane.dropped == 5 and valve.closed
+    assert valve.sent == [] and queue.dropped == 5 and valve.closed
 
 
 def test_a_waiting_dds_write_leaves_other_threads_running() -> None:
@@ -228,7 +228,7 @@ def test_a_waiting_dds_write_leaves_other_threads_running() -> None:
             if not writer.try_send(data):
                 refused += 1
                 break
-        # try for a while the way a lane does; the spinner must get a fair share meanwhile
+        # try for a while the way a queue does; the spinner must get a fair share meanwhile
         while time.monotonic() - t0 < 0.5:
             writer.try_send(data)
             time.sleep(0.001)
@@ -257,24 +257,24 @@ def test_a_waiting_dds_write_leaves_other_threads_running() -> None:
 @pytest.mark.parametrize("depth", [1, 2])
 def test_superseded_while_in_flight_is_counted_once(depth: int) -> None:
     valve = _Valve()
-    lane = Lane(valve, topic="/t", depth=depth)
+    queue = SendQueue(valve, topic="/t", depth=depth)
     valve.open.clear()
-    lane.send("old")
+    queue.send("old")
     harness.wait_until(lambda: valve.tries >= 2, 10, message="the thread is trying 'old'")
     for i in range(depth):
-        lane.send(i)                                  # 'old' falls out of the newest `depth`
+        queue.send(i)                                  # 'old' falls out of the newest `depth`
     valve.open.set()
-    harness.wait_until(lambda: len(valve.sent) >= depth and not lane._active, 10, message="the lane drained")
+    harness.wait_until(lambda: len(valve.sent) >= depth and not queue._active, 10, message="the queue drained")
     # 'old' either left just before it was superseded (then it is not a drop) or was given up (a drop)
-    assert lane.dropped == (0 if "old" in valve.sent else 1)
+    assert queue.dropped == (0 if "old" in valve.sent else 1)
     assert valve.sent[-depth:] == list(range(depth))
-    lane.close()
+    queue.close()
 
 
 def test_a_large_write_that_waits_marks_the_socket_congested_then_small_writes_release_the_gil(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """The heuristic behind HIGH-beside-LOW on one socket: a large write that waited on the network makes
-    every write of that participant release the GIL (and KEEP_LAST lanes send from their threads) until it
+    every write of that participant release the GIL (and KEEP_LAST send queues send from their threads) until it
     has been quiet; another participant's socket (another transport priority) is not congested by it."""
     from micros_rt.transports.dds import congestion
 
@@ -307,25 +307,25 @@ def test_a_large_write_that_waits_marks_the_socket_congested_then_small_writes_r
 
 def test_samples_older_than_max_age_are_not_sent_and_are_counted() -> None:
     valve = _Valve()
-    lane = Lane(valve, topic="/camera", depth=10, max_age=0.2)
+    queue = SendQueue(valve, topic="/camera", depth=10, max_age=0.2)
     valve.open.clear()                     # the link has no room
     for i in range(3):
-        lane.send(i)                       # they wait in the lane
-    harness.wait_until(lambda: valve.tries >= 3, 10, interval=0.01, message="the lane's thread tried")
+        queue.send(i)                       # they wait in the queue
+    harness.wait_until(lambda: valve.tries >= 3, 10, interval=0.01, message="the queue's thread tried")
     time.sleep(0.3)                        # (the age being tested) they are now older than max_age
-    lane.send(3)                           # a fresh one
+    queue.send(3)                           # a fresh one
     valve.open.set()
     harness.wait_until(lambda: 3 in valve.sent, 10, interval=0.01, message="the fresh sample sent")
     assert valve.sent == [3], valve.sent   # the stale three never left
-    assert lane.expired == 3 and lane.dropped == 3
-    lane.close()
+    assert queue.expired == 3 and queue.dropped == 3
+    queue.close()
 
 
 def test_max_age_is_the_lifespan_and_for_best_effort_also_the_budget() -> None:
     import math
 
     from micros_rt import AdvertiseQoSOptions
-    from micros_rt.core.lanes import max_age_for
+    from micros_rt.core.send_queue import max_age_for
 
     assert max_age_for(AdvertiseQoSOptions()) == math.inf
     assert max_age_for(AdvertiseQoSOptions(msg_valid_period=0.5, latency_budget=0.1)) == 0.5  # reliable: retried
@@ -335,13 +335,13 @@ def test_max_age_is_the_lifespan_and_for_best_effort_also_the_budget() -> None:
 
 
 def test_sender_for_is_the_one_rule_of_publications_and_the_relay() -> None:
-    # the relay's exports built their lane without the rule's lifespan (issue 36: relay.py against
+    # the relay's exports built their queue without the rule's lifespan (issue 36: relay.py against
     # publication.py); both now go through sender_for
     import inspect
 
     from micros_rt.bridges.relay import relay
     from micros_rt.core import publication
-    from micros_rt.core.lanes import sender_for
+    from micros_rt.core.send_queue import sender_for
     from micros_rt.qos import AdvertiseQoSOptions
 
     class Plain:
@@ -350,10 +350,10 @@ def test_sender_for_is_the_one_rule_of_publications_and_the_relay() -> None:
     plain = Plain()
     assert sender_for(plain, topic="/t", queue_size=5, options=None) is plain  # type: ignore[arg-type,comparison-overlap]
     for module in (relay, publication):
-        assert "sender_for(" in inspect.getsource(module) and "Lane(" not in inspect.getsource(module)
+        assert "sender_for(" in inspect.getsource(module) and "SendQueue(" not in inspect.getsource(module)
     options = AdvertiseQoSOptions(msg_valid_period=0.25)
-    lane = sender_for(_Valve(), topic="/t", queue_size=0, options=options)
+    queue = sender_for(_Valve(), topic="/t", queue_size=0, options=options)
     try:
-        assert isinstance(lane, Lane) and lane.max_age == 0.25 and lane.depth is None  # lossless: waits, keeps all
+        assert isinstance(queue, SendQueue) and queue.max_age == 0.25 and queue.depth is None  # lossless: waits, keeps all
     finally:
-        lane.close()
+        queue.close()

@@ -1,0 +1,156 @@
+"""A negotiated transport's two sides: what a publication and a subscription ask of a transport that
+``requestTopic`` chooses per publisher and subscriber (shared memory, DDS).
+
+A publication (:mod:`micros_rt.core.publication`) holds one :class:`PublicationSide` per negotiated transport
+it may serve, in preference order, and knows nothing else of them: each side judges a subscriber's offer,
+keeps its own links (pseudo-connections in rospy's lists, so ``rosnode info`` stays true) and says what
+``publish()`` sends through. The publication gives each side a :class:`PublicationHost`: the topic's facts,
+where to record a verdict for ``micros-rt topic info``, and a call to make when the side's writer changes.
+
+A subscription (:mod:`micros_rt.core.subscription`) holds one :class:`SubscriptionSide` per negotiated
+transport its TransportHints allow: each makes the offer, reads the publisher's answer and makes the link,
+which hands messages to the core's delivery thread (one admission path for every transport).
+
+A new negotiated transport is its package with the two sides, plus one entry in the node's registry of
+negotiated transports (:data:`micros_rt.node.NEGOTIATED`).
+"""
+
+from __future__ import annotations
+
+import abc
+import threading
+from typing import Any, Dict, List, Optional, Protocol, Tuple, Type
+
+from ..negotiation import NegotiatedTransport, Verdict
+from ..qos import AdvertiseQoSOptions, SubscribeQoSOptions
+from .base import PushReader, TransportWriter
+
+__all__ = ["PublicationHost", "PublicationSide", "SubscriptionHost", "SubscriptionSide"]
+
+
+class PublicationHost(Protocol):
+    """What a side knows of the publication it serves."""
+
+    topic: str
+    data_class: Type[Any]
+    queue_size: Optional[int]
+    latch: bool
+    options: AdvertiseQoSOptions
+
+    def remember(self, subscriber: str, verdict: Verdict) -> None:
+        """Keep the last verdict for ``subscriber`` (its caller id), for ``micros-rt topic info``."""
+
+    def writers_changed(self) -> None:
+        """A side's writer appeared, or whether it sends changed: ``publish()`` takes the new set."""
+
+    def latched_message(self) -> Optional[Any]:
+        """The last message of a latched topic, published before this side had a writer (None: none)."""
+
+
+class PublicationSide(abc.ABC):
+    """One negotiated transport of one publication (see the module's text)."""
+
+    #: the protocol name in ``requestTopic`` (:data:`micros_rt.negotiation.DDS`, ``SHM``)
+    protocol: str = ""
+    def __init__(self, host: PublicationHost, *, refusal: Optional[Verdict] = None) -> None:
+        self.host = host
+        #: the node's profile keeps this topic off this transport: the verdict every subscriber gets, in words
+        #: (``micros-rt topic info`` shows it); None: the transport serves when it can
+        self.refusal = refusal
+        #: what ``publish()`` sends through (None: no writer yet); the publication puts it behind a send
+        #: queue when it can say "no room now" and closes it
+        self.writer: Optional[TransportWriter] = None
+
+    @abc.abstractmethod
+    def negotiated(self, subscriber: str) -> Optional[NegotiatedTransport]:
+        """How to parse and judge ``subscriber``'s offer of this protocol; None: not judged here (a
+        :attr:`refusal`): the subscriber's entry is skipped as a stock publisher would, with no warning."""
+
+    def sending(self) -> bool:
+        """Whether ``publish()`` sends through :attr:`writer` now (it has one, and someone to serve with it)."""
+        return self.writer is not None
+
+    @abc.abstractmethod
+    def pseudo_links(self) -> int:
+        """This side's links in rospy's connection list (they are not TCPROS links)."""
+
+    @abc.abstractmethod
+    def reached(self) -> int:
+        """Subscribers of this side that a message published now reaches."""
+
+    def housekeeping(self, now: float) -> None:
+        """Drop links whose subscriber went away (the node's housekeeping thread, about once a second)."""
+
+    def dropped(self) -> int:
+        """Messages this side dropped by itself (its send queue's drops are the publication's)."""
+        return 0
+
+    def link_states(self) -> Optional[Dict[str, bool]]:
+        """Per subscriber caller id: whether its link is matched yet (for ``micros-rt topic info``); None when
+        this transport's links have no such step (they carry data once made)."""
+        return None
+
+    @abc.abstractmethod
+    def close(self) -> None:
+        """Close the links; the publication closes :attr:`writer` after it (its send queue flushes first)."""
+
+
+class SubscriptionHost(Protocol):
+    """What a side knows of the subscription it connects (the core's delivery thread and its readers)."""
+
+    topic: str
+    data_class: Type[Any]
+    queue_size: Optional[int]
+    depth: Optional[int]
+    effective: SubscribeQoSOptions
+    options: Optional[SubscribeQoSOptions]
+    tag: Dict[str, str]
+    lock: threading.Lock
+    closed: bool
+
+    def raise_priority(self, qos: Optional[AdvertiseQoSOptions]) -> None:
+        """A publisher of ``qos`` connected: the delivery thread runs at its transport priority if higher."""
+
+    def wake(self) -> None:
+        """Wake the delivery thread (a link came, data may be there)."""
+
+
+class SubscriptionSide(abc.ABC):
+    """One negotiated transport of one subscription: its entry in ``requestTopic``, and the links it makes when
+    a publisher accepts it."""
+
+    protocol: str = ""
+    #: the transport in a log line ("shared memory")
+    words: str = ""
+
+    def __init__(self, host: SubscriptionHost) -> None:
+        self.host = host
+
+    @abc.abstractmethod
+    def offer(self, held: str) -> Optional[List[Any]]:
+        """This transport's entry for ``requestTopic`` (None: not offered now). ``held``: the peer (channel,
+        writer) this subscription already reads from the publisher asked, "" when none."""
+
+    @abc.abstractmethod
+    def read_answer(self, params: Any, source: str) -> Any:
+        """The publisher's answer (raising :class:`~micros_rt.negotiation.MalformedNegotiationError`)."""
+
+    @abc.abstractmethod
+    def peer_of(self, answer: Any) -> str:
+        """The peer an answer names (a channel, a writer): the same as a link's held one means nothing changed."""
+
+    @abc.abstractmethod
+    def connect(self, pub_uri: str, answer: Any) -> Tuple[int, str, int]:
+        """Make the link the answer asks for; rospy's ``_connect_topic`` result (1: connected)."""
+
+    def open_first(self) -> bool:
+        """A publisher asked for this transport's reader before it answers (a lazy DDS offer): open it; True
+        when there is one."""
+        return False
+
+    def pushed(self) -> Tuple[PushReader, ...]:
+        """Readers whose links' threads hand over messages, for the delivery thread to take from."""
+        return ()
+
+    def close(self) -> None:
+        """Close the links (the delivery thread has stopped)."""

@@ -1,0 +1,155 @@
+"""The shared-memory side of a publication: a channel per subscriber process of this host and user that chose
+SHM, and its link in rospy's connection list.
+
+Importing this module imports no iceoryx2: the writer is made when a first subscriber chooses SHM."""
+
+from __future__ import annotations
+
+import os
+import threading
+from typing import TYPE_CHECKING, Dict, Optional, Tuple
+
+from ...exceptions import MicrosRtError
+from ...log import nonblocking_logger
+from ...negotiation import (SHM, NegotiatedTransport, PublicationFacts, ShmAnswer, ShmOffer, Verdict, decide_shm)
+from ...qos import is_lossless
+from ..negotiated import PublicationHost, PublicationSide
+from ..tcpros import patches
+from ..tcpros.patches import short
+from .host import host_identity, unavailable_reason
+
+if TYPE_CHECKING:
+    from .channel import ShmChannel, ShmWriter
+
+__all__ = ["ShmPublication"]
+
+_log = nonblocking_logger("rosout.micros_rt")
+
+
+class ShmPublication(PublicationSide):
+    """A publication's shared-memory writer and links (see the module's text)."""
+
+    protocol = SHM
+
+    def __init__(self, host: PublicationHost, *, refusal: Optional[Verdict] = None) -> None:
+        super().__init__(host, refusal=refusal)
+        self.lock = threading.Lock()
+        #: made when a first subscriber chooses SHM
+        self.shm: "Optional[ShmWriter]" = None
+        self.links: Dict[str, patches.DDSConnection] = {}  # subscriber caller id -> SHM link
+
+    def negotiated(self, subscriber: str) -> Optional[NegotiatedTransport]:
+        if self.refusal is not None:
+            return None
+        return NegotiatedTransport(parse=lambda params, source: ShmOffer.from_xmlrpc(params, source=source),
+                                   judge=lambda offer: self.judge(offer, subscriber))
+
+    def judge(self, offer: ShmOffer, subscriber: str) -> Tuple[Verdict, Optional[ShmAnswer]]:
+        """Accept a subscriber of this host and user on a channel of its own, or say why not."""
+        host = self.host
+        who = short(subscriber)
+        unavailable = unavailable_reason()
+        if unavailable is None and self.shm is not None and self.shm.failed:
+            unavailable = self.shm.failed
+        facts = PublicationFacts(topic=host.topic, dds_topic="", domain=None, type_name=host.data_class._type,
+                                 md5=host.data_class._md5sum, options=host.options, latch=host.latch)
+        verdict = decide_shm(offer, facts, host=host_identity(), unavailable=unavailable, subscriber=who)
+        if verdict.accepted and offer.held and self._still_held(subscriber, offer):
+            # asked again on a publisher update: the subscriber's channel is there and read, keep it
+            return verdict, self._answer(offer.held)
+        if verdict.accepted:
+            try:
+                channel = self._writer().open_channel(subscriber, offer.pid)
+            except MicrosRtError as exc:
+                verdict = Verdict(False, "shm-unavailable", f"{exc}; serving {who} otherwise")
+        host.remember(subscriber, verdict)
+        if not verdict.accepted:
+            return verdict, None
+        info = (f"SHM connection on channel {channel.name} to {who} ("
+                f"{'lossless' if is_lossless(host.queue_size) else f'newest {host.queue_size} kept'}, "
+                f"priority {host.options.transport_priority.name})")
+        conn = patches.DDSConnection(host.topic, subscriber, "o", info, peer_guid=channel.name,
+                                    on_close=self._connection_closed, transport=SHM)
+        with self.lock:
+            old = self.links.get(subscriber)
+            self.links[subscriber] = conn
+        refused = patches.attach_link(host.topic, old, conn, what="SHM", subscriber=who, fallback="the next protocol")
+        if refused is not None:
+            return refused, None
+        return verdict, self._answer(channel.name)
+
+    def _answer(self, channel: str) -> ShmAnswer:
+        return ShmAnswer(channel=channel, latch=self.host.latch, qos=self.host.options, node=patches.caller_id(),
+                         pid=os.getpid())
+
+    def _still_held(self, subscriber: str, offer: ShmOffer) -> bool:
+        """The channel ``offer`` says its subscriber reads is this publication's channel for that subscriber
+        process, open, its port attached, its link in rospy's list."""
+        shm = self.shm
+        channel = shm.channel_for(subscriber) if shm is not None else None
+        with self.lock:
+            linked = subscriber in self.links
+        return (channel is not None and linked and channel.name == offer.held and channel.peer_pid == offer.pid
+                and not channel.closed and channel.attached())
+
+    def _writer(self) -> "ShmWriter":
+        host = self.host
+        with self.lock:
+            if self.shm is None:
+                from .channel import ShmWriter
+
+                self.shm = ShmWriter(host.topic, latch=host.latch, queue_size=host.queue_size,
+                                     lossless=is_lossless(host.queue_size)
+                                     and not host.options.using_best_effort_protocol)
+                last = host.latched_message() if host.latch else None
+                if last is not None:
+                    self.shm.keep_latched(last)  # published before the first SHM subscriber came
+                self.writer = self.shm
+                created = True
+            else:
+                created = False
+        if created:
+            host.writers_changed()
+        return self.shm
+
+    def _connection_closed(self, conn: patches.DDSConnection) -> None:
+        with self.lock:
+            if self.links.get(conn.endpoint_id) is conn:
+                del self.links[conn.endpoint_id]
+        shm = self.shm
+        if shm is not None:
+            for channel in shm.channels():
+                if channel.name == conn.peer_guid:
+                    shm.close_channel(channel)
+
+    def _channel_gone(self, channel: "ShmChannel") -> None:
+        with self.lock:
+            conn = self.links.get(channel.subscriber)
+        if conn is not None and conn.peer_guid == channel.name:
+            _log.debug("micros_rt: topic %s: SHM subscriber %s is gone", self.host.topic, short(channel.subscriber))
+            patches.remove_pseudo_connection(self.host.topic, conn, publisher=True)
+            conn.close()
+
+    # -- links ---------------------------------------------------------------
+    def pseudo_links(self) -> int:
+        with self.lock:
+            return len(self.links)
+
+    def reached(self) -> int:
+        shm = self.shm
+        return shm.attached_count() if shm is not None and self.pseudo_links() else 0
+
+    def housekeeping(self, now: float) -> None:
+        """SHM channels whose subscriber left (a SIGKILLed one's ports are reclaimed first)."""
+        if self.shm is not None:
+            self.shm.housekeeping(now, self._channel_gone)
+
+    def dropped(self) -> int:
+        return self.shm.dropped if self.shm is not None else 0
+
+    def close(self) -> None:
+        with self.lock:
+            conns = list(self.links.values())
+        for conn in conns:
+            conn.close()
+        self.shm = self.writer = None
