@@ -62,7 +62,7 @@ def graph(ros_master: harness.RosMaster) -> Iterator[Dict[str, harness.Peer]]:
             {"name": f"{P}/r2/fib"}, {"name": f"{P}/r2/silent", "mode": "silent"}])), env, name="ros2_action_server"),
         "bridge": harness.Peer([harness.MICROS_RT_PYTHON, PEER1, "bridge",
                                 "--to-ros2", f"{P}/r1/fib", f"{P}/r1/dying",
-                                "--from-ros2", f"{P}/r2/fib", f"{P}/r2/silent",
+                                "--from-ros2", f"{P}/r2/fib", f"{P}/r2/silent", f"{P}/r2/none",
                                 "--expect", f"{P}/r2/fib", f"{P}/r2/silent",
                                 "--accept-timeout", str(ACCEPT_TIMEOUT),
                                 "--call-in-process", f"{P}/r2/fib"], env, name="mrt_action_bridge"),
@@ -123,6 +123,7 @@ def test_bad_input_reaches_the_caller_in_words(graph: Dict[str, harness.Peer], s
     # a ROS 2 server that never answers the goal: the stock ROS 1 client's goal is rejected in words
     ros1_client = spawn(stock("call", "--plan", json.dumps([
         {"label": "silent", "name": f"{P}/r2/silent", "order": 10, "wait": 20, "timeout": 10},
+        {"label": "none", "name": f"{P}/r2/none", "order": 10, "wait": 20, "timeout": 10},
         {"label": "after", "name": f"{P}/r2/fib", "order": 10}])), name="stock_action_client")
     # a ROS 1 server that dies mid-goal (SIGKILL after 5 feedback messages): the rclpy client's goal is aborted
     ros2_client = spawn(ros2("call", "--plan", json.dumps([
@@ -136,6 +137,11 @@ def test_bad_input_reaches_the_caller_in_words(graph: Dict[str, harness.Peer], s
     assert silent["text"] == (f"action {P}/r2/silent: the ROS 2 action server did not answer the goal within "
                               f"{ACCEPT_TIMEOUT:g} s"), silent
     assert ACCEPT_TIMEOUT - 0.2 < silent["elapsed"] < ACCEPT_TIMEOUT + 1.5, silent
+    # no ROS 2 server of the name at all: the same, with other words
+    none = result(ros1_client, "none")
+    assert none["status_name"] == "REJECTED" and none["elapsed"] < ACCEPT_TIMEOUT + 1.5, none
+    assert none["text"].startswith(f"action {P}/r2/none: no ROS 2 action server of {P}/r2/none was discovered "
+                                   f"within {ACCEPT_TIMEOUT:g} s (ROS_DOMAIN_ID "), none
     dies = result(ros2_client, "dies")
     assert dies["status_name"] == "ABORTED" and dies["feedback"] == 5 and dies["elapsed"] < 5.0, dies
     bridge = graph["bridge"]
