@@ -2,6 +2,7 @@
 
 Run with /usr/bin/python3. Prints {"event": "ready"} once the service is registered, then
 {"event": "called", "data": ...} for every call; answers success=True, message="mode on"/"mode off".
+Exits after --duration seconds, or promptly on SIGINT/SIGTERM.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ import argparse
 import json
 import os
 import sys
+import time
 from typing import Any
 
 import rospy
@@ -35,7 +37,11 @@ def main() -> int:
 
     rospy.Service(args.service, SetBool, handle)
     emit("ready", service=args.service)
-    rospy.sleep(args.duration)
+    # Not rospy.sleep: on the wall clock it is time.sleep, which rospy's SIGINT/SIGTERM handler does not cut
+    # short (it only flags shutdown), so the harness's stop waited for SIGKILL (10 s).
+    end = time.monotonic() + args.duration
+    while not rospy.is_shutdown() and time.monotonic() < end:
+        time.sleep(0.1)
     return 0
 
 
