@@ -5,6 +5,10 @@ names the file and the line of the offending key or value (:func:`location`). Ea
 :class:`~micros_rt.exceptions.ProfileError` with one line of words, ``<file>:<line>: <key path>: <what is
 wrong>``; a program with an error type of its own re-raises it with the same text.
 
+A program reads its whole file with :func:`load_document` (or its text with :func:`parse_document`): the file
+read, an empty document refused, its own parser given the root node, and every error of the shared helpers
+raised as the program's error type with the same text.
+
 >>> root = compose("relay: {queue_size: 5}\\n", source="relay.yaml")
 >>> [(key.value, node_value(body)) for key, body in mapping_items(root, "relay.yaml", "")]
 [('relay', {'queue_size': 5})]
@@ -19,17 +23,48 @@ micros_rt.exceptions.ProfileError: f.yaml:1: import.deadline: -1 is invalid: ...
 
 from __future__ import annotations
 
-from typing import Any, Sequence, TypeVar
+import os
+from typing import Any, Callable, Sequence, TypeVar
 
 import yaml
 
 from micros_rt.exceptions import MicrosRtError, ProfileError, UnsupportedQoSError
 from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions
 
-__all__ = ["compose", "describe_node", "expect_mapping", "is_null", "location", "mapping_items", "node_value",
-           "parse_qos_options", "sub_mapping"]
+__all__ = ["compose", "describe_node", "expect_mapping", "is_null", "load_document", "location", "mapping_items",
+           "node_value", "parse_document", "parse_qos_options", "sub_mapping"]
 
 _Options = TypeVar("_Options", AdvertiseQoSOptions, SubscribeQoSOptions)
+_Parsed = TypeVar("_Parsed")
+
+
+def load_document(path: str | os.PathLike[str], parse: Callable[[yaml.Node, str], _Parsed], *, what: str,
+                  empty: str, error: type[MicrosRtError] = ProfileError) -> _Parsed:
+    """Read the YAML file at ``path`` and :func:`parse_document` it (its path names it in errors); a file that
+    cannot be read raises ``error``: ``<file>: cannot read <what>: <reason>``."""
+    source = os.fspath(path)
+    try:
+        with open(path, encoding="utf-8") as f:
+            text = f.read()
+    except OSError as exc:
+        raise error(f"{source}: cannot read {what}: {exc}") from exc
+    return parse_document(text, parse, source=source, empty=empty, error=error)
+
+
+def parse_document(text: str, parse: Callable[[yaml.Node, str], _Parsed], *, source: str, empty: str,
+                   error: type[MicrosRtError] = ProfileError) -> _Parsed:
+    """``parse(root, source)`` of YAML ``text``'s root node. An empty document raises ``error``:
+    ``<source>: <empty>``; any other micros_rt error (invalid YAML, the shared helpers' ProfileError) is
+    raised as ``error`` with the same text."""
+    try:
+        root = compose(text, source=source)
+        if root is None:
+            raise error(f"{source}: {empty}")
+        return parse(root, source)
+    except MicrosRtError as exc:
+        if isinstance(exc, error):
+            raise
+        raise error(str(exc)) from exc
 
 
 def compose(text: str, *, source: str) -> yaml.Node | None:

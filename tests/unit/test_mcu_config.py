@@ -123,5 +123,8 @@ def test_reliable_delivery_on_the_link_is_refused_in_words() -> None:
 
 
 def test_unreadable_file_names_it(tmp_path: Path) -> None:
-    with pytest.raises(McuConfigError, match="nope.yaml: cannot read"):
+    with pytest.raises(McuConfigError, match="nope.yaml: cannot read the bridge configuration: "):
         load_config(tmp_path / "nope.yaml")
+    (tmp_path / "empty.yaml").write_text("")
+    with pytest.raises(McuConfigError, match=r"empty.yaml: empty configuration; at least 'microcontroller: \{"):
+        load_config(tmp_path / "empty.yaml")

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import pytest
 
 from micros_rt import TransportPriority
-from micros_rt.bridges.relay.config import RelayConfigError, parse_config, send_buffer_for
+from micros_rt.bridges.relay.config import RelayConfigError, load_config, parse_config, send_buffer_for
 
 GOOD = """\
 graph: robot_a
@@ -89,3 +90,14 @@ def test_link_bandwidth_sizes_the_low_process_send_buffer() -> None:
     assert parse_config("graph: a\n").link_bandwidth is None
     # ~3.3 ms of the link (the kernel holds twice that), never below 16 kB (smaller starved the camera)
     assert send_buffer_for(40e6) == 16_500 and send_buffer_for(1e9) == 412_500 and send_buffer_for(1e6) == 16_384
+
+
+def test_a_file_unreadable_or_empty_is_named(tmp_path: Path) -> None:
+    with pytest.raises(RelayConfigError, match="nope.yaml: cannot read the relay configuration: "):
+        load_config(tmp_path / "nope.yaml")
+    (tmp_path / "empty.yaml").write_text("# nothing\n")
+    with pytest.raises(RelayConfigError, match="empty.yaml: empty relay configuration; it needs at least 'graph:'"):
+        load_config(tmp_path / "empty.yaml")
+    (tmp_path / "a.yaml").write_text("graph: a\nexport:\n  /x: {deadline: 1}\n")
+    with pytest.raises(RelayConfigError, match=r"a.yaml:3: export\['/x'\].deadline: unknown option"):
+        load_config(str(tmp_path / "a.yaml"))

@@ -35,10 +35,9 @@ import roslib.message
 import rosgraph.names
 import yaml
 
-from micros_rt.exceptions import ProfileError
 from micros_rt.qos.options import MCU_FROM, MCU_SERVICE, MCU_TO, OPTIONS, AdvertiseQoSOptions, SubscribeQoSOptions
-from micros_rt.qos.yamlconfig import (compose, describe_node, expect_mapping, is_null, location, mapping_items,
-                                      node_value, parse_qos_options, sub_mapping)
+from micros_rt.qos.yamlconfig import (describe_node, expect_mapping, is_null, load_document, location, mapping_items,
+                                      node_value, parse_document, parse_qos_options, sub_mapping)
 from micros_rt.transports.mcu.errors import McuConfigError
 from micros_rt.transports.mcu.spec import (DEFAULT_SERVICE_TIMEOUT, MAX_MTU, Address, McuConfig, ServiceEntry,
                                            TopicEntry)
@@ -60,22 +59,21 @@ _SERVICE_QOS = _applying(MCU_SERVICE)
 _ADVERTISE_KEYS = tuple(k for k in AdvertiseQoSOptions._KEYS if k not in SubscribeQoSOptions._KEYS)
 
 
+_EMPTY = "empty configuration; at least 'microcontroller: {address: ...}' is needed"
+
+
 def load_config(path: str | os.PathLike[str]) -> McuConfig:
     """Read a bridge configuration file; errors are :class:`McuConfigError` naming file, line, key."""
-    try:
-        with open(path, encoding="utf-8") as f:
-            text = f.read()
-    except OSError as exc:
-        raise McuConfigError(f"{os.fspath(path)}: cannot read the bridge configuration: {exc}") from exc
-    return parse_config(text, source=os.fspath(path))
+    return load_document(path, _parse, what="the bridge configuration", empty=_EMPTY, error=McuConfigError)
 
 
 def parse_config(text: str, *, source: str = "<string>") -> McuConfig:
     """Parse configuration YAML ``text``; ``source`` names it in error messages."""
-    try:
-        return _Parser(source).parse(text)
-    except ProfileError as exc:  # from the shared YAML helpers: already file:line: key: words
-        raise McuConfigError(str(exc)) from exc
+    return parse_document(text, _parse, source=source, empty=_EMPTY, error=McuConfigError)
+
+
+def _parse(root: yaml.Node, source: str) -> McuConfig:
+    return _Parser(source).parse(root)
 
 
 class _Parser:
@@ -85,11 +83,7 @@ class _Parser:
     def error(self, node: yaml.Node, path: str, words: str) -> McuConfigError:
         return McuConfigError(f"{location(self.source, node)}: {path}: {words}")
 
-    def parse(self, text: str) -> McuConfig:
-        root = compose(text, source=self.source)
-        if root is None:
-            raise McuConfigError(f"{self.source}: empty configuration; at least 'microcontroller: "
-                                 f"{{address: ...}}' is needed")
+    def parse(self, root: yaml.Node) -> McuConfig:
         expect_mapping(root, self.source, "the top level", "a mapping")
         known = ("microcontroller", "bind", "mtu", "stats_period", "wire_form", "to_microcontroller", "from_microcontroller",
                  "services_on_microcontroller", "services_for_microcontroller")

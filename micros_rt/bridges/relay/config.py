@@ -53,8 +53,8 @@ from ...exceptions import MicrosRtError
 from ...qos import AdvertiseQoSOptions, SubscribeQoSOptions
 from ...qos.links import parse_bandwidth, send_buffer_for
 from ...qos.topic_rules import TopicPattern
-from ...qos.yamlconfig import (compose, expect_mapping, is_null, location, mapping_items, node_value, parse_qos_options,
-                               sub_mapping)
+from ...qos.yamlconfig import (expect_mapping, is_null, load_document, location, mapping_items, node_value,
+                               parse_document, parse_qos_options, sub_mapping)
 
 __all__ = ["ExportRule", "ImportRule", "RelayConfig", "RelayConfigError", "Ros2Entry", "ServiceImport", "load_config",
            "parse_config", "send_buffer_for"]
@@ -138,29 +138,17 @@ class RelayConfig:
         return f"/{self.graph}{topic}"
 
 
-def load_config(path: str) -> RelayConfig:
-    try:
-        with open(path, encoding="utf-8") as f:
-            text = f.read()
-    except OSError as exc:
-        raise RelayConfigError(f"{path}: cannot read the relay configuration: {exc}") from None
-    return parse_config(text, source=os.fspath(path))
+_EMPTY = "empty relay configuration; it needs at least 'graph:'"
+
+
+def load_config(path: str | os.PathLike[str]) -> RelayConfig:
+    """Read a relay configuration file; errors are :class:`RelayConfigError` naming file, line, key."""
+    return load_document(path, _parse, what="the relay configuration", empty=_EMPTY, error=RelayConfigError)
 
 
 def parse_config(text: str, *, source: str = "<string>") -> RelayConfig:
     """Parse relay YAML ``text``; ``source`` names it in errors."""
-    try:
-        root = compose(text, source=source)
-    except MicrosRtError as exc:
-        raise RelayConfigError(str(exc)) from None
-    if root is None:
-        raise RelayConfigError(f"{source}: empty relay configuration; it needs at least 'graph:'")
-    try:
-        return _parse(root, source)
-    except MicrosRtError as exc:  # a ProfileError from the shared option parser: same one-line form
-        if isinstance(exc, RelayConfigError):
-            raise
-        raise RelayConfigError(str(exc)) from None
+    return parse_document(text, _parse, source=source, empty=_EMPTY, error=RelayConfigError)
 
 
 def _parse(root: yaml.Node, source: str) -> RelayConfig:
