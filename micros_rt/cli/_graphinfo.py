@@ -24,7 +24,7 @@ from ..core.introspection import INFO_METHOD
 # the library's XML-RPC transport with a per-connection timeout (the micros_rt package imports rospy anyway)
 from ..transports.tcpros.xmlrpc import TimeoutTransport
 from ..exceptions import MicrosRtError
-from ..qos.options import describe
+from ..qos.options import describe, drop_counters
 from . import CommandError
 
 __all__ = [
@@ -358,10 +358,8 @@ def relay_marking(report: NodeReport, topic: str, *, publisher: bool) -> Optiona
         counters = dict(im.get("counters") or {})
         exporters = [str(e) for e in im.get("exporters") or []]
         seen = f"exported by {', '.join(exporters)}" if exporters else "no exporting relay seen now"
-        dropped = [f"{label} {counters[key]}" for key, label in (
-            ("dropped_queue_full", "queue full"), ("dropped_expired", "expired"), ("dropped_filtered", "filtered"),
-            ("dropped_out_of_order", "out of order"), ("refused", "refused"), ("bad_input", "bad input"), ("lost", "lost"),
-            ("deadline_missed", "deadline missed")) if counters.get(key)]
+        dropped = [f"{key.removeprefix('dropped_').replace('_', ' ')} {counters[key]}" for key in (
+            "dropped_queue_full", *drop_counters(), "refused", "bad_input", "lost") if counters.get(key)]
         summary = (f"relayed in from graph {im.get('origin')} (outside topic {im.get('outside')}, {seen}) by relay "
                    f"node {report.name}")
         straight = int(im.get("straight") or 0)

@@ -440,6 +440,14 @@ def enforcers() -> frozenset[str]:
     return frozenset(o.enforcer for o in OPTIONS if o.enforcer is not None)
 
 
+def drop_counters(*, side: Optional[str] = None, applies: Optional[str] = None) -> tuple[str, ...]:
+    """The :class:`~micros_rt.core.stats.SubscriberStatistics` fields that count what the enforcers drop (or
+    miss: ``deadline_missed``), in the catalogue's order, once each: of every option, or only of one ``side``'s
+    ("advertise", "subscribe") and of those with an effect on a bridge entry (``applies``, an ``MCU_*``)."""
+    return tuple(dict.fromkeys(o.counter for o in OPTIONS if o.counter is not None
+                               and (side is None or o.side == side) and (applies is None or applies in o.applies)))
+
+
 def describe(encoded: Mapping[str, Any], side: str, *, short: bool = False) -> list[str]:
     """Words for a ``to_dict`` form (a peer's, missing keys at their defaults), in the catalogue's order."""
     defaults = {f.name: f.default for f in dataclasses.fields(OPTION_CLASSES[side])}

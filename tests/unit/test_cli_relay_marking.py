@@ -114,6 +114,19 @@ def test_subscribers_reading_the_exporter_straight_are_counted_on_the_import() -
                                            "from graph robot_a's relay")
 
 
+def test_an_import_s_drops_are_said_in_words_the_enforcers_counters_from_the_catalogue() -> None:
+    counters = {"received": 20, "published": 9, "dropped_queue_full": 1, "dropped_expired": 2, "deadline_missed": 3,
+                "dropped_filtered": 4, "dropped_out_of_order": 5, "refused": 6, "bad_input": 7, "lost": 8}
+    relay_b = relay_node("/relay_robot_b", "http://127.0.0.1:2001/", [],
+                         {"graph": "robot_b", "imports": [{"outside": OUTSIDE, "local": OUTSIDE, "origin": "robot_a",
+                                                           "counters": counters}]})
+    marking = relay_marking(relay_b, OUTSIDE, publisher=True)
+    assert marking is not None
+    assert marking["description"].endswith(
+        "published 9 of 20 received (queue full 1, expired 2, deadline missed 3, filtered 4, out of order 5, "
+        "refused 6, bad input 7, lost 8)")
+
+
 def test_links_between_ordinary_nodes_keep_their_json_and_text() -> None:
     snap = snapshot_of(graph_a(), T, ["/talker"], ["/plain", "/relay_robot_a_high"])
     links = {link.subscriber: link.to_dict() for link in snap.links}

@@ -13,7 +13,7 @@ from micros_rt.core.stats import SubscriberStatistics
 from micros_rt.exceptions import QoSValueError
 from micros_rt.qos import mapping, options
 from micros_rt.qos.options import (OPTIONS, AdvertiseQoSOptions, QoSOption, SubscribeQoSOptions, describe,
-                                   enforcers, options_of, wire_keys)
+                                   drop_counters, enforcers, options_of, wire_keys)
 from micros_rt.bridges.mcu import config as mcu_config
 
 
@@ -32,6 +32,28 @@ def test_every_enforcer_counts_its_drops_and_every_dds_policy_has_a_builder() ->
     builders = mapping._policy_builders()
     assert {o.dds_policy for o in OPTIONS if o.dds_policy} <= set(builders)
     assert enforcers() == {"time_filter", "lifespan", "source_order", "deadline"}
+
+
+def test_drop_counters_are_the_enforcers_counters() -> None:
+    assert drop_counters() == ("dropped_expired", "deadline_missed", "dropped_filtered", "dropped_out_of_order")
+    assert set(drop_counters()) == {o.counter for o in OPTIONS if o.enforcer is not None}
+    assert drop_counters(side="subscribe", applies=options.MCU_FROM) == ("deadline_missed", "dropped_filtered")
+    assert drop_counters(applies=options.MCU_TO) == ("dropped_expired", "dropped_filtered")
+    assert drop_counters(side="advertise") == ("dropped_expired",)
+
+
+def test_a_new_enforcer_s_counter_reaches_the_relay_and_the_graph_tool(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The relay's import counters and micros-rt graph's words for them take the catalogue's counters: an option
+    # with an enforcer (here a toy one counted in ``malformed``) needs no change there.
+    from micros_rt.cli._graphinfo import NodeReport, relay_marking
+
+    toy = QoSOption("toy_check", "subscribe", "bool", "toy", enforcer="toy", counter="malformed")
+    monkeypatch.setattr(options, "OPTIONS", OPTIONS + (toy,))
+    assert drop_counters()[-1] == "malformed"
+    report = NodeReport("/r", "http://x/", "micros_rt", info={"relay": {"graph": "b", "imports": [
+        {"outside": "/a/t", "local": "/a/t", "origin": "a", "counters": {"received": 2, "published": 1, "malformed": 1}}]}})
+    marking = relay_marking(report, "/a/t", publisher=True)
+    assert marking is not None and marking["description"].endswith("published 1 of 2 received (malformed 1)")
 
 
 def test_the_bridges_key_lists_follow_the_catalogue() -> None:

@@ -37,6 +37,7 @@ from std_msgs.msg import String
 
 import micros_rt
 from micros_rt.log import nonblocking_logger
+from micros_rt.qos.options import MCU_FROM, MCU_TO, drop_counters
 
 from ...transports.mcu import wire
 from ...transports.mcu.spec import McuConfig, ServiceEntry, TopicEntry
@@ -55,6 +56,16 @@ _FROM_QUEUE = 1000     # board stream -> its publication: the newest 1,000 waiti
 _SUBSCRIBE_QUEUE = 10  # ROS-side subscriber of a topic for the board
 _DEADLINE_REMINDER = 10.0  # seconds between log lines while a stream stays silent
 _MAX_OUTSTANDING = 8   # board -> ROS calls whose ROS service has not answered yet
+
+#: What each stream's subscription drops or misses, from the QoS catalogue: a board stream's applies the entry's
+#: subscriber options, a topic to the board's its time filter and msg_valid_period (every option it takes).
+#: In ``~stats`` each counter is named without ``dropped_`` (``filtered``, ``expired``, ``deadline_missed``).
+_FROM_DROPS = drop_counters(side="subscribe", applies=MCU_FROM)
+_TO_DROPS = drop_counters(applies=MCU_TO)
+
+
+def _drops(stats: micros_rt.SubscriberStatistics, counters: tuple[str, ...]) -> Dict[str, int]:
+    return {counter.removeprefix("dropped_"): getattr(stats, counter) for counter in counters}
 
 
 @dataclass
@@ -230,13 +241,11 @@ class McuBridge:
             assert stream.publisher is not None
             from_board[stream.entry.name] = {
                 "received": sub.received, "published": stream.publisher.statistics().published,
-                "filtered": sub.dropped_filtered, "dropped_queue_full": sub.dropped_queue_full,
-                "deadline_missed": sub.deadline_missed}
+                "dropped_queue_full": sub.dropped_queue_full, **_drops(sub, _FROM_DROPS)}
         to_board: Dict[str, Any] = {}
         for stream in self._to:
-            sub = stream.subscriber.statistics()
             to_board[stream.entry.name] = {**wire_to.get(stream.entry.name, {}),
-                                           "expired": sub.dropped_expired, "filtered": sub.dropped_filtered}
+                                           **_drops(stream.subscriber.statistics(), _TO_DROPS)}
         if from_board:
             snapshot["from_microcontroller"] = from_board
         if to_board:

@@ -48,6 +48,7 @@ import micros_rt
 from micros_rt.extend import SendQueue, dds_backend, register_info_section, sender_for, unregister_info_section
 from micros_rt.qos import DURATION_MAX, SubscribeQoSOptions
 from micros_rt.log import nonblocking_logger
+from micros_rt.qos.options import drop_counters
 from micros_rt.qos.topic_rules import best_match
 from micros_rt.transports.base import EndpointSpec, PushReader, TransportWriter
 
@@ -205,12 +206,11 @@ class _Import:
 
     def stats(self) -> Dict[str, Any]:
         s = self.sub.statistics()
+        # the enforcers' counters (expired, filtered, out of order, deadline missed) from the QoS catalogue
         return {"topic": self.rule.outside, "as": self.rule.local, "received": s.received, "published": s.delivered,
-                "dropped_queue_full": s.dropped_queue_full, "dropped_expired": s.dropped_expired,
-                "dropped_filtered": s.dropped_filtered, "dropped_out_of_order": s.dropped_out_of_order,
+                "dropped_queue_full": s.dropped_queue_full, **{c: getattr(s, c) for c in drop_counters()},
                 "refused": self.feed.refused if self.feed else 0,
-                "bad_input": self.feed.bad_input if self.feed else 0, "lost": self.feed.lost if self.feed else 0,
-                "deadline_missed": s.deadline_missed}
+                "bad_input": self.feed.bad_input if self.feed else 0, "lost": self.feed.lost if self.feed else 0}
 
     def info(self) -> Dict[str, Any]:
         """This import in the node's ``microsRtInfo`` (section ``relay``): the exporting relays seen now are
