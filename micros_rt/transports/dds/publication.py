@@ -210,8 +210,7 @@ class DDSPublication(PublicationSide):
         return matched
 
     def pseudo_links(self) -> int:
-        with self.lock:
-            return len(self.connections)
+        return len(self.connections)  # a dict's len: no lock (TCPROS's prepare asks on every publish)
 
     def reached(self) -> int:
         """DDS subscribers whose reader the writer has matched (negotiation precedes DDS discovery by a few
