@@ -3,8 +3,10 @@
 ``micros-rt run SCRIPT`` calls :func:`install` and then runs the script: its ``rospy.init_node`` starts a
 micros_rt node (YAML profile, negotiation hooks), its ``rospy.Publisher``/``rospy.Subscriber`` are
 micros_rt endpoints behind rospy's signatures, so two scripts run this way talk DDS and each still talks
-TCPROS to stock nodes. Everything else (services, parameters, timers, time, logging, ``spin``,
-``on_shutdown``) is rospy's own, untouched.
+TCPROS to stock nodes. Its ``rospy.Service`` also serves ROS 2 clients of the same name, and its
+``rospy.ServiceProxy`` also reaches a ROS 2 server (:mod:`micros_rt.services`). Everything else (parameters,
+timers, time, logging, ``spin``, ``on_shutdown``) is rospy's own, untouched; ``rospy.wait_for_service`` waits for a
+ROS 1 server in the master or a ROS 2 server of the name.
 
 The drop-in classes subclass rospy's own classes, so ``isinstance(pub, rospy.Publisher)`` holds both for
 the patched name and for rospy's original class. What stays on stock rospy (TCPROS only):
@@ -36,7 +38,8 @@ from . import node as _node
 from .log import nonblocking_logger
 from .negotiation.hints import TransportHints
 
-__all__ = ["Publisher", "Subscriber", "init_node", "install", "wait_for_message"]
+__all__ = ["Publisher", "Service", "ServiceProxy", "Subscriber", "init_node", "install", "wait_for_message",
+           "wait_for_service"]
 
 _log = nonblocking_logger("rosout.micros_rt")
 _ROSPY_INIT_NODE: Callable[..., Any] = rospy.init_node
@@ -56,8 +59,9 @@ _settings = _Settings()
 
 
 def install(*, profile: Optional[str] = None, hints: Optional[TransportHints] = None) -> None:
-    """Put micros_rt under rospy's names: ``rospy.init_node``, ``rospy.Publisher``, ``rospy.Subscriber``
-    and ``rospy.wait_for_message``. Idempotent.
+    """Put micros_rt under rospy's names: ``rospy.init_node``, ``rospy.Publisher``, ``rospy.Subscriber``,
+    ``rospy.Service``, ``rospy.ServiceProxy``, ``rospy.wait_for_service`` and ``rospy.wait_for_message``.
+    Idempotent.
 
     ``rospy.topics.Publisher``/``Subscriber`` stay rospy's: rospy's own methods name them through
     their module (``super(Subscriber, self)``), so replacing them there would break every rospy endpoint.
@@ -71,6 +75,9 @@ def install(*, profile: Optional[str] = None, hints: Optional[TransportHints] = 
     rospy.init_node = init_node
     rospy.Publisher = Publisher
     rospy.Subscriber = Subscriber
+    rospy.Service = Service
+    rospy.ServiceProxy = ServiceProxy
+    rospy.wait_for_service = wait_for_service
     rospy.wait_for_message = rospy.client.wait_for_message = wait_for_message
 
 
@@ -206,6 +213,94 @@ class Subscriber(patches.ROSPY_SUBSCRIBER):  # type: ignore[misc]
         self.impl = None
         self.callback = self.callback_args = None
         sub.unregister()
+
+
+class Service(patches.ROSPY_SERVICE):  # type: ignore[misc]
+    """``rospy.Service`` on micros_rt: rospy's own for ROS 1 clients (same arguments, same behaviour), and the
+    handler also answers ROS 2 clients (rclpy) of the same name. ``micros_rt`` is the ROS 2 side
+    (:class:`micros_rt.services.ServiceServer`: ``serves_ros2``, ``ros2_error``), None before ``init_node`` or
+    when the type does not map to ROS 2 (said once, in words)."""
+
+    def __init__(self, name: str, service_class: Any, handler: Callable[[Any], Any], *args: Any,
+                 **kwargs: Any) -> None:
+        super().__init__(name, service_class, handler, *args, **kwargs)
+        self.micros_rt: Any = None
+        if _settings.initialized:
+            from .services import advertise_service
+
+            self.micros_rt = advertise_service(self.resolved_name, service_class, handler, ros1=False)
+
+    def shutdown(self, reason: str = "") -> None:
+        server, self.micros_rt = self.micros_rt, None
+        if server is not None:
+            server.shutdown(reason)
+        super().shutdown(reason)
+
+
+class ServiceProxy(patches.ROSPY_SERVICE_PROXY):  # type: ignore[misc]
+    """``rospy.ServiceProxy`` on micros_rt: a call goes to the ROS 1 server registered with the master, else to a
+    ROS 2 server of the same name (:class:`micros_rt.services.ServiceClient`); ``wait_for_service`` waits for
+    either. Errors are rospy's exceptions (``rospy.ServiceException``, ``rospy.ROSException``) with words. A
+    ``persistent`` proxy or one with ``headers`` (ROS 1 notions) stays rospy's own, ROS 1 only."""
+
+    def __init__(self, name: str, service_class: Any, persistent: bool = False,
+                 headers: Optional[Dict[str, str]] = None) -> None:
+        super().__init__(name, service_class, persistent=persistent, headers=headers)
+        self.micros_rt: Any = None
+        if _settings.initialized and not persistent and not headers:
+            from .services import service_client
+
+            self.micros_rt = service_client(self.resolved_name, service_class)
+
+    def wait_for_service(self, timeout: Optional[float] = None) -> None:
+        client = self.micros_rt
+        if client is None:
+            super().wait_for_service(timeout)
+        else:
+            client.wait_for_service(timeout)
+
+    def call(self, *args: Any, **kwds: Any) -> Any:
+        client = self.micros_rt
+        return super().call(*args, **kwds) if client is None else client.call(*args, **kwds)
+
+    def close(self) -> None:
+        client, self.micros_rt = self.micros_rt, None
+        if client is not None:
+            client.close()
+        super().close()
+
+
+_ROSPY_WAIT_FOR_SERVICE: Callable[..., Any] = rospy.wait_for_service
+
+
+def wait_for_service(service: str, timeout: Optional[float] = None) -> None:
+    """``rospy.wait_for_service``: until a ROS 1 server of ``service`` is in the master, or a ROS 2 server of that
+    name is discovered; ``rospy.ROSException`` after ``timeout`` seconds, as rospy raises."""
+    if not _settings.initialized:
+        _ROSPY_WAIT_FOR_SERVICE(service, timeout)
+        return
+    from .services import ServiceTimeoutError, ros2_gateway
+    from .services.gateway import Ros2Unavailable
+
+    resolved = rospy.names.resolve_name(service)
+    deadline = None if timeout is None else time.monotonic() + timeout
+    ros2_note = ""
+    while True:
+        try:
+            _ROSPY_WAIT_FOR_SERVICE(resolved, 0.2)  # rospy's own master lookup, 0.2 s at a time
+            return
+        except rospy.ROSException:
+            pass
+        try:
+            if resolved in ros2_gateway().server_names():
+                return
+        except Ros2Unavailable as exc:
+            ros2_note = f" (ROS 2 unreachable: {exc})"
+        if rospy.is_shutdown():
+            raise rospy.ROSInterruptException(f"the node shut down while waiting for service {resolved}")
+        if deadline is not None and time.monotonic() >= deadline:
+            raise ServiceTimeoutError(f"timeout exceeded while waiting for service {resolved} ({timeout:g} s): no "
+                                      f"ROS 1 server registered with the master, no ROS 2 server discovered{ros2_note}")
 
 
 def wait_for_message(topic: str, topic_type: Type[genpy.Message], timeout: Optional[float] = None) -> Any:

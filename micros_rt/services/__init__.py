@@ -48,13 +48,14 @@ def ros2_gateway() -> Ros2Gateway:
 
 
 def advertise_service(resolved_name: str, srv_class: Any, handler: Callable[[Any], Any], *,
-                      ros2: bool = True) -> ServiceServer:
-    """Serve ``resolved_name`` to ROS 1 and (``ros2=True``) ROS 2 clients with ``handler(request) -> response``."""
+                      ros2: bool = True, ros1: bool = True) -> ServiceServer:
+    """Serve ``resolved_name`` to ROS 1 (``ros1=False``: the caller does, the drop-in ``rospy.Service``) and
+    (``ros2=True``) ROS 2 clients with ``handler(request) -> response``."""
     _require_node()
     check_srv_class(srv_class)
     if not callable(handler):
         raise TypeError(f"handler must be callable, got {handler!r}")
-    return ServiceServer(resolved_name, srv_class, handler, _process_gateway, ros2=ros2)
+    return ServiceServer(resolved_name, srv_class, handler, _process_gateway, ros2=ros2, ros1=ros1)
 
 
 def service_client(resolved_name: str, srv_class: Any, *, timeout: Optional[float] = None,

@@ -18,6 +18,7 @@ import rosgraph.masterapi
 import rospy
 
 from ..exceptions import TypeMappingError
+from ..transports.tcpros import patches
 from .errors import ServiceError, ServiceTimeoutError, ServiceUnavailableError
 from .gateway import Ros2Gateway, Ros2Unavailable
 from .mapping import SrvMapping, srv_mapping
@@ -50,7 +51,7 @@ class ServiceClient:
         self.request_class = srv_class._request_class
         self.response_class = srv_class._response_class
         self.timeout = timeout
-        self._ros1 = rospy.ServiceProxy(resolved_name, srv_class)
+        self._ros1 = patches.ROSPY_SERVICE_PROXY(resolved_name, srv_class)  # rospy's own (micros-rt run)
         self._route: Optional[str] = None
         self._route_time = 0.0
         self._gateway: Optional[Ros2Gateway] = None

@@ -39,6 +39,7 @@ STATUS, RESULT, ERROR, REQUEST, HELLO = 20, 21, 22, 23, 24
 # actions (micros_rt.actions), micros_rt -> helper: serve a ROS 1 action to ROS 2 (A_SERVE .. A_DONE), reach a
 # ROS 2 action server (A_CLIENT .. A_FORGET)
 A_SERVE, A_UNSERVE, A_VERDICT, A_FEEDBACK, A_DONE, A_CLIENT, A_SEND, A_CANCEL, A_READY, A_FORGET = range(9, 19)
+SERVICE_NAMES = 19
 # helper -> micros_rt, each with {"name": action}: a ROS 2 client's goal and cancel; a ROS 2 server's answers
 G_GOAL, G_CANCEL, G_ACCEPTED, G_FEEDBACK, G_RESULT = range(25, 30)
 #: what an action sink gets when the helper is gone: ``sink(GONE, 0, {"error": words}, b"")``
@@ -297,6 +298,10 @@ class Ros2Gateway:
     def server_ready(self, name: str, ros2_type: str) -> bool:
         """Whether the helper's client of ``name`` has discovered a ROS 2 server."""
         return bool(self._status(READY, {"name": name, "type": ros2_type}).get("ready"))
+
+    def server_names(self) -> List[str]:
+        """The services ROS 2 servers offer now (DDS discovery), by name, whatever their type."""
+        return [str(n) for n in self._status(SERVICE_NAMES, {"name": ""}).get("names", [])]
 
     def call(self, name: str, ros2_type: str, request: bytes, timeout: Optional[float]) -> bytes:
         """One call to a ROS 2 server: the response's bytes. Raises TimeoutError, or ``RuntimeError`` in words."""

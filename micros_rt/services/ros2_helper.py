@@ -41,6 +41,8 @@ from rclpy.serialization import deserialize_message, serialize_message
 # micros_rt -> helper
 ADVERTISE, UNADVERTISE, CLIENT, READY, CALL, CANCEL, RESPONSE, FAIL = 1, 2, 3, 4, 5, 6, 7, 8
 A_SERVE, A_UNSERVE, A_VERDICT, A_FEEDBACK, A_DONE, A_CLIENT, A_SEND, A_CANCEL, A_READY, A_FORGET = range(9, 19)
+#: the names of the services ROS 2 servers offer now (DDS discovery), whatever their type
+SERVICE_NAMES = 19
 # helper -> micros_rt
 STATUS, RESULT, ERROR, REQUEST, HELLO = 20, 21, 22, 23, 24
 G_GOAL, G_CANCEL, G_ACCEPTED, G_FEEDBACK, G_RESULT = range(25, 30)
@@ -184,6 +186,10 @@ class Helper:
             found = self.calls.pop(cid, None)
             if found is not None:
                 found[1].remove_pending_request(found[2])
+        elif op == SERVICE_NAMES:
+            # servers only (count_services), not this helper's own clients
+            names = sorted(n for n, _types in self.node.get_service_names_and_types() if self.node.count_services(n))
+            self.send(STATUS, cid, {"ok": True, "names": names})
         elif op == A_SERVE:
             self.actions().serve(name, meta["type"])
             self.send(STATUS, cid, {"ok": True})

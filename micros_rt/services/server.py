@@ -11,6 +11,7 @@ import rospy
 
 from ..exceptions import TypeMappingError
 from ..log import nonblocking_logger
+from ..transports.tcpros import patches
 from .gateway import Ros2Gateway, Ros2Unavailable
 from .mapping import SrvMapping, srv_mapping
 
@@ -42,7 +43,7 @@ class ServiceServer:
     service from both sides. ``ros2_error`` says, in words, why ROS 2 clients are not served (None: they are)."""
 
     def __init__(self, resolved_name: str, srv_class: Any, handler: Callable[[Any], Any],
-                 gateway: Callable[[], Ros2Gateway], *, ros2: bool = True) -> None:
+                 gateway: Callable[[], Ros2Gateway], *, ros2: bool = True, ros1: bool = True) -> None:
         self.resolved_name = resolved_name
         self.srv_class = srv_class
         self.handler = handler
@@ -51,7 +52,9 @@ class ServiceServer:
         self._mapping: Optional[SrvMapping] = None
         self._lock = threading.Lock()
         self.closed = False
-        self._ros1 = rospy.Service(resolved_name, srv_class, handler)
+        # rospy's own class (``micros-rt run`` replaces the name ``rospy.Service``); none when the caller serves
+        # ROS 1 itself (the drop-in rospy.Service)
+        self._ros1 = patches.ROSPY_SERVICE(resolved_name, srv_class, handler) if ros1 else None
         if ros2:
             try:
                 self._mapping = srv_mapping(srv_class)
@@ -87,7 +90,8 @@ class ServiceServer:
             if self.closed:
                 return
             self.closed = True
-        self._ros1.shutdown(reason or "micros_rt ServiceServer.shutdown()")
+        if self._ros1 is not None:
+            self._ros1.shutdown(reason or "micros_rt ServiceServer.shutdown()")
         if self._gateway is not None:
             self._gateway.unadvertise(self.resolved_name)
 
@@ -100,5 +104,5 @@ class ServiceServer:
         self.shutdown()
 
     def __repr__(self) -> str:
-        return (f"<ServiceServer {self.resolved_name} ({self.srv_class._type}) ROS 1"
-                f"{' + ROS 2' if self.serves_ros2 else ''}>")
+        sides = [side for side, on in (("ROS 1", self._ros1 is not None), ("ROS 2", self.serves_ros2)) if on]
+        return f"<ServiceServer {self.resolved_name} ({self.srv_class._type}) {' + '.join(sides) or 'closed'}>"

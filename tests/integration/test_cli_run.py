@@ -20,6 +20,8 @@ MICROS_RT = str(harness.REPO_ROOT / ".venv" / "bin" / "micros-rt")
 PLAIN_TALKER = str(harness.PEERS_DIR / "plain_talker.py")
 PLAIN_LISTENER = str(harness.PEERS_DIR / "plain_listener.py")
 PLAIN_PROBE = str(harness.PEERS_DIR / "plain_probe.py")
+PLAIN_SERVICE = str(harness.PEERS_DIR / "plain_service.py")
+ROS2_SERVICE_PEER = str(harness.PEERS_DIR / "ros2_service_peer.py")
 
 
 def run(script: str, *args: str, profile: Optional[Path] = None, hints: Optional[str] = None) -> List[str]:
@@ -147,6 +149,35 @@ def test_services_params_timers_and_wait_for_message_under_run(ros_master: harne
     # wait_for_message's subscriber was unregistered again: the talker keeps no link to the probe
     harness.wait_until(lambda: "/run_probe" not in links_of(ros_master, "/run_wfm_talker", "/run_wfm"), 20,
                        message="the probe's links to go")
+
+
+def test_an_unmodified_rospy_service_and_proxy_reach_ros2_under_run(ros_master: harness.RosMaster,
+                                                                    spawn: harness.Spawner) -> None:
+    # an rclpy server, called by rospy.ServiceProxy in an unmodified script; the script's rospy.Service, called by
+    # an rclpy client (both ROS 2 peers in their own venv and process)
+    server = spawn([harness.ROS2_PYTHON, ROS2_SERVICE_PEER, "serve", "--services",
+                    json.dumps([{"name": "/run_r2/flag", "type": "std_srvs/srv/SetBool"}])], name="rclpy_server")
+    server.wait_for("ready", 60)
+    serving = spawn(run(PLAIN_SERVICE, "serve", "/run_plain/flag", "__name:=run_plain_server"), name="plain_server")
+    serving.wait_for("ready", 60)
+    caller = spawn(run(PLAIN_SERVICE, "call", "/run_r2/flag", "--count", "3", "__name:=run_plain_caller"),
+                   name="plain_caller")
+    client = spawn([harness.ROS2_PYTHON, ROS2_SERVICE_PEER, "call", "--plan", json.dumps([
+        {"label": "plain", "name": "/run_plain/flag", "type": "std_srvs/srv/SetBool", "args": {"data": True},
+         "wait": 30, "timeout": 10}])], name="rclpy_client")
+    assert caller.wait(90) == 0, caller.stderr_tail()
+    assert [(e["success"], e["message"]) for e in caller.events("response")] == [
+        (True, "rclpy /run_r2/flag got True"), (False, "rclpy /run_r2/flag got False"),
+        (True, "rclpy /run_r2/flag got True")], caller.events()[-6:]
+    assert caller.events("done")[0]["classes"] == ["micros_rt.drop_in"]
+    client.wait_for("done", 90)
+    answer = [e for e in client.events("response") if e.get("label") == "plain"]
+    assert answer and answer[0]["fields"] == {"success": True, "message": "plain /run_plain/flag got True"}, \
+        client.events()[-6:]
+    # a stock ROS 1 client still reaches the same rospy.Service over TCPROS
+    cp = subprocess.run([harness.STOCK_PYTHON, "/usr/bin/rosservice", "call", "/run_plain/flag", "data: false"],
+                        env=ros_master.env, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=60)
+    assert cp.returncode == 0 and "plain /run_plain/flag got False" in cp.stdout, (cp.stdout, cp.stderr)
 
 
 def _run_cli(argv: List[str], env: Dict[str, str], cwd: Optional[Path] = None) -> "subprocess.CompletedProcess[str]":

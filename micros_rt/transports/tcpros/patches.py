@@ -74,6 +74,8 @@ __all__ = [
     "transport_socket",
     "ROSPY_PUBLISHER",
     "ROSPY_SUBSCRIBER",
+    "ROSPY_SERVICE",
+    "ROSPY_SERVICE_PROXY",
     "dds_connections",
     "latched_messages",
     "set_publisher_tcp_nodelay",
@@ -222,6 +224,9 @@ def attach_link(topic: str, old: Optional[DDSConnection], conn: DDSConnection, *
 #: side must not construct those (it would call itself).
 ROSPY_PUBLISHER: Any = rospy.topics.Publisher
 ROSPY_SUBSCRIBER: Any = rospy.topics.Subscriber
+#: the same for services: ``micros-rt run`` puts drop-in classes in ``rospy.Service``/``rospy.ServiceProxy``
+ROSPY_SERVICE: Any = rospy.Service
+ROSPY_SERVICE_PROXY: Any = rospy.ServiceProxy
 
 
 def topic_impl(topic: str, *, publisher: bool) -> Any:
