@@ -46,7 +46,7 @@ nh = micros_rt.NodeHandle()
 pub = nh.advertise("/toy_chatter", String, 10)
 toy_got = []
 toy = nh.subscribe_with_qos("/toy_chatter", String, toy_got.append, 10,
-                            SubscribeQoSOptions(time_filter_duration=0.3, ordered_by_sending_timestamp=False),
+                            SubscribeQoSOptions(time_filter_duration=1.0, ordered_by_sending_timestamp=False),
                             transport_hints=hints)
 print(json.dumps({"event": "ready"}), flush=True)
 # this process's subscriber and the other process's: two links, one of them TOY
@@ -54,7 +54,7 @@ wait(lambda: pub.get_num_connections() >= 2, "two subscribers")
 wait(lambda: toy.connection_transports(), "the subscription connected")
 for i in range(5):
     pub.publish(String(data="m%d" % i))   # one burst: the time filter lets the first through
-time.sleep(0.4)                           # past the 0.3 s filter period (the duration under test)
+time.sleep(1.2)                           # past the 1 s filter period (the duration under test)
 pub.publish(String(data="after"))
 wait(lambda: len(toy_got) >= 2, "the toy's two")
 print(json.dumps({"event": "done", "toy": [m.data for m in toy_got],

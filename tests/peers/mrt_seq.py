@@ -59,7 +59,9 @@ def send(a: argparse.Namespace, nh: micros_rt.NodeHandle) -> int:
     elapsed = time.monotonic() - start
     stats = pub.statistics()
     emit("sent", count=a.count, seconds=elapsed, blocked_seconds=stats.blocked_seconds, published=stats.published)
-    time.sleep(a.linger)
+    end = time.monotonic() + a.linger
+    while time.monotonic() < end and not micros_rt.is_shutdown():  # a stop (SIGINT/SIGTERM) ends the linger
+        time.sleep(0.05)
     return 0
 
 
@@ -88,7 +90,7 @@ def recv(a: argparse.Namespace, nh: micros_rt.NodeHandle) -> int:
     deadline = time.monotonic() + a.timeout
     first: Optional[float] = None
     last_n, last_change = 0, time.monotonic()
-    while time.monotonic() < deadline and len(seen) < a.count:
+    while time.monotonic() < deadline and len(seen) < a.count and not micros_rt.is_shutdown():
         time.sleep(0.05)
         if seen and first is None:
             first = time.monotonic()

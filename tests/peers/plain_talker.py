@@ -41,16 +41,17 @@ def main() -> None:
          greeting=greeting, is_rospy_publisher=isinstance(pub, rospy.Publisher))
     while pub.get_num_connections() < args.wait_subscribers and not rospy.is_shutdown():
         time.sleep(0.02)
-    rate = rospy.Rate(args.rate) if args.rate > 0 else None
+    period = 1.0 / args.rate if args.rate > 0 else 0.0
     sent = 0
-    try:
-        while not rospy.is_shutdown() and (args.count == 0 or sent < args.count):
-            pub.publish(String(data="%s %d" % (greeting, sent)))
-            sent += 1
-            if rate is not None:
-                rate.sleep()
-    except rospy.ROSInterruptException:
-        pass
+    next_t = time.monotonic()
+    while not rospy.is_shutdown() and (args.count == 0 or sent < args.count):
+        pub.publish(String(data="%s %d" % (greeting, sent)))
+        sent += 1
+        # rospy.Rate's sleep is time.sleep, which a Ctrl-C does not end (rospy's handler only sets the shutdown
+        # flag): at --rate 0.1 a stop would wait 10 s. Short sleeps until the next period instead.
+        next_t += period
+        while period and not rospy.is_shutdown() and (left := next_t - time.monotonic()) > 0:
+            time.sleep(min(0.05, left))
     emit("done", sent=sent, connections=pub.get_num_connections())
 
 
