@@ -30,12 +30,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import random
 import shutil
-import socket
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 from pathlib import Path
@@ -44,7 +41,7 @@ from typing import Any, Dict, List, Optional
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from services import (RESULTS, client_argv, eth0_tx, load, read_events, server_argv,  # noqa: E402
+from services import (RESULTS, bench_env, client_argv, eth0_tx, load, read_events, server_argv,  # noqa: E402
                       start_master, stop)
 
 CLI = str(HERE.parent / ".venv" / "bin" / "micros-rt")
@@ -115,19 +112,7 @@ def main() -> None:
     parser.add_argument("--out", default=str(RESULTS / "relay_services"))
     args = parser.parse_args()
 
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    domain = random.randint(1, 200)
-    logdir = Path(tempfile.mkdtemp(prefix="micros_rt_bench_relay_services_"))
-    env = {k: v for k, v in os.environ.items()
-           if not k.startswith(("ROS_", "CYCLONEDDS", "FASTRTPS", "FASTDDS", "RMW_", "PYTHONPATH", "AMENT",
-                                "MICROS_RT", "VIRTUAL_ENV"))}
-    env.update(ROS_MASTER_URI=f"http://127.0.0.1:{port}", ROS_IP="127.0.0.1", ROS_DOMAIN_ID=str(domain),
-               PYTHONUNBUFFERED="1", ROS_HOME=str(logdir / "roshome"), ROS_LOG_DIR=str(logdir / "roslog"),
-               CYCLONEDDS_URI=f"file://{HERE / 'cyclonedds_loopback.xml'}",
-               FASTRTPS_DEFAULT_PROFILES_FILE=str(HERE / "fastdds_loopback.xml"),
-               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    env, logdir = bench_env("micros_rt_bench_relay_services_")
     config = logdir / "relay.yaml"
     config.write_text("graph: bench\nros2:\n  export: {/bench_ros1: {}}\n  import: {/bench_ros2: {}}\n")
     log = open(logdir / "processes.log", "w")

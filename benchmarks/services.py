@@ -31,7 +31,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Tuple
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -163,6 +163,25 @@ def run_stack(stack: str, calls: int, env: Dict[str, str], logdir: Path, n: int)
             log.close()
 
 
+
+def bench_env(prefix: str) -> Tuple[Dict[str, str], Path]:
+    """The environment every process of a services benchmark runs in, and its log directory: a master on a free
+    loopback port, a random DDS domain, loopback-only Cyclone and Fast DDS, nothing of the caller's ROS set-up."""
+    import socket
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    logdir = Path(tempfile.mkdtemp(prefix=prefix))
+    env = {k: v for k, v in os.environ.items()
+           if not k.startswith(("ROS_", "CYCLONEDDS", "FASTRTPS", "FASTDDS", "RMW_", "PYTHONPATH", "AMENT",
+                                "MICROS_RT", "VIRTUAL_ENV"))}
+    env.update(ROS_MASTER_URI=f"http://127.0.0.1:{port}", ROS_IP="127.0.0.1", ROS_DOMAIN_ID=str(random.randint(1, 200)),
+               PYTHONUNBUFFERED="1", ROS_HOME=str(logdir / "roshome"), ROS_LOG_DIR=str(logdir / "roslog"),
+               CYCLONEDDS_URI=f"file://{HERE / 'cyclonedds_loopback.xml'}",
+               FASTRTPS_DEFAULT_PROFILES_FILE=str(HERE / "fastdds_loopback.xml"),
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    return env, logdir
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--calls", type=int, default=1000)
@@ -175,20 +194,7 @@ def main() -> None:
         if s not in STACKS:
             raise SystemExit(f"unknown stack {s!r}: one of {', '.join(STACKS)}")
 
-    import socket
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    domain = random.randint(1, 200)
-    logdir = Path(tempfile.mkdtemp(prefix="micros_rt_bench_services_"))
-    env = {k: v for k, v in os.environ.items()
-           if not k.startswith(("ROS_", "CYCLONEDDS", "FASTRTPS", "FASTDDS", "RMW_", "PYTHONPATH", "AMENT",
-                                "MICROS_RT", "VIRTUAL_ENV"))}
-    env.update(ROS_MASTER_URI=f"http://127.0.0.1:{port}", ROS_IP="127.0.0.1", ROS_DOMAIN_ID=str(domain),
-               PYTHONUNBUFFERED="1", ROS_HOME=str(logdir / "roshome"), ROS_LOG_DIR=str(logdir / "roslog"),
-               CYCLONEDDS_URI=f"file://{HERE / 'cyclonedds_loopback.xml'}",
-               FASTRTPS_DEFAULT_PROFILES_FILE=str(HERE / "fastdds_loopback.xml"),
-               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    env, logdir = bench_env("micros_rt_bench_services_")
     tx0, load0 = eth0_tx(), load()
     master = start_master(env, logdir)
     rows: List[Dict[str, Any]] = []
