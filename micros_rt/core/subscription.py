@@ -62,7 +62,8 @@ SubscriptionSideFactory = Callable[["_Subscription"], SubscriptionSide]
 
 
 class _Subscription:
-    """Per topic and process: rospy subscriber, DDS reader(s) and the delivery thread."""
+    """Per topic and process: the TCPROS reader, the negotiated sides, the readers they feed and the delivery
+    thread."""
 
     def __init__(self, topic: str, data_class: Type[genpy.Message], queue_size: Optional[int],
                  options: Optional[SubscribeQoSOptions], hints: TransportHints, *,

@@ -260,31 +260,13 @@ def _ros2_entry(direction: str, key_node: yaml.ScalarNode, body: yaml.Node, sour
                                f"/chatter); globs are not accepted here")
     own = _ROS2_EXPORT_KEYS if direction == "export" else _ROS2_IMPORT_KEYS
     mine, qos_node = _split(body, source, path, own)
-    target = name
-    if "as" in mine:
-        node, value = mine["as"]
-        if not isinstance(value, str) or not _TOPIC_NAME.match(value):
-            raise RelayConfigError(f"{location(source, node)}: {path}.as: {value!r} is invalid: expected a global "
-                                   f"name (e.g. /robot/chatter)")
-        target = value
-    timeout = 10.0
-    if "timeout" in mine:
-        node, value = mine["timeout"]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
-            raise RelayConfigError(f"{location(source, node)}: {path}.timeout: {value!r} is invalid: expected "
-                                   f"seconds, a number above 0")
-        timeout = float(value)
+    target = _name_as(mine, source, path, name, "name (e.g. /robot/chatter)")
+    timeout = _above_zero(mine, "timeout", source, path, 10.0, "seconds")
     latch: Optional[bool] = _flag(mine, "latch", source, path) if "latch" in mine else None
     given = [k.value for k, _v in qos_node.value] if isinstance(qos_node, yaml.MappingNode) else []
     topic_keys = tuple(k for k in ("max_rate", "queue_size", "latch") if k in mine) + tuple(given)
     if direction == "export":
-        max_rate = math.inf
-        if "max_rate" in mine:
-            node, value = mine["max_rate"]
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
-                raise RelayConfigError(f"{location(source, node)}: {path}.max_rate: {value!r} is invalid: expected "
-                                       f"messages per second, a number above 0")
-            max_rate = float(value)
+        max_rate = _above_zero(mine, "max_rate", source, path, math.inf, "messages per second")
         options = parse_qos_options(AdvertiseQoSOptions, qos_node, source, path)
         return Ros2Entry("export", name, target, where, export_options=options, max_rate=max_rate,
                          queue_size=_queue_size(mine, source, path), latch=latch, timeout=timeout,
@@ -326,21 +308,31 @@ def _service_import(key_node: yaml.ScalarNode, body: yaml.Node, source: str, gra
     if isinstance(rest, yaml.MappingNode) and rest.value:
         key = rest.value[0][0]
         raise RelayConfigError(f"{location(source, key)}: {path}.{key.value}: unknown option; known: as, timeout")
-    local = outside
-    if "as" in mine:
-        node, value = mine["as"]
-        if not isinstance(value, str) or not _TOPIC_NAME.match(value):
-            raise RelayConfigError(f"{location(source, node)}: {path}.as: {value!r} is invalid: expected a global "
-                                   f"service name")
-        local = value
-    timeout = 10.0
-    if "timeout" in mine:
-        node, value = mine["timeout"]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
-            raise RelayConfigError(f"{location(source, node)}: {path}.timeout: {value!r} is invalid: expected "
-                                   f"seconds, a number above 0")
-        timeout = float(value)
+    local = _name_as(mine, source, path, outside, "service name")
+    timeout = _above_zero(mine, "timeout", source, path, 10.0, "seconds")
     return ServiceImport(outside, local, outside.split("/")[1], timeout)
+
+
+def _name_as(mine: Dict[str, Tuple[yaml.Node, Any]], source: str, path: str, default: str, what: str) -> str:
+    """An entry's ``as:`` (a global name; ``what`` says which kind in the error), else ``default``."""
+    if "as" not in mine:
+        return default
+    node, value = mine["as"]
+    if not isinstance(value, str) or not _TOPIC_NAME.match(value):
+        raise RelayConfigError(f"{location(source, node)}: {path}.as: {value!r} is invalid: expected a global {what}")
+    return value
+
+
+def _above_zero(mine: Dict[str, Tuple[yaml.Node, Any]], key: str, source: str, path: str, default: float,
+                unit: str) -> float:
+    """An entry's ``key`` (a number above 0, in ``unit``), else ``default``."""
+    if key not in mine:
+        return default
+    node, value = mine[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+        raise RelayConfigError(f"{location(source, node)}: {path}.{key}: {value!r} is invalid: expected {unit}, a "
+                               f"number above 0")
+    return float(value)
 
 
 def _split(node: yaml.Node, source: str, path: str, own: Tuple[str, ...]) -> Tuple[Dict[str, Tuple[yaml.Node, Any]],
@@ -393,13 +385,7 @@ def _export(key_node: yaml.ScalarNode, body: yaml.Node, source: str) -> ExportRu
         raise RelayConfigError(f"{location(source, key_node)}: export: {key!r} is not a global topic name "
                                f"(e.g. /camera/image)")
     mine, qos_node = _split(body, source, path, ("max_rate", "queue_size", "latch"))
-    max_rate = math.inf
-    if "max_rate" in mine:
-        node, value = mine["max_rate"]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
-            raise RelayConfigError(f"{location(source, node)}: {path}.max_rate: {value!r} is invalid: expected "
-                                   f"messages per second, a number above 0")
-        max_rate = float(value)
+    max_rate = _above_zero(mine, "max_rate", source, path, math.inf, "messages per second")
     options = parse_qos_options(AdvertiseQoSOptions, qos_node, source, path)
     return ExportRule(key, options, max_rate, _queue_size(mine, source, path), _flag(mine, "latch", source, path),
                       pattern)
@@ -417,13 +403,7 @@ def _import(key_node: yaml.ScalarNode, body: yaml.Node, source: str, graph: str)
         raise RelayConfigError(f"{where}: import: {outside!r} is this graph's own export ({graph}): a topic never "
                                f"comes back to the graph it left")
     mine, qos_node = _split(body, source, path, ("as", "queue_size", "latch"))
-    local = outside
-    if "as" in mine:
-        node, value = mine["as"]
-        if not isinstance(value, str) or not _TOPIC_NAME.match(value):
-            raise RelayConfigError(f"{location(source, node)}: {path}.as: {value!r} is invalid: expected a global "
-                                   f"topic name (e.g. /others/chatter)")
-        local = value
+    local = _name_as(mine, source, path, outside, "topic name (e.g. /others/chatter)")
     options = None if is_null(qos_node) or not qos_node.value else parse_qos_options(SubscribeQoSOptions, qos_node, source, path)
     return ImportRule(outside, local, origin, options, _queue_size(mine, source, path),
                       _flag(mine, "latch", source, path))

@@ -40,6 +40,7 @@ import rospy
 
 import micros_rt
 from micros_rt.extend import SendQueue, sender_for
+from micros_rt.qos.options import drop_counters
 from micros_rt.log import nonblocking_logger
 from micros_rt.qos import SubscribeQoSOptions
 from micros_rt.transports.base import EndpointSpec, PushReader, TransportWriter
@@ -266,10 +267,9 @@ class _TopicIn:
         feed = self.feed
         return {"direction": "import", "kind": "topic", "name": self.entry.name, "as": self.entry.ros1_name,
                 "latch": self.latch, "received": s.received, "published": s.delivered,
-                "dropped_queue_full": s.dropped_queue_full, "dropped_expired": s.dropped_expired,
-                "dropped_filtered": s.dropped_filtered, "dropped_out_of_order": s.dropped_out_of_order,
+                "dropped_queue_full": s.dropped_queue_full, **{c: getattr(s, c) for c in drop_counters()},
                 "refused": feed.refused if feed else 0, "bad_input": feed.bad_input if feed else 0,
-                "lost": feed.lost if feed else 0, "deadline_missed": s.deadline_missed}
+                "lost": feed.lost if feed else 0}
 
     def close(self) -> None:
         self.sub.unregister()
