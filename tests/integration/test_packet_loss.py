@@ -101,14 +101,21 @@ def test_best_effort_loses_and_reliable_does_not(two_hosts: TwoHosts, spawn: har
                                                 best_effort: bool) -> None:
     n = 300
     qos = {"using_best_effort_protocol": best_effort}
-    listener = spawn(two_hosts.run("b", mrt("listen", "--topic", "/lossy", "--duration", "40", "--queue-size",
+    # Discovery crosses the lossy link too: a lost SPDP announcement is sent again only after Cyclone's
+    # SPDP interval (the 15 s network lease - 2 s), so the talker may wait for its reader for tens of seconds
+    # (a CI run: 30 s were not enough, and the first 50 messages went out before the match). The listener
+    # outlives the talker's longest wait; the test ends it.
+    listener = spawn(two_hosts.run("b", mrt("listen", "--topic", "/lossy", "--duration", "150", "--queue-size",
                                             "1000", qos=dict(qos, ordered_by_sending_timestamp=False))),
                      env=two_hosts.env("b"))
     listener.wait_for("ready", 30)
     talker = spawn(two_hosts.run("a", mrt("talk", "--topic", "/lossy", "--count", n, "--rate", "100",
                                           "--queue-size", "1000", "--wait-subscribers", "1",
-                                          "--wait-dds-readers", "1", "--linger", "5", qos=qos)),
+                                          "--wait-dds-readers", "1", "--wait-timeout", "90", "--linger", "5",
+                                          qos=qos)),
                    env=two_hosts.env("a"))
+    matched = talker.wait_for("dds_matched", 120)
+    assert matched["n"] == 1, f"the talker's DDS writer found no reader across the lossy link in 90 s: {matched}"
     talker.wait(60)
     if not best_effort:
         listener.wait_for_count("recv", n, timeout=20)

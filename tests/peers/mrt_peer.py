@@ -175,6 +175,8 @@ def main() -> int:
     ap.add_argument("--prefix", default="hello")
     ap.add_argument("--stamp", action="store_true", help="stamp Header with the wall clock")
     ap.add_argument("--wait-subscribers", type=int, default=0)
+    ap.add_argument("--wait-timeout", type=float, default=30.0,
+                    help="talk: how long --wait-subscribers and --wait-dds-readers wait together (seconds)")
     ap.add_argument("--linger", type=float, default=0.5, help="seconds to stay up after the last message")
     ap.add_argument("--start-delay", type=float, default=0.0,
                     help="talk: seconds to wait after the subscribers are there (a ROS 2 reader's own discovery)")
@@ -202,7 +204,7 @@ def main() -> int:
                     help="talk: advertise this std_msgs/String topic at this transport priority first (it sends "
                          "nothing; it gives the process participant its priority)")
     ap.add_argument("--wait-dds-readers", type=int, default=0,
-                    help="talk: wait (max 30 s) until the DDS writer matches this many readers (e.g. rclpy)")
+                    help="talk: wait (see --wait-timeout) until the DDS writer matches this many readers (e.g. rclpy)")
     args = ap.parse_args()
 
     def capture_logs() -> None:
@@ -242,7 +244,7 @@ def main() -> int:
         if args.clock_offset:
             play_clock_offset(pub, args.clock_offset)
         emit("ready", topic=pub.resolved_name)
-        deadline = time.monotonic() + 30.0
+        deadline = time.monotonic() + args.wait_timeout
         while pub.get_num_connections() < args.wait_subscribers and time.monotonic() < deadline:
             time.sleep(0.02)
 
