@@ -4,6 +4,8 @@
     ros2_action_peer.py serve --actions '[{"name": "/r2/fib"}, {"name": "/r2/silent", "mode": "silent"}]'
     ros2_action_peer.py call --plan '[{"label": "fib", "name": "/r1/fib", "order": 100, "wait": 20}]'
 
+serve --clock also publishes /clock (rosgraph_msgs/msg/Clock, 2000 s + n * 0.1 s, every 50 ms), as a simulator.
+
 The same protocol and events as tests/peers/ros1_action_peer.py: a goal of order N gets N feedback messages (the
 i-th ``sequence == [i]``, one per --period), then fibonacci(N). Server modes: "normal"; "silent" (the goal callback
 never answers); "die" (the process kills itself with SIGKILL after --die-after feedback messages). Events: "ready",
@@ -81,6 +83,21 @@ def serve(args: argparse.Namespace, node: Any) -> None:
 
         ActionServer(node, Fibonacci, name, execute_callback=execute, goal_callback=on_goal,
                      cancel_callback=on_cancel, callback_group=group)
+    if args.clock:
+        # a simulator's clock: rosgraph_msgs/msg/Clock on /clock, 2000 s + n * 0.1 s, every 50 ms
+        from rosgraph_msgs.msg import Clock
+
+        clock_pub = node.create_publisher(Clock, "/clock", 10)
+        ticks = [0]
+
+        def tick() -> None:
+            n = ticks[0]
+            ticks[0] += 1
+            msg = Clock()
+            msg.clock.sec, msg.clock.nanosec = 2000 + n // 10, (n % 10) * 100_000_000
+            clock_pub.publish(msg)
+
+        node.create_timer(0.05, tick, callback_group=group)
     emit("ready")
 
 
@@ -148,6 +165,7 @@ def main() -> None:
     s.add_argument("--period", type=float, default=0.005)
     s.add_argument("--die-after", type=int, default=5)
     s.add_argument("--seconds", type=float, default=120.0)
+    s.add_argument("--clock", action="store_true", help="also publish /clock (rosgraph_msgs/msg/Clock)")
     c = sub.add_parser("call")
     c.add_argument("--plan", required=True)
     args = parser.parse_args()

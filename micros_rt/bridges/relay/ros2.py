@@ -428,10 +428,11 @@ class Ros2Side:
             self.carried[self.key(entry)] = carried
         self.relay._refused.pop(self.key(entry), None)   # carried now: no longer in not_carried
 
-    def _topic_options_on_service(self, entry: Ros2Entry) -> None:
+    def _topic_options_on_service(self, entry: Ros2Entry, what: str = "a service") -> None:
         if entry.topic_keys:
-            _log.warning("micros_rt: relay %s: %s: %s is a service; its options %s apply to topics only and are "
-                         "not used", self.relay.config.graph, entry.where, entry.name, ", ".join(entry.topic_keys))
+            _log.warning("micros_rt: relay %s: %s: %s is %s; its options %s apply to topics only and are "
+                         "not used", self.relay.config.graph, entry.where, entry.name, what,
+                         ", ".join(entry.topic_keys))
 
     # -- ROS 1 -> ROS 2 --------------------------------------------------------------------------------------
     def _export(self, entry: Ros2Entry, state: GraphState) -> Optional[str]:
@@ -442,7 +443,48 @@ class Ros2Side:
         servers = [n for n in state.services.get(entry.name, ()) if n not in own]
         if servers:
             return self._export_service(entry)
+        action_type = self._ros1_action_server(entry.name, state)
+        if action_type is not None:
+            return self._export_action(entry, action_type)
         return None  # neither published nor served now: looked for again next round
+
+    def _ros1_action_server(self, name: str, state: GraphState) -> Optional[str]:
+        """``pkg/FooAction`` when a node other than the relay serves action ``name`` (publishes ``name/status``,
+        and ``name/feedback`` is an ``*ActionFeedback``), else None."""
+        own = self._own()
+        if not [n for n in state.publishers.get(name + "/status", ()) if n not in own]:
+            return None
+        feedback = state.types.get(name + "/feedback", "")
+        return feedback[: -len("Feedback")] if feedback.endswith("ActionFeedback") else None
+
+    def _action_class(self, entry: Ros2Entry, ros2_type: str) -> Tuple[Any, str]:
+        from .actions import action_class
+
+        return action_class(ros2_type, self.gateway().python)
+
+    def _export_action(self, entry: Ros2Entry, ros1_type: str) -> Optional[str]:
+        from .actions import ActionOut, check_against_server, ros2_action_type
+
+        what = f"{entry.where}: cannot export action {entry.name} ({ros1_type}) to ROS 2"
+        if entry.target != entry.name:
+            return f"{what}: an action keeps its name on both sides ('as: {entry.target}' is not supported for actions)"
+        ros2_type = ros2_action_type(ros1_type)
+        try:
+            cls, source = self._action_class(entry, ros2_type)
+            if cls._type != ros1_type:
+                return f"{what}: the ROS 1 class found is {cls._type}"
+            check_against_server(cls, entry.name, rospy.get_master(), self.relay.node, tuple(self._own()))
+        except TypeLearningError as exc:
+            return f"{what}: {exc}"
+        self._topic_options_on_service(entry, "an action")
+        try:
+            out = ActionOut(self.relay.nh, entry, cls, source)
+        except (micros_rt.MicrosRtError, TypeError, ValueError) as exc:
+            return f"{what}: {exc}"
+        self._add(entry, out)
+        _log.info("micros_rt: relay %s: ROS 2 export of action %s (%s, class %s) as %s", self.relay.config.graph,
+                  entry.name, ros2_type, source, entry.ros2_name)
+        return None
 
     def _export_topic(self, entry: Ros2Entry, type_name: str, own: Tuple[str, ...]) -> Optional[str]:
         master = rospy.get_master()
@@ -539,7 +581,40 @@ class Ros2Side:
         servers = [r for r in self.directory.endpoints("readers", request_topic) if r.tag is None]
         if servers:
             return self._import_service(entry, servers[0], state)
+        from .actions import send_goal_topic
+
+        action_servers = [r for r in self.directory.endpoints("readers", send_goal_topic(entry.ros2_name))
+                          if r.tag is None]
+        if action_servers:
+            return self._import_action(entry, action_servers[0], state)
         return None  # no ROS 2 publisher or server now: looked for again next round
+
+    def _import_action(self, entry: Ros2Entry, server: DiscoveredEndpoint, state: GraphState) -> Optional[str]:
+        from .actions import ActionIn, ros2_action_type_of
+
+        what = f"{entry.where}: cannot import action {entry.name} from ROS 2"
+        ros2_type = ros2_action_type_of(server.type_name)
+        if ros2_type is None:
+            return f"{what}: its goal request type {server.type_name} is not a ROS 2 action's"
+        if entry.target != entry.name:
+            return f"{what}: an action keeps its name on both sides ('as: {entry.target}' is not supported for actions)"
+        others = [n for n in state.publishers.get(entry.name + "/status", ()) if n not in self._own()]
+        if others:
+            return (f"{what}: {', '.join(others)} serves action {entry.name} in this graph already (a micros_rt "
+                    f"process offering it to ROS 2 would make it come back as a second server)")
+        try:
+            cls, source = self._action_class(entry, ros2_type)
+        except TypeLearningError as exc:
+            return f"{what}: {exc}"
+        self._topic_options_on_service(entry, "an action")
+        try:
+            incoming = ActionIn(self.relay.nh, entry, cls, ros2_type, source)
+        except (micros_rt.MicrosRtError, TypeError, ValueError) as exc:
+            return f"{what}: {exc}"
+        self._add(entry, incoming)
+        _log.info("micros_rt: relay %s: ROS 2 import of action %s (%s, class %s) as %s", self.relay.config.graph,
+                  entry.name, ros2_type, source, entry.ros1_name)
+        return None
 
     def _import_topic(self, entry: Ros2Entry, writers: List[DiscoveredEndpoint], state: GraphState) -> Optional[str]:
         type_name = ros1_type(writers[0].type_name)
@@ -607,7 +682,7 @@ class Ros2Side:
             else:
                 out.append({"direction": entry.direction, "kind": None, "name": entry.name,
                             "as": entry.target, "state": "not found yet" if entry.direction == "import" else
-                            "no ROS 1 publisher or server yet"})
+                            "no ROS 1 publisher, server or action server yet"})
         return out
 
     def close(self) -> None:
