@@ -32,9 +32,10 @@ exports cross. The relay process that carries only exports below HIGH then asks 
 (another process, another socket) wait at most a few milliseconds behind it on a link that does not honour
 DSCP.
 
-``ros2:`` entries (:class:`Ros2Entry`) name a topic or a service, which the relay finds out at run time (see
-:mod:`.ros2`). An ``export`` entry takes the export options above plus ``as`` (its ROS 2 name) and ``timeout``
-(seconds a service call may take); an ``import`` entry the import options plus ``timeout``. ``latch`` left out
+``ros2:`` entries (:class:`Ros2Entry`) name a topic, a service or an action, which the relay finds out at run
+time (see :mod:`.ros2`). An ``export`` entry takes the export options above plus ``as`` (its ROS 2 name) and
+``timeout`` (seconds a service call may take, or the other side may take to accept a goal); an ``import`` entry
+the import options plus ``timeout``. ``latch`` left out
 follows the other side (a latching ROS 1 publisher, a transient_local ROS 2 writer).
 """
 

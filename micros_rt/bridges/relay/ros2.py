@@ -1,7 +1,9 @@
-"""The relay's ``ros2:`` section: topics and services between this ROS 1 graph and ROS 2 (the same DDS domain).
+"""The relay's ``ros2:`` section: topics, services and actions between this ROS 1 graph and ROS 2 (the same DDS
+domain).
 
-Each entry names a topic or a service; which one is found at run time, and an entry nobody offers yet is looked
-for again every poll (:meth:`Ros2Side.poll`):
+Each entry names a topic, a service or an action; which one is found at run time, and an entry nobody offers yet
+is looked for again every poll (:meth:`Ros2Side.poll`). Actions: :mod:`.actions`, on the node API's
+``offer_action_to_ros2`` and ``offer_ros2_action``.
 
 - **export** (ROS 1 -> ROS 2). A topic with a publisher in the master (other than this relay): a micros_rt
   subscription over TCPROS (stock publishers), whose callback writes each message on a DDS writer of
