@@ -4,12 +4,13 @@ under a user's CYCLONEDDS_URI, and that a real Cyclone participant accepts what 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, List
+from typing import Any, Dict, List
 
 import pytest
 
 from micros_rt.transports.dds.participant import (
     DEFAULT_LEASE_DURATION,
+    DEFAULT_SHM_LEASE_DURATION,
     DEFAULT_NETWORK_LEASE_DURATION,
     LOOPBACK_CONFIG,
     cyclone_config,
@@ -20,11 +21,20 @@ from micros_rt.transports.dds.participant import (
 from micros_rt.exceptions import DDSUnavailableError
 
 
-def test_default_lease_notices_a_dead_peer_within_two_seconds_on_loopback() -> None:
+def test_default_lease_notices_a_dead_peer_within_two_seconds_on_loopback_when_dds_carries_the_data() -> None:
     assert DEFAULT_LEASE_DURATION <= 2.0
     for env in ({"ROS_IP": "127.0.0.1"}, {"ROS_HOSTNAME": "localhost"}, {"ROS_IP": "::1"}):
+        env = dict(env, MICROS_RT_DISABLE_SHM="1")
         assert lease_duration(env) == DEFAULT_LEASE_DURATION
         assert f"<LeaseDuration>{DEFAULT_LEASE_DURATION:g}s</LeaseDuration>" in micros_rt_defaults(env)
+
+
+@pytest.mark.parametrize("env", [{"ROS_IP": "127.0.0.1"}, {"ROS_IP": "127.0.0.1", "MICROS_RT_DISABLE_SHM": "0"}])
+def test_with_shared_memory_on_the_loopback_lease_is_longer(env: Dict[str, str]) -> None:
+    # shared memory notices a dead local node; the lease then only paces the announcements to every peer
+    assert DEFAULT_LEASE_DURATION < DEFAULT_SHM_LEASE_DURATION < DEFAULT_NETWORK_LEASE_DURATION
+    assert lease_duration(env) == DEFAULT_SHM_LEASE_DURATION
+    assert f"<LeaseDuration>{DEFAULT_SHM_LEASE_DURATION:g}s</LeaseDuration>" in micros_rt_defaults(env)
 
 
 def test_network_lease_outlasts_a_ten_second_link_outage() -> None:

@@ -103,7 +103,7 @@ def test_cyclonedds_uri_wins() -> None:
     # the user's configuration comes last, so it overrides micros_rt's defaults where it speaks
     cfg = cyclone_config({"CYCLONEDDS_URI": "file:///x.xml", "ROS_IP": "127.0.0.1"})
     assert cfg.endswith(",file:///x.xml") and LOOPBACK_CONFIG not in cfg
-    assert "<LeaseDuration>1.5s</LeaseDuration>" in cfg.split(",")[0]  # ROS_IP is loopback
+    assert "<LeaseDuration>5s</LeaseDuration>" in cfg.split(",")[0]  # ROS_IP is loopback, shared memory on
 
 
 @pytest.mark.parametrize("raw,expected", [("", 0), ("7", 7), ("232", 232)])
