@@ -81,8 +81,11 @@ class ActionToRos2:
         self._status_seen = True
 
     def server_present(self) -> bool:
-        """Whether a ROS 1 action server of the name is connected to this node (its status arrives)."""
-        return self._status_seen and self._status.get_num_connections() > 0
+        """Whether a ROS 1 action server of the name is connected to this node: its status arrives, and it has
+        subscribed to this node's goals and cancels (a goal published before that would be lost)."""
+        return (self._status_seen and self._status.get_num_connections() > 0
+                and self._client.pub_goal.get_num_connections() > 0
+                and self._client.pub_cancel.get_num_connections() > 0)
 
     def wait_for_server(self, timeout: float) -> bool:
         """Block until the ROS 1 server is connected (True) or ``timeout`` seconds passed (False)."""

@@ -1,11 +1,11 @@
 """Stock nodes through the relay (issue 35, deliverable 3): actions both ways in the ``ros2:`` section, and ``/clock``
 from ROS 2 into ROS 1 (ROS 1 -> ROS 2 is in test_relay_ros2.py).
 
-Processes (all real, shared by the tests of this file): a rosmaster of its own; ``micros-rt relay`` whose
-configuration names the two actions and ``/clock`` and nothing about their types; a stock actionlib server
-(tests/peers/ros1_action_peer.py under /usr/bin/python3, no micros_rt); an rclpy action server that also publishes
-``/clock`` as a simulator does (tests/peers/ros2_action_peer.py, .venv-ros2, Fast DDS on loopback); then an rclpy
-action client, a stock actionlib client and stock ``rostopic``. The action type, test_msgs/Fibonacci, is in no ROS 1
+Processes (all real): a rosmaster of its own and ``micros-rt relay``, whose configuration names the two actions and
+``/clock`` and nothing about their types, and an rclpy action server that also publishes ``/clock`` as a simulator
+does (tests/peers/ros2_action_peer.py, .venv-ros2, Fast DDS on loopback), shared by the tests of this file; then an
+rclpy action client, a stock actionlib server started after it (tests/peers/ros1_action_peer.py under
+/usr/bin/python3, no micros_rt), a stock actionlib client and stock ``rostopic``. The action type, test_msgs/Fibonacci, is in no ROS 1
 package on this host: the relay builds the ROS 1 classes from ROS 2's Fibonacci.action, and the stock peers build
 theirs with genpy (tests/peers/ros1_action_types.py); rospy's md5 check at every connection would refuse a mismatch.
 """
@@ -36,6 +36,7 @@ ros2:
   import: {{{R2}: {{}}, /clock: {{}}}}    # an rclpy action server, and a ROS 2 /clock, offered to ROS 1
 """
 T = 40.0               # generous bound on any one wait (the 2-core machine may be busy)
+PERIOD = "0.01"        # the servers' feedback period, seconds (100 Hz)
 CANCEL_BOUND = 0.100   # issue 35: a cancel reaches the server within 100 ms
 
 
@@ -63,13 +64,11 @@ def setup(dds_domain: int, tmp_path_factory: pytest.TempPathFactory) -> Iterator
         config = work / "relay.yaml"
         config.write_text(CONFIG)
         env = dict(master.env)
-        # all start at once: their start-up (imports, DDS discovery) overlaps; the relay finds the servers as they
-        # come (every --poll-period)
-        peers["relay"] = harness.Peer([CLI, "relay", "--config", str(config), "--json", "--stats-period", "0.3",
-                                       "--poll-period", "0.3"], env, name="relay")
-        peers["r1"] = harness.Peer([harness.STOCK_PYTHON, PEER1, "serve", "--name", R1], env,
-                                   name="stock_action_server")
-        peers["r2"] = harness.Peer([harness.ROS2_PYTHON, PEER2, "serve", "--clock", "--actions",
+        # both start at once: their start-up (imports, DDS discovery) overlaps; the relay finds the server as it comes
+        # (every --poll-period). The stock server comes later, in the test.
+        peers["relay"] = harness.Peer([CLI, "relay", "--config", str(config), "--json", "--stats-period", "0.5",
+                                       "--poll-period", "0.5"], env, name="relay")
+        peers["r2"] = harness.Peer([harness.ROS2_PYTHON, PEER2, "serve", "--clock", "--period", PERIOD, "--actions",
                                     json.dumps([{"name": R2}])], env, name="ros2_action_server")
         for peer in peers.values():
             peer.wait_for("ready", timeout=T)
@@ -96,34 +95,41 @@ def _cancel_latency(client: harness.Peer, server: harness.Peer, label: str, name
 
 def test_actions_both_ways(setup: Setup, spawn: Any) -> None:
     plan = [{"label": "fib", "order": 100, "wait": 30}, {"label": "cancel", "order": 5000, "cancel_after": 5}]
-    # an rclpy ActionClient of the stock server's action, then a stock actionlib client of the rclpy server's, each
-    # through the relay alone (one after the other: 2 cores, and rclpy's ActionClient drops a feedback message it
-    # takes after the result, so a starved client process could miss the last one)
+    env = dict(setup.master.env)
+    # an rclpy ActionClient of the stock server's action, waiting for it before the stock server exists: its goal
+    # goes out as soon as the relay offers the action to ROS 2, just after the relay found the server
     ros2_client = spawn([harness.ROS2_PYTHON, PEER2, "call", "--plan",
-                         json.dumps([{**step, "name": R1} for step in plan])], dict(setup.master.env),
-                        name="ros2_action_client")
+                         json.dumps([{**step, "name": R1} for step in plan])], env, name="ros2_action_client")
+    r1 = spawn([harness.STOCK_PYTHON, PEER1, "serve", "--name", R1, "--period", PERIOD], env,
+               name="stock_action_server")
+    r1.wait_for("ready", T)
     ros2_client.wait_for("done", T)
+    # then a stock actionlib client of the rclpy server's action (one after the other: 2 cores, and rclpy's
+    # ActionClient drops a feedback message it takes after the result, so a starved client could miss the last one)
     ros1_client = spawn([harness.STOCK_PYTHON, PEER1, "call", "--plan",
-                         json.dumps([{**step, "name": R2} for step in plan])], dict(setup.master.env),
-                        name="stock_action_client")
+                         json.dumps([{**step, "name": R2} for step in plan])], env, name="stock_action_client")
     ros1_client.wait_for("done", T)
     # goal, every one of the 100 feedback messages in order, and the result, both ways
     said = [e["line"] for e in setup.peers["relay"].events("_raw") if "action" in e.get("line", "")]
+    said += [e for e in (setup.peers["relay"].events("stats") or [{}])[-1].get("ros2", []) if e.get("kind") == "action"]
     for client in (ros2_client, ros1_client):
         fib = _result(client, "fib")
+        if (fib["status_name"], fib["feedback"], fib["feedback_in_order"], fib["sequence_ok"]) != \
+                ("SUCCEEDED", 100, True, True):
+            print(f"{client.name}: {fib}\nthe relay: {json.dumps(said, indent=1)}\n{setup.peers['relay'].stderr_tail()}")
         assert (fib["status_name"], fib["feedback"], fib["feedback_in_order"], fib["sequence_ok"]) == \
-            ("SUCCEEDED", 100, True, True), (client.name, fib, said)
+            ("SUCCEEDED", 100, True, True), (client.name, fib)
     assert _result(ros1_client, "fib")["text"] == "succeeded on the ROS 2 action server"
     # cancel, both ways: the goal ends cancelled (CANCELED in ROS 2's words, PREEMPTED in actionlib's) and the
     # server's cancel callback ran within 100 ms of the client's cancel
     assert _result(ros2_client, "cancel")["status_name"] == "CANCELED", _result(ros2_client, "cancel")
     assert _result(ros1_client, "cancel")["status_name"] == "PREEMPTED", _result(ros1_client, "cancel")
-    to_ros1 = _cancel_latency(ros2_client, setup.peers["r1"], "cancel", R1)
+    to_ros1 = _cancel_latency(ros2_client, r1, "cancel", R1)
     to_ros2 = _cancel_latency(ros1_client, setup.peers["r2"], "cancel", R2)
     print(f"through the relay: rclpy client -> stock server 100/100 feedback, cancel in {to_ros1 * 1e3:.1f} ms; "
           f"stock client -> rclpy server 100/100 feedback, cancel in {to_ros2 * 1e3:.1f} ms")
     assert 0 <= to_ros1 < CANCEL_BOUND and 0 <= to_ros2 < CANCEL_BOUND, (to_ros1, to_ros2)
-    assert setup.peers["r1"].wait_for(lambda e: e.get("event") == "finished" and e["status"] == "PREEMPTED", T)
+    assert r1.wait_for(lambda e: e.get("event") == "finished" and e["status"] == "PREEMPTED", T)
     assert setup.peers["r2"].wait_for(lambda e: e.get("event") == "finished" and e["status"] == "CANCELED", T)
     # the relay's counters: each entry learnt it is an action, its type built from ROS 2's definition
     for direction, name in (("export", R1), ("import", R2)):
