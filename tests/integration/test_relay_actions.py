@@ -29,11 +29,12 @@ PEER1 = str(harness.PEERS_DIR / "ros1_action_peer.py")
 PEER2 = str(harness.PEERS_DIR / "ros2_action_peer.py")
 P = f"/ra{os.getpid()}"
 R1, R2 = f"{P}/r1/fib", f"{P}/r2/fib"   # a ROS 1 server's action (exported), a ROS 2 server's (imported)
+RENAMED = f"{P}/r2/renamed"              # a ROS 2 server's action imported under another name: refused in words
 CONFIG = f"""\
 graph: robot
 ros2:
   export: {{{R1}: {{}}}}                  # a stock actionlib server, offered to ROS 2
-  import: {{{R2}: {{}}, /clock: {{}}}}    # an rclpy action server, and a ROS 2 /clock, offered to ROS 1
+  import: {{{R2}: {{}}, /clock: {{}}, {RENAMED}: {{as: /elsewhere}}}}   # an rclpy action server, a ROS 2 /clock
 """
 T = 40.0               # generous bound on any one wait (the 2-core machine may be busy)
 PERIOD = "0.01"        # the servers' feedback period, seconds (100 Hz)
@@ -69,7 +70,7 @@ def setup(dds_domain: int, tmp_path_factory: pytest.TempPathFactory) -> Iterator
         peers["relay"] = harness.Peer([CLI, "relay", "--config", str(config), "--json", "--stats-period", "0.5",
                                        "--poll-period", "0.5"], env, name="relay")
         peers["r2"] = harness.Peer([harness.ROS2_PYTHON, PEER2, "serve", "--clock", "--period", PERIOD, "--actions",
-                                    json.dumps([{"name": R2}])], env, name="ros2_action_server")
+                                    json.dumps([{"name": R2}, {"name": RENAMED}])], env, name="ros2_action_server")
         for peer in peers.values():
             peer.wait_for("ready", timeout=T)
         yield Setup(master, peers)
@@ -163,3 +164,30 @@ def test_ros2_clock_reaches_stock_ros1(setup: Setup) -> None:
     # the peer's clock: 2000 s + n * 0.1 s, increasing
     assert len(ticks) == 3 and all(s >= 2000 and n % 100_000_000 == 0 for s, n in ticks), echoed
     assert ticks == sorted(set(ticks)), echoed
+
+
+def test_an_action_that_cannot_be_carried_is_said_in_words(setup: Setup) -> None:
+    # found to be an action in DDS discovery, but 'as:' would rename it: refused in words, naming the entry's line
+    event = setup.peers["relay"].wait_for(lambda e: e.get("event") == "stats" and any(
+        RENAMED in why for why in e.get("not_carried", {}).values()), timeout=T)
+    why = next(w for w in event["not_carried"].values() if RENAMED in w)
+    assert "relay.yaml:4" in why and "an action keeps its name on both sides" in why, why
+    assert harness.system_state(setup.master)["publishers"].get(f"{RENAMED}/status") is None
+    assert harness.system_state(setup.master)["publishers"].get("/elsewhere/status") is None
+
+
+def test_ros2_action_definitions_map_back_to_ros1() -> None:
+    """The part of the relay that reads a ROS 2 .action part as a ROS 1 definition, on the constructs ROS 1 lacks."""
+    from micros_rt.bridges.relay.actions import _ros1_text
+    from micros_rt.bridges.relay.msgtypes import TypeLearningError
+
+    deps: Dict[str, str] = {}
+    text = _ros1_text("# a comment\nint32 order 5  # a default value\nstring<=8 name\nint32[<=4] few\n"
+                      "float64[3] xyz\nbuiltin_interfaces/Time stamp\nbuiltin_interfaces/Duration span\n"
+                      "std_msgs/Header header\nint8 MODE=2  # a constant\nstring NAME=a#b\n", "pkg", deps, "x")
+    assert text == ("int32 order\nstring name\nint32[] few\nfloat64[3] xyz\ntime stamp\nduration span\n"
+                    "std_msgs/Header header\nint8 MODE=2\nstring NAME=a#b\n"), text
+    assert "std_msgs/Header" in deps   # a nested type's ROS 1 definition comes from its installed package
+    for bad, words in (("wstring w", "no wstring"), ("NoSuchType t", "pkg/NoSuchType is not installed")):
+        with pytest.raises(TypeLearningError, match=words):
+            _ros1_text(bad, "pkg", {}, "x")
