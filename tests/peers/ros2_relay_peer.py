@@ -8,7 +8,8 @@ keep_last 1, one message "ros2 latched <pid>"); serves ``/ros2_trigger`` (std_sr
 front. Commands come as files in ``--trigger-dir`` (the test writes them when it is ready; the peer looks every
 10 ms):
 
-- ``late``: subscribe now, transient_local, to ``/ros1_latched``; emits ``{"event": "late", "data", "after_ms"}``
+- ``late``: subscribe now, transient_local (depth 100, as tf2 reads ``/tf_static``), to ``/ros1_latched``; emits
+  ``{"event": "late", "data", "after_ms"}`` for each message
   with the time from creating the subscription to its first message;
 - ``call``: JSON ``{"name", "count", "data"}``: calls std_srvs/SetBool ``name`` ``count`` times; emits
   ``{"event": "called", "ok", "p50_ms", "last"}``.
@@ -43,6 +44,8 @@ def emit(event: str, **fields: Any) -> None:
 
 LATCHED = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+LATE_JOINER = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def main() -> None:
@@ -104,12 +107,11 @@ def main() -> None:
                     got = threading.Event()
                     start = time.monotonic()
 
-                    def on_late(msg: Any, start: float = start, got: threading.Event = got) -> None:
-                        if not got.is_set():
-                            got.set()
-                            emit("late", data=msg.data, after_ms=(time.monotonic() - start) * 1e3)
+                    def on_late(msg: Any, start: float = start) -> None:
+                        emit("late", data=msg.data, after_ms=(time.monotonic() - start) * 1e3)
 
-                    node.create_subscription(String, f"{p}/ros1_latched", on_late, LATCHED)
+                    # as tf2's listener of /tf_static: deep enough for every publisher's latched message
+                    node.create_subscription(String, f"{p}/ros1_latched", on_late, LATE_JOINER)
                 else:
                     with open(path, encoding="utf-8") as f:
                         plan = json.load(f)

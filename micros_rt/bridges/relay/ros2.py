@@ -175,10 +175,14 @@ class _TopicOut:
         tag = {"graph": relay.graph_id, "node": relay.node, "relay_ros2": relay.config.graph,
                "type": data_class._type, "md5": data_class._md5sum,
                "best_effort": "1" if options.using_best_effort_protocol else "0", "latch": "1" if latch else "0"}
-        writer = relay.backend.open_writer(EndpointSpec(entry.ros2_name, data_class, self.rule.queue_size, latch, tag),
-                                           options)
-        self.sender: TransportWriter = sender_for(writer, topic=entry.ros2_name, queue_size=self.rule.queue_size,
-                                                  options=options)
+        self._backend, self._spec = relay.backend, EndpointSpec(entry.ros2_name, data_class, self.rule.queue_size,
+                                                                latch, tag)
+        # A latched topic keeps each ROS 1 publisher's last message for late subscribers, as ROS 1 does (/tf_static:
+        # one static transform broadcaster per node): one transient_local writer per publisher, since a writer
+        # keeps only its own last message. Otherwise one writer for the topic.
+        self.sender: TransportWriter = self._open()
+        self.latched: Dict[str, TransportWriter] = {}
+        self._lock = threading.Lock()
         # TCPROS only: a DDS reader of the topic would also hear ROS 2's own publishers of it, and send them back
         self.sub = relay.nh.subscribe(entry.name, data_class, self._on_message, self.rule.queue_size,
                                       micros_rt.TransportHints().tcp())
@@ -196,15 +200,37 @@ class _TopicOut:
         if now - self._last_sent < self.min_interval:
             self.rate_capped += 1
             return
-        prepared = self.sender.prepare(msg)
-        if prepared is None:
-            self.no_reader += 1  # no ROS 2 subscriber now (a volatile topic keeps nothing for later ones)
-            return
-        self._last_sent = now
-        self.sender.send(prepared)
-        self.sent += 1
+        with self._lock:  # refresh() may close a departed publisher's writer meanwhile
+            sender = self.sender if not self.latch or caller is None else self._latched_sender(caller)
+            prepared = sender.prepare(msg)
+            if prepared is None:
+                self.no_reader += 1  # no ROS 2 subscriber now (a volatile topic keeps nothing for later ones)
+                return
+            self._last_sent = now
+            sender.send(prepared)
+            self.sent += 1
+
+    def _open(self) -> TransportWriter:
+        options = self.rule.options
+        return sender_for(self._backend.open_writer(self._spec, options), topic=self.entry.ros2_name,
+                          queue_size=self.rule.queue_size, options=options)
+
+    def _latched_sender(self, caller: str) -> TransportWriter:
+        sender = self.latched.get(caller)
+        if sender is None:
+            in_use = any(x is self.sender for x in self.latched.values())
+            sender = self.latched[caller] = self._open() if in_use else self.sender
+        return sender
 
     def refresh(self, side: "Ros2Side", state: GraphState) -> None:
+        publishers = set(state.publishers.get(self.entry.name, ()))
+        with self._lock:
+            for caller in [c for c in self.latched if c not in publishers]:
+                # a ROS 1 publisher that went away takes its latched message with it, as in ROS 1
+                sender = self.latched.pop(caller)
+                sender.close()
+                if sender is self.sender:
+                    self.sender = self._open()  # the topic's writer again, without that publisher's message
         if self.entry.ros2_name == self.entry.name:
             # micros_rt nodes of this graph are ROS 2 nodes already: their messages are not written twice
             self.direct = frozenset(e.tag.get("node", "") for e in side.directory.endpoints("writers", self.dds_topic)
@@ -212,15 +238,20 @@ class _TopicOut:
                                     and "relay_ros2" not in e.tag) - {""}
 
     def stats(self) -> Dict[str, Any]:
-        lane_dropped = self.sender.dropped if isinstance(self.sender, SendQueue) else 0
+        senders = {id(x): x for x in (self.sender, *self.latched.values())}.values()
+        lane_dropped = sum(x.dropped for x in senders if isinstance(x, SendQueue))
         return {"direction": "export", "kind": "topic", "name": self.entry.name, "as": self.entry.ros2_name,
-                "latch": self.latch, "received": self.received, "sent": self.sent, "rate_capped": self.rate_capped,
+                "latch": self.latch, "latched_publishers": sorted(self.latched),
+                "received": self.received, "sent": self.sent, "rate_capped": self.rate_capped,
                 "looped": self.looped, "on_ros2_already": self.on_ros2_already, "no_reader": self.no_reader,
                 "superseded": lane_dropped, "dropped_queue_full": self.sub.statistics().dropped_queue_full}
 
     def close(self) -> None:
         self.sub.unregister()
-        self.sender.close()
+        with self._lock:
+            for sender in {id(x): x for x in (self.sender, *self.latched.values())}.values():
+                sender.close()
+            self.latched.clear()
 
 
 class _TopicIn:
