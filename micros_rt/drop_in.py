@@ -6,7 +6,9 @@ micros_rt endpoints behind rospy's signatures, so two scripts run this way talk 
 TCPROS to stock nodes. Its ``rospy.Service`` also serves ROS 2 clients of the same name, and its
 ``rospy.ServiceProxy`` also reaches a ROS 2 server (:mod:`micros_rt.services`). Everything else (parameters,
 timers, time, logging, ``spin``, ``on_shutdown``) is rospy's own, untouched; ``rospy.wait_for_service`` waits for a
-ROS 1 server in the master or a ROS 2 server of the name.
+ROS 1 server in the master or a ROS 2 server of the name. actionlib's ``ActionClient.wait_for_server`` (also
+``SimpleActionClient``'s) waits the same way, and for an action only a ROS 2 server has it makes
+:meth:`micros_rt.NodeHandle.offer_ros2_action` of it in this process (:func:`wait_for_action_server`).
 
 The drop-in classes subclass rospy's own classes, so ``isinstance(pub, rospy.Publisher)`` holds both for
 the patched name and for rospy's original class. What stays on stock rospy (TCPROS only):
@@ -38,8 +40,8 @@ from . import node as _node
 from .log import nonblocking_logger
 from .negotiation.hints import TransportHints
 
-__all__ = ["Publisher", "Service", "ServiceProxy", "Subscriber", "init_node", "install", "wait_for_message",
-           "wait_for_service"]
+__all__ = ["Publisher", "Service", "ServiceProxy", "Subscriber", "init_node", "install", "wait_for_action_server",
+           "wait_for_message", "wait_for_service"]
 
 _log = nonblocking_logger("rosout.micros_rt")
 _ROSPY_INIT_NODE: Callable[..., Any] = rospy.init_node
@@ -60,7 +62,8 @@ _settings = _Settings()
 
 def install(*, profile: Optional[str] = None, hints: Optional[TransportHints] = None) -> None:
     """Put micros_rt under rospy's names: ``rospy.init_node``, ``rospy.Publisher``, ``rospy.Subscriber``,
-    ``rospy.Service``, ``rospy.ServiceProxy``, ``rospy.wait_for_service`` and ``rospy.wait_for_message``.
+    ``rospy.Service``, ``rospy.ServiceProxy``, ``rospy.wait_for_service`` and ``rospy.wait_for_message``; and
+    actionlib's ``ActionClient.wait_for_server`` (:func:`wait_for_action_server`) when actionlib is installed.
     Idempotent.
 
     ``rospy.topics.Publisher``/``Subscriber`` stay rospy's: rospy's own methods name them through
@@ -79,6 +82,7 @@ def install(*, profile: Optional[str] = None, hints: Optional[TransportHints] = 
     rospy.ServiceProxy = ServiceProxy
     rospy.wait_for_service = wait_for_service
     rospy.wait_for_message = rospy.client.wait_for_message = wait_for_message
+    _install_actionlib()
 
 
 def init_node(name: str, argv: Optional[List[str]] = None, anonymous: bool = False, **kwargs: Any) -> None:
@@ -88,6 +92,8 @@ def init_node(name: str, argv: Optional[List[str]] = None, anonymous: bool = Fal
         _ROSPY_INIT_NODE(name, argv=argv, anonymous=anonymous, **kwargs)
         return
     _settings.starting = True
+    # before micros_rt's own hook, which closes the topics: the offers' actionlib servers stop publishing first
+    rospy.on_shutdown(_close_ros2_actions)
     try:
         _node.init_node(name, argv, anonymous, qos_profile=_settings.profile, **kwargs)
     finally:
@@ -301,6 +307,90 @@ def wait_for_service(service: str, timeout: Optional[float] = None) -> None:
         if deadline is not None and time.monotonic() >= deadline:
             raise ServiceTimeoutError(f"timeout exceeded while waiting for service {resolved} ({timeout:g} s): no "
                                       f"ROS 1 server registered with the master, no ROS 2 server discovered{ros2_note}")
+
+
+_ACTIONLIB_WAIT_FOR_SERVER: Optional[Callable[..., Any]] = None  # actionlib's own ActionClient.wait_for_server
+_ros2_actions: Dict[str, Any] = {}  # action name -> the ActionFromRos2 this process offers its clients
+_ros2_actions_said: Set[str] = set()  # names whose ROS 2 failure was logged
+_ros2_actions_lock = threading.Lock()
+
+
+def _install_actionlib() -> None:
+    """Put :func:`wait_for_action_server` in actionlib's ``ActionClient`` (the class: ``SimpleActionClient`` and
+    ``wait_for_action_server_to_start`` call it through ``self``); nothing when actionlib is not installed."""
+    global _ACTIONLIB_WAIT_FOR_SERVER
+    try:
+        from actionlib.action_client import ActionClient  # type: ignore[import-untyped]
+    except ImportError:
+        return
+    if ActionClient.wait_for_server is not wait_for_action_server:
+        _ACTIONLIB_WAIT_FOR_SERVER = ActionClient.wait_for_server
+        ActionClient.wait_for_server = wait_for_action_server
+
+
+def wait_for_action_server(self: Any, timeout: Any = None) -> bool:
+    """actionlib's ``ActionClient.wait_for_server(timeout)`` (``self`` the ActionClient, ``timeout`` a
+    ``rospy.Duration``, 0 for ever): True once a server is connected, False after ``timeout``, as actionlib's.
+
+    While no ROS 1 server of the action is in the master (no publisher of ``NAME/status``) and a ROS 2 action
+    server of the name is discovered (its ``NAME/_action/send_goal`` service), this process offers that ROS 2
+    server to its actionlib clients with :meth:`micros_rt.NodeHandle.offer_ros2_action` (once per name), and the
+    wait ends when actionlib's client is connected to that offer and the offer's helper has discovered the ROS 2
+    server. A ROS 1 server is preferred, as ``wait_for_service`` prefers one."""
+    original = _ACTIONLIB_WAIT_FOR_SERVER
+    assert original is not None
+    if timeout is None:
+        timeout = rospy.Duration(0.0)
+    if not _settings.initialized:
+        return bool(original(self, timeout))
+    name = str(self.pub_goal.resolved_name).removesuffix("/goal")  # the name actionlib resolved
+    forever = timeout == rospy.Duration(0.0)
+    deadline = rospy.get_rostime() + timeout
+    offer: Any = None
+    ros2 = True
+    while not rospy.is_shutdown():
+        connected = original(self, rospy.Duration(0.2))  # actionlib's own check, 0.2 s at a time
+        if connected and (offer is None or offer.ros2_server_ready()):
+            return True
+        if offer is None and ros2:
+            try:
+                offer = _ros2_action(name, self.ActionSpec)
+            except Exception as exc:  # ROS 2 unreachable, its type missing: actionlib's own wait goes on
+                ros2 = False
+                if name not in _ros2_actions_said:
+                    _ros2_actions_said.add(name)
+                    _log.warning("micros_rt: action %s: waiting for a ROS 1 server only: %s", name, exc)
+        if not forever and rospy.get_rostime() >= deadline:
+            return False
+        if connected:
+            time.sleep(0.05)
+    return False
+
+
+def _ros2_action(name: str, action_class: Any) -> Any:
+    """This process's offer of the ROS 2 action server of ``name``, made now if no ROS 1 server of ``name`` is in
+    the master and a ROS 2 one is discovered; else None."""
+    with _ros2_actions_lock:
+        if name in _ros2_actions:
+            return _ros2_actions[name]
+        if any(topic == f"{name}/status" for topic, _type in rospy.get_published_topics()):
+            return None  # a ROS 1 server (or another process's offer): actionlib's own wait connects to it
+        from .services import ros2_gateway
+
+        if f"{name}/_action/send_goal" not in ros2_gateway().server_names():
+            return None
+        offer = _ros2_actions[name] = _node.NodeHandle().offer_ros2_action(name, action_class)
+        _log.info("micros_rt: action %s: served by ROS 2, offered to this process's actionlib clients (%s)", name,
+                  offer.ros2_type)
+        return offer
+
+
+def _close_ros2_actions() -> None:
+    with _ros2_actions_lock:
+        offers = list(_ros2_actions.values())
+        _ros2_actions.clear()
+    for offer in offers:
+        offer.shutdown()
 
 
 def wait_for_message(topic: str, topic_type: Type[genpy.Message], timeout: Optional[float] = None) -> Any:

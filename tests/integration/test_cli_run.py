@@ -2,7 +2,8 @@
 
 Two plain scripts run this way talk DDS (no TCP link between them in the kernel's socket table) and
 TCPROS with stock rospy nodes and ``rostopic``; a YAML profile gives an unmodified subscriber a time
-filter; services, parameters, timers, time and ``wait_for_message`` keep working; the script's
+filter; services, parameters, timers, time and ``wait_for_message`` keep working; an unmodified
+``rospy.Service``/``ServiceProxy`` and actionlib ``SimpleActionClient`` reach ROS 2 (rclpy peers); the script's
 ``__name__``, ``sys.argv``, ``sys.path[0]``, remappings, traceback and exit code are its own.
 """
 
@@ -22,6 +23,8 @@ PLAIN_LISTENER = str(harness.PEERS_DIR / "plain_listener.py")
 PLAIN_PROBE = str(harness.PEERS_DIR / "plain_probe.py")
 PLAIN_SERVICE = str(harness.PEERS_DIR / "plain_service.py")
 ROS2_SERVICE_PEER = str(harness.PEERS_DIR / "ros2_service_peer.py")
+PLAIN_ACTION_CLIENT = str(harness.PEERS_DIR / "plain_action_client.py")
+ROS2_ACTION_PEER = str(harness.PEERS_DIR / "ros2_action_peer.py")
 
 
 def run(script: str, *args: str, profile: Optional[Path] = None, hints: Optional[str] = None) -> List[str]:
@@ -178,6 +181,40 @@ def test_an_unmodified_rospy_service_and_proxy_reach_ros2_under_run(ros_master: 
     cp = subprocess.run([harness.STOCK_PYTHON, "/usr/bin/rosservice", "call", "/run_plain/flag", "data: false"],
                         env=ros_master.env, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=60)
     assert cp.returncode == 0 and "plain /run_plain/flag got False" in cp.stdout, (cp.stdout, cp.stderr)
+
+
+def test_an_unmodified_actionlib_client_reaches_a_ros2_action_server_under_run(ros_master: harness.RosMaster,
+                                                                              spawn: harness.Spawner) -> None:
+    # an rclpy action server (test_msgs/action/Fibonacci, its own venv and process); no ROS 1 server of the name
+    name = "/run_r2/fib"
+    server = spawn([harness.ROS2_PYTHON, ROS2_ACTION_PEER, "serve", "--actions", json.dumps([{"name": name}])],
+                   name="rclpy_action_server")
+    server.wait_for("ready", 60)
+    # the unmodified SimpleActionClient script as a stock node finds no server of the name: actionlib's
+    # wait_for_server times out (first: once the micros-rt run script below offers the action, the master has it)
+    plain = spawn(stock(PLAIN_ACTION_CLIENT, name, "--wait", "3", "__name:=stock_plain_action_client"),
+                  name="stock_plain_action_client")
+    assert plain.wait(60) == 1, plain.stderr_tail()
+    assert plain.events("unavailable") and not plain.events("active"), plain.events()
+    # the same script under micros-rt run reaches the rclpy server
+    client = spawn(run(PLAIN_ACTION_CLIENT, name, "--order", "20", "__name:=run_plain_action_client"),
+                   name="run_plain_action_client")
+    assert client.wait(60) == 0, client.stderr_tail()
+    print("micros-rt run actionlib client:", json.dumps([{k: v for k, v in e.items() if k != "_rx"}
+                                                         for e in client.events() if e["event"] != "_raw"]))
+    assert [e["label"] for e in client.events("active")] == ["fib", "cancel"], client.events()[-6:]
+    results = {e["label"]: e for e in client.events("result")}
+    fib = results["fib"]   # goal accepted, every feedback message in order, the result
+    assert (fib["status_name"], fib["feedback"], fib["feedback_in_order"], fib["sequence_ok"], fib["text"]) == \
+        ("SUCCEEDED", 20, True, True, "succeeded on the ROS 2 action server"), fib
+    cancel = results["cancel"]   # cancel_goal() after 5 feedback messages: the rclpy server cancels
+    assert (cancel["status_name"], cancel["text"]) == ("PREEMPTED", "canceled on the ROS 2 action server"), cancel
+    assert cancel["feedback_in_order"] and 5 <= cancel["feedback"] < 5000, cancel
+    # the rclpy server is the one that ran both goals and got the cancel
+    assert [(e["name"], e["order"]) for e in server.events("goal")] == [(name, 20), (name, 5000)], server.events()
+    assert server.wait_for(lambda e: e.get("event") == "finished" and e["status"] == "CANCELED", 10)
+    assert len(server.events("cancel_received")) == 1, server.events()
+    assert "Traceback" not in client.stderr_tail(200), client.stderr_tail(200)   # a clean exit, offer and all
 
 
 def _run_cli(argv: List[str], env: Dict[str, str], cwd: Optional[Path] = None) -> "subprocess.CompletedProcess[str]":
