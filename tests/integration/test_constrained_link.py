@@ -24,7 +24,7 @@ from netns import Hosts
 LINK = str(harness.PEERS_DIR / "mrt_link.py")
 SECONDS = 6.0
 #: The control topic's p99 (ms) when the camera's traffic is kept out of the link's 50 ms queue (paced by the
-#: link's rate in a profile). Measured on 2 cores with the camera, tcpdump and both hosts' nodes sharing them:
+#: link's rate in a profile, or served after the control topic by a DSCP-honouring link). Measured on 2 cores with the camera, tcpdump and both hosts' nodes sharing them:
 #: 3.7-19.1 ms over 8 runs (the subscriber's GIL, held decoding 921 kB frames, is most of the tail); with the
 #: queue full, 22-55 ms. The benchmark (benchmarks/constrained_link.py) measures the difference; here the
 #: bound catches a queue that fills, and the mechanism (the pacing rate, the DSCP marks) is asserted itself.
@@ -92,7 +92,9 @@ def run_pair(hosts: Hosts, spawn: harness.Spawner, label: str, *, pub_env: Optio
     sub = spawn(hosts.run(1, link("sub", "--seconds", 90)), env={**hosts.env(1), **(sub_env or {})}, name="sub")
     sub.wait_for("ready", 60)
     dump = start_capture(hosts) if capture else None
-    pub = spawn(hosts.run(0, link("pub", "--seconds", SECONDS)), env={**hosts.env(0), **(pub_env or {})}, name="pub")
+    # the 1 kHz loop catches up stalls of up to 20 ms (the camera thread's GIL, a loaded machine): what it
+    # publishes then measures publish() blocking, not the scheduler (see mrt_link.paced)
+    pub = spawn(hosts.run(0, link("pub", "--seconds", SECONDS, "--catch-up", 0.02)), env={**hosts.env(0), **(pub_env or {})}, name="pub")
     ready = pub.wait_for("ready", 90)
     published = pub.wait_for("published", SECONDS + 90)
     summary = sub.wait_for("summary", 120)
@@ -129,8 +131,9 @@ def test_two_dds_topics_of_one_process_leave_with_their_own_dscp_and_the_link_se
     control = published["statistics"]["control"]
     assert summary["control"] + control["dropped"] >= published["control"] - 1, (summary, control)
     assert summary["control"] >= 0.99 * published["control"], (summary, published)
-    # the camera never delays the control topic in the sender's socket nor in the link's queue
-    assert summary["p99_ms"] < 15.0, summary
+    # the camera never delays the control topic in the sender's socket nor in the link's queue (p99 0.5-4.8 ms;
+    # 16 ms once beside another test run; both marked AF41, the benchmark's control p99 was 121-124 ms)
+    assert summary["p99_ms"] < PACED_P99_MS, summary
     assert summary["image"] >= 10, summary
 
 
