@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import struct
 import sys
 import time
@@ -42,6 +43,8 @@ def send(a: argparse.Namespace, nh: micros_rt.NodeHandle) -> int:
     while pub.get_num_connections() < a.subscribers and time.monotonic() < deadline:
         time.sleep(0.01)
     emit("ready", connections=pub.get_num_connections())
+    while a.start_file and not os.path.exists(a.start_file) and time.monotonic() < deadline + a.timeout:
+        time.sleep(0.05)  # the test says when the subscriber has matched this writer too
     time.sleep(0.3)
     pad = bytes(max(a.size - 8, 0))
     msg = UInt8MultiArray()
@@ -90,8 +93,12 @@ def recv(a: argparse.Namespace, nh: micros_rt.NodeHandle) -> int:
     deadline = time.monotonic() + a.timeout
     first: Optional[float] = None
     last_n, last_change = 0, time.monotonic()
+    connected = False
     while time.monotonic() < deadline and len(seen) < a.count and not micros_rt.is_shutdown():
         time.sleep(0.05)
+        if not connected and sub.get_num_connections() > 0:
+            connected = True  # this side matched a publisher (over DDS: the reader found the writer)
+            emit("connected", transports=sorted(set(sub.connection_transports().values())))
         if seen and first is None:
             first = time.monotonic()
         if len(seen) != last_n:
@@ -124,6 +131,7 @@ def main() -> int:
     ap.add_argument("--timeout", type=float, default=60.0)
     ap.add_argument("--idle", type=float, default=5.0, help="stop after this long without a new message")
     ap.add_argument("--linger", type=float, default=3.0)
+    ap.add_argument("--start-file", default="", help="send: publish once this file exists (recv says 'connected')")
     ap.add_argument("--rate", type=float, default=0.0, help="send: messages (with --burst, bursts) per second (0: as fast as possible)")
     ap.add_argument("--burst", type=int, default=1, help="send: with --rate, this many messages back to back each time")
     ap.add_argument("--progress", type=int, default=0, help="send: a progress event every N messages")
