@@ -143,7 +143,10 @@ def test_bad_input_reaches_the_caller_in_words(graph: Dict[str, harness.Peer], s
     assert none["text"].startswith(f"action {P}/r2/none: no ROS 2 action server of {P}/r2/none was discovered "
                                    f"within {ACCEPT_TIMEOUT:g} s (ROS_DOMAIN_ID "), none
     dies = result(ros2_client, "dies")
-    assert dies["status_name"] == "ABORTED" and dies["feedback"] == 5 and dies["elapsed"] < 5.0, dies
+    # the server sent 5 feedback messages before its SIGKILL; ROS 2 carries feedback (a topic) and the result (a
+    # service) apart, and rclpy's client drops feedback it takes after the result: the 5th may lose that race
+    # (a full run: 4), never more than 5 arrive
+    assert dies["status_name"] == "ABORTED" and 4 <= dies["feedback"] <= 5 and dies["elapsed"] < 5.0, dies
     bridge = graph["bridge"]
     harness.wait_until(lambda: "went away during a ROS 2 client's goal" in bridge.stderr_tail(200), 5.0,
                        message="the bridge's warning about the ROS 1 server that died")
