@@ -6,7 +6,10 @@
     .venv/bin/python benchmarks/run.py --only micros_rt_dds,rospy_tcpros --figures lat64,thr64
 
 Transports (each endpoint its own process; see CONFIG for the configuration of each figure):
-  micros_rt_shm     micros_rt's default between two micros_rt nodes of one host: shared memory (iceoryx2)
+  micros_rt_shm     micros_rt's default between two micros_rt nodes of one host: shared memory (iceoryx2), ROS 2
+                    visibility auto (no ROS 2 node on the benchmark's domain: one DDS participant, the watcher's)
+  micros_rt_shm_ros2   the same with ROS 2 visibility on (MICROS_RT_ROS2=on): a participant per node, what auto
+                    becomes once a ROS 2 node is on the domain
   micros_rt_shm_local  the same with ROS 2 visibility off (MICROS_RT_ROS2=off): DDS only where a peer needs it
   micros_rt_dds     micros_rt NodeHandle, DDS link (.venv/bin/python, micros_rt's own loopback Cyclone config)
   micros_rt_dds_budget  micros_rt DDS with latency_budget=1 ms on the publisher (write batching), throughput only
@@ -43,6 +46,7 @@ PEER = str(HERE / "peer.py")
 RESULTS = HERE / "results"
 PY = {
     "micros_rt_shm": str(REPO / ".venv/bin/python"),
+    "micros_rt_shm_ros2": str(REPO / ".venv/bin/python"),
     "micros_rt_shm_local": str(REPO / ".venv/bin/python"),
     "micros_rt_dds": str(REPO / ".venv/bin/python"),
     "micros_rt_dds_budget": str(REPO / ".venv/bin/python"),
@@ -51,7 +55,7 @@ PY = {
     "cyclonedds_python": str(REPO / ".venv/bin/python"),
     "rclpy_fastdds": str(REPO / ".venv-ros2/bin/python"),
 }
-IMPL = {"micros_rt_shm": "mrt_shm", "micros_rt_shm_local": "mrt_shm", "micros_rt_dds": "mrt_dds", "micros_rt_dds_budget": "mrt_budget", "micros_rt_tcpros": "mrt_tcpros", "rospy_tcpros": "rospy",
+IMPL = {"micros_rt_shm": "mrt_shm", "micros_rt_shm_ros2": "mrt_shm", "micros_rt_shm_local": "mrt_shm", "micros_rt_dds": "mrt_dds", "micros_rt_dds_budget": "mrt_budget", "micros_rt_tcpros": "mrt_tcpros", "rospy_tcpros": "rospy",
         "cyclonedds_python": "cyclone", "rclpy_fastdds": "rclpy"}
 TRANSPORTS = tuple(PY)
 BASE = "rospy_tcpros"
@@ -59,7 +63,11 @@ CYCLONE_XML = HERE / "cyclonedds_loopback.xml"
 FASTDDS_XML = HERE / "fastdds_loopback.xml"
 CONFIG = {
     "micros_rt_shm": "advertise(queue_size=None) / subscribe(queue_size=None), default QoS and TransportHints: "
-                     "shared memory (SHM, iceoryx2), chosen first between micros_rt nodes of one host and user",
+                     "shared memory (SHM, iceoryx2), chosen first between micros_rt nodes of one host and user; "
+                     "ROS 2 visibility auto (the default): no ROS 2 node on the domain, one DDS participant (the "
+                     "host watcher's)",
+    "micros_rt_shm_ros2": "as micros_rt_shm, with MICROS_RT_ROS2=on: every node a DDS participant with a writer and "
+                          "reader per topic from its start (what auto becomes once a ROS 2 node is on the domain)",
     "micros_rt_shm_local": "as micros_rt_shm, with MICROS_RT_ROS2=off: no DDS participant until a peer on another "
                            "host needs one; the delivery thread waits on the shared-memory links itself",
     "micros_rt_dds": "advertise(queue_size=None) / subscribe(queue_size=None), default QoS (reliable); "
@@ -284,6 +292,12 @@ def child_env(transport, master_uri, domain):
         env["MICROS_RT_DISABLE_SHM"] = "1"  # these measure the DDS plane (and TCPROS) between local processes
     if transport == "micros_rt_shm_local":
         env["MICROS_RT_ROS2"] = "off"
+    if transport == "micros_rt_shm_ros2":
+        env["MICROS_RT_ROS2"] = "on"
+    if transport in ("cyclonedds_python", "rclpy_fastdds"):
+        # a domain of their own: a DDS participant that is not micros_rt's (or its discovery data, until its
+        # lease ends) would make micros_rt's auto visibility turn on in the phases after it
+        env["ROS_DOMAIN_ID"] = str(domain + 1)
     if transport == "cyclonedds_python":
         env["CYCLONEDDS_URI"] = f"file://{CYCLONE_XML}"
     if transport == "rclpy_fastdds":
@@ -607,7 +621,7 @@ def headline(transports):
 
 def verdict(fig, figs, t):
     """'ok'/'MISS' for a micros_rt stack vs rospy, '' otherwise."""
-    if t not in ("micros_rt_shm", "micros_rt_shm_local", "micros_rt_dds", "micros_rt_dds_budget") or fig not in TARGETS:
+    if t not in ("micros_rt_shm", "micros_rt_shm_ros2", "micros_rt_shm_local", "micros_rt_dds", "micros_rt_dds_budget") or fig not in TARGETS:
         return ""
     v, b = figs.get(t, {}).get(fig), figs.get(BASE, {}).get(fig)
     if v is None or not b:
@@ -625,7 +639,7 @@ def verdict(fig, figs, t):
 def table(figs, spread, transports, md=False):
     names = sorted({f for t in transports for f, v in figs.get(t, {}).items()
                     if not isinstance(v, dict) and not f.endswith("_sent")}, key=_fig_order)
-    short = {"micros_rt_shm": "mrt SHM", "micros_rt_shm_local": "mrt SHM local", "micros_rt_dds": "mrt DDS", "micros_rt_dds_budget": "mrt budget", "micros_rt_tcpros": "mrt TCPROS", "rospy_tcpros": "rospy",
+    short = {"micros_rt_shm": "mrt SHM", "micros_rt_shm_ros2": "mrt SHM ROS2 on", "micros_rt_shm_local": "mrt SHM local", "micros_rt_dds": "mrt DDS", "micros_rt_dds_budget": "mrt budget", "micros_rt_tcpros": "mrt TCPROS", "rospy_tcpros": "rospy",
              "cyclonedds_python": "cyclone-py", "rclpy_fastdds": "rclpy"}
     cols = [t for t in transports]
     head = ["figure"] + [short[t] for t in cols]
@@ -676,7 +690,7 @@ def _fig_order(f):
 
 #: one colour per stack in every plot (stock rospy red, micros_rt's DDS blue, SHM orange, its TCPROS grey;
 #: cross_host.py and constrained_link.py use the same for the stacks they share)
-COLOURS = {"micros_rt_shm": "#ff7f0e", "micros_rt_shm_local": "#ffbb78", "micros_rt_dds": "#1f77b4",
+COLOURS = {"micros_rt_shm": "#ff7f0e", "micros_rt_shm_ros2": "#8c564b", "micros_rt_shm_local": "#ffbb78", "micros_rt_dds": "#1f77b4",
            "micros_rt_dds_budget": "#17becf", "micros_rt_tcpros": "#7f7f7f", "rospy_tcpros": "#d62728",
            "cyclonedds_python": "#2ca02c", "rclpy_fastdds": "#9467bd"}
 

@@ -26,8 +26,8 @@ from .transports.tcpros import patches
 from .core.publication import Publisher, _Publication
 from .core import negotiated
 from .transports.negotiated import PublicationSide
-from .core.runtime import (_graph_id, _log, _node, _require_node, dds_backend, ros2_visible, start_dds_early,
-                           wait_dds_started)
+from .core.runtime import (_graph_id, _log, _node, _require_node, dds_backend, note_ros2_at_start, ros2_visible,
+                           start_dds_early, wait_dds_started, watch_ros2)
 from .core.reader_subscription import OpenReader, ReaderSubscription
 from .core.registry import EndpointRegistry
 from .core.subscription import DeadlineMissed, Subscriber, _Subscription
@@ -79,6 +79,7 @@ def init_node(name: str, argv: Optional[List[str]] = None, anonymous: bool = Fal
     path = qos_profile or os.environ.get("MICROS_RT_QOS_PROFILE") or None
     profile = QoSProfile.load(path) if path else None
     _tune_malloc()
+    note_ros2_at_start(profile)
     start_dds_early(profile)
     with patches.prompt_registration_poll():
         rospy.init_node(name, argv=argv, anonymous=anonymous, **kwargs)
@@ -145,6 +146,11 @@ def _housekeeping_loop() -> None:
                 p.housekeeping(now)
             except Exception:
                 _log.exception("micros_rt: topic %s: publisher housekeeping failed (will retry)", p.topic)
+        try:
+            if watch_ros2():
+                negotiated.open_dds_sides()
+        except Exception:
+            _log.exception("micros_rt: watching the DDS domain for ROS 2 nodes failed (will retry)")
         time.sleep(0.5)
 
 

@@ -99,6 +99,10 @@ def dds_env(domain_id: int) -> Dict[str, str]:
         # memory (chosen first on one host) is off unless a test turns it on ("0"), as tests/integration/
         # test_shm.py and the SHM contract tests do.
         "MICROS_RT_DISABLE_SHM": "1",
+        # ... and every node's topics are ROS 2 topics from its start, whoever else is on the domain (the run's
+        # ROS 2 peers come and go on one domain, and auto visibility would follow them from test to test);
+        # tests/integration/test_ros2_auto.py tests the default, auto, with this removed
+        "MICROS_RT_ROS2": "on",
         "CYCLONEDDS_URI": CYCLONEDDS_CONFIG.as_uri(),
         "FASTRTPS_DEFAULT_PROFILES_FILE": str(FASTDDS_PROFILE),
         "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",

@@ -358,7 +358,8 @@ def _node_detail(r: NodeRow) -> str:
     if r.side == ROS2:
         return f"ROS 2 node ({dds}, participant {', '.join(r.participants)})"
     if r.ros1_kind == MICROS_RT:
-        return "micros_rt node not announced to ROS 2 (ROS 2 visibility off, DDS unavailable, or no topic yet)"
+        return ("micros_rt node not announced to ROS 2 (ROS 2 visibility off, or auto with no ROS 2 node seen on the "
+                "domain; DDS unavailable; or no topic yet)")
     if r.ros1_kind is None:
         return "ROS 1 node"
     return f"{r.ros1_kind} ROS 1 node" + ("" if r.ros1_kind == "unreachable" else " (TCPROS only, not on DDS)")

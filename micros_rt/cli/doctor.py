@@ -23,6 +23,7 @@ from typing import Dict, List, Mapping, Optional, Tuple
 from . import CommandError
 from ._args import ArgumentParser
 from ._graphinfo import MICROS_RT, Master, master_uri, probe_all
+from ..exceptions import MicrosRtError
 
 __all__ = ["Check", "main", "run_checks", "interface_addresses", "judge_clocks"]
 
@@ -320,16 +321,37 @@ def check_shared_memory(env: Mapping[str, str]) -> Check:
 
 
 def check_ros2_visibility(env: Mapping[str, str]) -> Check:
-    """Whether this node's topics are ROS 2 topics from the start (MICROS_RT_ROS2, the profile's ros2:)."""
+    """When this host's nodes' topics are ROS 2 topics (MICROS_RT_ROS2, the profile's ros2:), and, with auto, whether
+    the host's watcher has seen ROS 2 on the domain and which process watches."""
     raw = env.get("MICROS_RT_ROS2", "").strip().lower()
     if raw in ("0", "off", "false", "no"):
         return Check("ROS 2 visibility", OK, "off (MICROS_RT_ROS2): no DDS until a micros_rt peer on another "
                                              "host needs it; ROS 2 nodes do not see these nodes")
-    if raw and raw not in ("1", "on", "true", "yes"):
-        return Check("ROS 2 visibility", FAIL, f"MICROS_RT_ROS2={raw!r} is neither on nor off", "export "
-                     "MICROS_RT_ROS2=off (no ROS 2 nodes on this robot) or unset it")
-    return Check("ROS 2 visibility", OK, "on: every node has a DDS participant and its topics are ROS 2 topics "
-                                         "(MICROS_RT_ROS2=off or ros2: false in the profile turns it off)")
+    if raw in ("1", "on", "true", "yes"):
+        return Check("ROS 2 visibility", OK, "on (MICROS_RT_ROS2): every node has a DDS participant and its topics "
+                                             "are ROS 2 topics from its start")
+    if raw and raw != "auto":
+        return Check("ROS 2 visibility", FAIL, f"MICROS_RT_ROS2={raw!r} is not on, off or auto", "unset it (auto, the "
+                     "default), or export MICROS_RT_ROS2=off (no ROS 2 nodes on this robot) or on")
+    from ..transports.dds.participant import domain_id_from_env
+    from ..transports.dds.watch import watch_paths, watcher_pid
+
+    try:
+        domain = domain_id_from_env(env)
+    except MicrosRtError as exc:
+        return Check("ROS 2 visibility", FAIL, str(exc), "export ROS_DOMAIN_ID=0..232 (or unset it)")
+    lock, marker = watch_paths(domain)
+    pid = watcher_pid(lock)
+    watching = f"watched by pid {pid}" if pid else "no micros_rt node of this host and user watches it now"
+    try:
+        with open(marker) as f:
+            seen = len(f.read().split())
+    except OSError:
+        seen = 0
+    now = (f"ROS 2 seen: {seen} participant(s) that are not micros_rt, so the nodes' topics are ROS 2 topics" if seen
+           else "no ROS 2 node seen, so nodes make no DDS participant of their own (one node, the watcher, has one)")
+    return Check("ROS 2 visibility", OK, f"auto: {now}; DDS domain {domain} {watching} (MICROS_RT_ROS2=on/off or "
+                                         f"ros2: true/false in a profile fix it)")
 
 
 def check_clocks(env: Mapping[str, str]) -> Check:

@@ -18,13 +18,13 @@ from ..transports.dds.subscription import DDSSubscription
 from ..transports.negotiated import PublicationSide, SubscriptionSide
 from ..transports.shm.publication import ShmPublication
 from ..transports.shm.subscription import ShmSubscription
-from .runtime import _node, dds_backend, ros2_visible
+from .runtime import _log, _node, dds_backend, ros2_visible
 
 if TYPE_CHECKING:
     from .publication import _Publication
     from .subscription import _Subscription
 
-__all__ = ["NegotiatedTransport", "TRANSPORTS", "register", "unregister"]
+__all__ = ["NegotiatedTransport", "TRANSPORTS", "open_dds_sides", "register", "unregister"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,6 +50,22 @@ def _dds_subscription(sub: "_Subscription") -> SubscriptionSide:
     # with ROS 2 visibility off, the DDS reader comes with the first publisher that takes DDS
     eager = ros2_visible(_node.profile)
     return DDSSubscription(sub, backend=sub.dds, lazy=None if eager else dds_backend)
+
+
+def open_dds_sides() -> None:
+    """ROS 2 was seen (``auto`` visibility): every topic's DDS writer and reader now, as visibility on makes them
+    with the topic; the links negotiated before stay as they are."""
+    opened = 0
+    for pub in _node.publications.all():
+        writer = pub.sides.get(DDS)
+        if isinstance(writer, DDSPublication) and writer.ensure_writer():
+            opened += 1
+    for sub in _node.subscriptions.all():
+        reader = sub.sides.get(DDS)
+        if isinstance(reader, DDSSubscription) and reader.open_first():
+            opened += 1
+    _log.info("micros_rt: ROS 2 is on the DDS domain: this node's topics are ROS 2 topics now (%d DDS writers and "
+              "readers)", opened)
 
 
 #: protocol name -> transport, in preference order (a publication's sides are made in this order)

@@ -13,7 +13,7 @@ import rospy
 
 from .registry import EndpointRegistry
 from ..transports.dds.participant import get_participant
-from ..exceptions import NodeNotInitializedError
+from ..exceptions import MicrosRtError, NodeNotInitializedError
 from ..qos import QoSProfile
 from ..log import nonblocking_logger
 
@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     from .subscription import _Subscription
     from ..transports.dds.backend import DDSBackend
     from ..transports.pacing import LinkPacer
+    from ..transports.dds.watch import Ros2Watch
 
 _log = nonblocking_logger("rosout.micros_rt")  # rospy prints it and sends it to /rosout
 
@@ -39,6 +40,9 @@ class _NodeState:
     dds_start: Optional[threading.Thread] = None
     #: TCP pacing across the profile's links of limited bandwidth (None: the profile names none)
     pacer: "Optional[LinkPacer]" = None
+    #: ``auto`` ROS 2 visibility: this node's part in watching the domain, and whether ROS 2 has been seen
+    ros2_watch: "Optional[Ros2Watch]" = None
+    ros2_seen: bool = False
 
 
 _node = _NodeState()
@@ -57,21 +61,74 @@ def _graph_id() -> str:
 
 _OFF = ("0", "off", "false", "no")
 _ON = ("1", "on", "true", "yes")
+ON, OFF, AUTO = "on", "off", "auto"
+
+
+def ros2_mode(profile: Optional[QoSProfile] = None) -> str:
+    """How this node's topics become ROS 2 topics: ``MICROS_RT_ROS2`` (on/off/auto), else the profile's ``ros2:``
+    (true: on, false: off), else auto.
+
+    - on: a DDS participant, writers and readers made with each topic, as an rclpy node's.
+    - auto: as off until something other than micros_rt is on the DDS domain (a ROS 2 node or tool, seen by the
+      host's watcher, :mod:`micros_rt.transports.dds.watch`), then as on.
+    - off: DDS entities only when a peer needs them (a micros_rt node on another host, a relay)."""
+    raw = os.environ.get("MICROS_RT_ROS2", "").strip().lower()
+    if raw in _OFF:
+        return OFF
+    if raw in _ON:
+        return ON
+    if raw and raw != AUTO:
+        _log.warning("micros_rt: MICROS_RT_ROS2=%r is not on, off or auto; auto it is", raw)
+    if not raw and profile is not None and profile.ros2 is not None:
+        return ON if profile.ros2 else OFF
+    return AUTO
 
 
 def ros2_visible(profile: Optional[QoSProfile] = None) -> bool:
-    """Whether this node's topics are ROS 2 topics from the start (a DDS participant, writers and readers made
-    with each topic, as an rclpy node's): ``MICROS_RT_ROS2`` (on/off), else the profile's ``ros2:``, else on.
-    Off, a node makes DDS entities only when a peer needs them (a micros_rt node on another host): a robot
-    with no ROS 2 node pays nothing for DDS."""
-    raw = os.environ.get("MICROS_RT_ROS2", "").strip().lower()
-    if raw in _OFF:
+    """Whether this node's topics are ROS 2 topics now (:func:`ros2_mode`; auto: once ROS 2 has been seen).
+    Not visible, a node makes DDS entities only when a peer needs them: a robot with no ROS 2 node pays
+    nothing for DDS but the host watcher's participant."""
+    mode = ros2_mode(profile)
+    return mode == ON or (mode == AUTO and _node.ros2_seen)
+
+
+def note_ros2_at_start(profile: Optional[QoSProfile]) -> None:
+    """With ``auto`` visibility, at ``init_node``: a node started while ROS 2 is there is visible from its first
+    topic (the host's watcher left its marker); becoming the watcher waits for the first housekeeping tick."""
+    if ros2_mode(profile) != AUTO or os.environ.get("MICROS_RT_DISABLE_DDS", "") not in ("", "0"):
+        return
+    from ..transports.dds.participant import domain_id_from_env
+    from ..transports.dds.watch import watch_paths
+
+    try:
+        seen = os.path.exists(watch_paths(domain_id_from_env())[1])
+    except MicrosRtError:
+        return
+    if seen:
+        with _node.lock:
+            _node.ros2_seen = True
+
+
+def watch_ros2() -> bool:
+    """With ``auto`` visibility, a housekeeping tick: take part in watching the DDS domain for ROS 2; True once,
+    on the tick ROS 2 is first seen (the caller opens the topics' DDS sides)."""
+    if os.environ.get("MICROS_RT_DISABLE_DDS", "") not in ("", "0") or ros2_mode(_node.profile) != AUTO:
         return False
-    if raw and raw not in _ON:
-        _log.warning("micros_rt: MICROS_RT_ROS2=%r is not on or off; ROS 2 visibility stays on", raw)
-    if not raw and profile is not None and profile.ros2 is not None:
-        return profile.ros2
-    return True
+    watch = _node.ros2_watch
+    if watch is None:
+        from ..transports.dds.participant import domain_id_from_env
+        from ..transports.dds.watch import Ros2Watch
+
+        try:
+            watch = _node.ros2_watch = Ros2Watch(domain_id_from_env(), get_participant)
+        except MicrosRtError:
+            return False  # a bad ROS_DOMAIN_ID: the first DDS use says so
+    seen = watch.poll()
+    if seen and not _node.ros2_seen:
+        with _node.lock:
+            _node.ros2_seen = True
+        return True
+    return False
 
 
 def _require_node() -> None:

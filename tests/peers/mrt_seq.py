@@ -107,10 +107,16 @@ def recv(a: argparse.Namespace, nh: micros_rt.NodeHandle) -> int:
             break
     got = list(seen)
     distinct = set(got)
+    gaps: List[List[int]] = []  # the missing sequence numbers as [first, last] ranges (the first 20)
+    for i in sorted(set(range(a.count)) - distinct):
+        if gaps and gaps[-1][1] == i - 1:
+            gaps[-1][1] = i
+        elif len(gaps) < 20:
+            gaps.append([i, i])
     out_of_order = sum(1 for x, y in zip(got, got[1:]) if y < x)
     s = sub.statistics()
     emit("summary", received=len(got), distinct=len(distinct), duplicates=len(got) - len(distinct),
-         out_of_order=out_of_order, missing=a.count - len(distinct),
+         out_of_order=out_of_order, missing=a.count - len(distinct), missing_ranges=gaps,
          transports=sorted(set(sub.connection_transports().values())),
          stats={k: getattr(s, k) for k in s.__dataclass_fields__}, latency=sub.latency.summary(),
          longest_gap=max((b - a for a, b in zip(arrivals, arrivals[1:])), default=0.0),

@@ -166,7 +166,9 @@ def test_shared_memory_check_sends_a_message_through_a_channel(monkeypatch: pyte
 def test_ros2_visibility_check_says_which_and_refuses_nonsense() -> None:
     from micros_rt.cli.doctor import check_ros2_visibility
 
-    assert check_ros2_visibility({}).detail.startswith("on")
+    auto = check_ros2_visibility({"ROS_DOMAIN_ID": "231"})
+    assert auto.detail.startswith("auto: no ROS 2 node seen") and "no micros_rt node" in auto.detail, auto
+    assert check_ros2_visibility({"MICROS_RT_ROS2": "on"}).detail.startswith("on")
     assert check_ros2_visibility({"MICROS_RT_ROS2": "off"}).detail.startswith("off")
     bad = check_ros2_visibility({"MICROS_RT_ROS2": "maybe"})
     assert bad.failed and "MICROS_RT_ROS2=off" in bad.fix

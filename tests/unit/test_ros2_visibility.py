@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from micros_rt import AdvertiseQoSOptions, SubscribeQoSOptions
-from micros_rt.core.runtime import ros2_visible
+from micros_rt.core.runtime import ros2_mode, ros2_visible
 from micros_rt.exceptions import ProfileError
 from micros_rt.negotiation import DDSOffer, DDSOpenFirst, PublicationFacts, decide
 from micros_rt.qos import QoSProfile
@@ -20,18 +20,21 @@ def test_profile_ros2_switch() -> None:
 
 
 @pytest.mark.parametrize("env,profile,want", [
-    (None, None, True),
-    ("off", None, False), ("0", None, False), ("false", QoSProfile.from_string("ros2: true"), False),
-    ("on", QoSProfile.from_string("ros2: false"), True),
-    (None, QoSProfile.from_string("ros2: false"), False),
+    (None, None, "auto"), ("auto", QoSProfile.from_string("ros2: true"), "auto"),
+    ("off", None, "off"), ("0", None, "off"), ("false", QoSProfile.from_string("ros2: true"), "off"),
+    ("on", QoSProfile.from_string("ros2: false"), "on"),
+    (None, QoSProfile.from_string("ros2: false"), "off"), (None, QoSProfile.from_string("ros2: true"), "on"),
+    ("sometimes", None, "auto"),
 ])
 def test_environment_wins_over_profile(monkeypatch: pytest.MonkeyPatch, env: str | None,
-                                       profile: QoSProfile | None, want: bool) -> None:
+                                       profile: QoSProfile | None, want: str) -> None:
     if env is None:
         monkeypatch.delenv("MICROS_RT_ROS2", raising=False)
     else:
         monkeypatch.setenv("MICROS_RT_ROS2", env)
-    assert ros2_visible(profile) is want
+    assert ros2_mode(profile) == want
+    # auto: visible once the host's watcher saw ROS 2 (this process has seen nothing)
+    assert ros2_visible(profile) is (want == "on")
 
 
 def test_lazy_offer_round_trip_and_open_first_answer() -> None:

@@ -28,6 +28,7 @@ from .typecache import forget_type_data, load_type_data, save_type_data
 __all__ = [
     "LOOPBACK_CONFIG",
     "DDSParticipant",
+    "PARTICIPANT_USER_DATA",
     "DEFAULT_LEASE_DURATION",
     "DEFAULT_SHM_LEASE_DURATION",
     "DEFAULT_NETWORK_LEASE_DURATION",
@@ -281,6 +282,11 @@ def domain_id_from_env(env: Mapping[str, str] = os.environ) -> int:
     return value
 
 
+#: User data of every micros_rt participant: rmw's ``enclave=/;`` (what ROS 2 nodes announce, so ROS 2 tools read
+#: it as theirs) and micros_rt's mark, by which the host's ROS 2 watcher (:mod:`.watch`) tells micros_rt from ROS 2
+PARTICIPANT_USER_DATA = b"enclave=/;micros_rt=1;"
+
+
 class DDSParticipant:
     """One Cyclone domain participant and the topics created on it.
 
@@ -292,6 +298,7 @@ class DDSParticipant:
     def __init__(self, domain_id: int, config: str, *, local_id: Optional[int] = None) -> None:
         from cyclonedds.core import DDSException
         from cyclonedds.domain import Domain, DomainParticipant
+        from cyclonedds.qos import Policy, Qos
 
         self.domain_id = domain_id
         #: the id Cyclone knows this participant's domain by in this process (another one than
@@ -304,7 +311,8 @@ class DDSParticipant:
             # A Domain with an explicit config keeps our settings out of the
             # process environment (CYCLONEDDS_URI stays the user's).
             self._domain = Domain(self.local_id, config)
-            self.dp = DomainParticipant(self.local_id)
+            # marked as micros_rt's: the host's ROS 2 watcher (watch.py) tells ROS 2 participants from these
+            self.dp = DomainParticipant(self.local_id, qos=Qos(Policy.Userdata(PARTICIPANT_USER_DATA)))
         except DDSException as exc:
             raise DDSUnavailableError(
                 f"cannot start a Cyclone DDS participant on domain {domain_id}: {exc}") from exc
@@ -464,6 +472,16 @@ def get_participant() -> Optional[DDSParticipant]:
             _log.warning("micros_rt: DDS disabled (MICROS_RT_DISABLE_DDS is set); using TCPROS for every topic")
             return None
         try:
+            # cyclonedds's modules import each other in a cycle: two threads importing them at once (the host
+            # watcher's housekeeping tick and a lazy DDS open for a peer) could meet one half-initialised, so the
+            # first import happens here, under the lock every DDS user of the process comes through
+            import cyclonedds.builtin  # noqa: F401
+            import cyclonedds.domain  # noqa: F401
+            import cyclonedds.idl  # noqa: F401
+            import cyclonedds.pub  # noqa: F401
+            import cyclonedds.sub  # noqa: F401
+            import cyclonedds.topic  # noqa: F401
+
             _participant = DDSParticipant(domain_id_from_env(), cyclone_config())
         except Exception as exc:
             _failed = str(exc)

@@ -84,21 +84,23 @@ class DDSPublication(PublicationSide):
             _log.warning("micros_rt: topic %s will use TCPROS only: %s", host.topic, exc)
         self.writer = self.dds
 
-    def _ensure_writer(self) -> None:
-        """With ROS 2 visibility off: the DDS writer, made when a first subscriber would take DDS (XML-RPC thread)."""
+    def ensure_writer(self) -> bool:
+        """Not visible to ROS 2: the DDS writer, made when a first subscriber would take DDS (XML-RPC thread) or
+        ROS 2 is seen (housekeeping). True when there is one."""
         with self._opening:  # two subscribers asking at once: one writer, and both wait for it
             opener = self._lazy
             if opener is None or self.dds is not None:
-                return
+                return self.dds is not None
             backend = opener()
             self._lazy = None
             if backend is None:
-                return  # DDS cannot start here: said once by the participant; the subscriber gets TCPROS
+                return False  # DDS cannot start here: said once by the participant; the subscriber gets TCPROS
             self._backend = backend
             self._open_writer(backend)
             if self.dds is not None:
-                _log.info("micros_rt: topic %s: DDS writer made for a subscriber that takes DDS", self.host.topic)
+                _log.info("micros_rt: topic %s: DDS writer made", self.host.topic)
                 self.host.writers_changed()
+            return self.dds is not None
 
     def sending(self) -> bool:
         """The own writer stays out while every DDS subscriber is served by foreign writers (it would send each
@@ -132,7 +134,7 @@ class DDSPublication(PublicationSide):
 
     def judge(self, offer: DDSOffer, subscriber: str) -> Tuple[Verdict, Optional[Union[DDSAnswer, DDSOpenFirst]]]:
         if self.dds is None and self._lazy is not None:
-            self._ensure_writer()
+            self.ensure_writer()
         facts = self.facts()
         if offer.lazy:
             # a subscriber with no DDS reader yet: say whether DDS would do; it opens its reader and asks again

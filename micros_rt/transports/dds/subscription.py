@@ -111,7 +111,7 @@ class DDSSubscription(SubscriptionSide):
                     self.backend = backend
                     try:
                         self.reader = self._open_reader(latched=False)
-                        _log.info("micros_rt: topic %s: DDS reader made for a publisher that takes DDS",
+                        _log.info("micros_rt: topic %s: DDS reader made",
                                   self.host.topic)
                     except MicrosRtError as exc:
                         _log.warning("micros_rt: topic %s will use TCPROS only: %s", self.host.topic, exc)

@@ -1,0 +1,198 @@
+"""ROS 2 visibility on demand (``MICROS_RT_ROS2=auto``, the default): a node makes DDS entities for its topics
+once something other than micros_rt is on its DDS domain (an rclpy node, the ``ros2`` CLI's daemon, any DDS
+program), not before.
+
+One node per host (network namespace), Unix user and DDS domain watches the domain for all of them: the one
+that holds the lock file :attr:`Ros2Watch.lock_path` (``flock``; the kernel lets it go when the process dies, and
+the next node to try takes over). The watcher starts its process's participant, with no topics, and reads
+Cyclone's built-in DCPSParticipant topic. micros_rt participants say so in their user data
+(:data:`PARTICIPANT_USER_DATA`); any other participant alive means ROS 2 is there, and the watcher creates the
+marker file :attr:`Ros2Watch.marker` (the foreign participants' GUIDs in it) and removes it once they are gone.
+Every node looks for the marker on its housekeeping tick (0.5 s) and then makes its writers and readers, as a
+node with ROS 2 visibility on does from its start, and stays so.
+
+What it costs a robot with no ROS 2 node: one participant (the watcher's) instead of one per node; each other
+node one ``stat`` and one non-blocking ``flock`` per tick.
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import os
+import tempfile
+import time
+from typing import Any, Callable, FrozenSet, Optional
+
+from ...log import nonblocking_logger
+from .participant import PARTICIPANT_USER_DATA, DDSParticipant
+
+__all__ = ["PARTICIPANT_USER_DATA", "Ros2Watch", "is_micros_rt_participant", "watch_paths", "watcher_pid"]
+
+_log = nonblocking_logger("rosout.micros_rt.dds")
+
+#: How long a new watcher keeps a marker it found before it may remove it: the foreign participants already on
+#: the domain announce themselves again within their SPDP interval (Fast DDS: 3 s; Cyclone: a few seconds)
+TAKEOVER_GRACE = 10.0
+
+
+def is_micros_rt_participant(user_data: Optional[bytes]) -> bool:
+    """Whether a participant's user data is micros_rt's (:data:`PARTICIPANT_USER_DATA`)."""
+    return bool(user_data) and b"micros_rt=1;" in bytes(user_data or b"")
+
+
+def _netns() -> str:
+    try:
+        return str(os.stat("/proc/self/ns/net").st_ino)
+    except OSError:
+        return "host"
+
+
+def watch_paths(domain: int) -> tuple[str, str]:
+    """The lock file and the marker of this host (network namespace), user and DDS ``domain``."""
+    base = "/dev/shm" if os.access("/dev/shm", os.W_OK) else tempfile.gettempdir()
+    stem = os.path.join(base, f"micros_rt_ros2_u{os.getuid()}_n{_netns()}_d{domain}")
+    return stem + ".lock", stem + ".seen"
+
+
+def watcher_pid(lock_path: str) -> Optional[int]:
+    """The process holding ``lock_path`` (the watcher), from /proc/locks; None when nobody holds it."""
+    try:
+        st = os.stat(lock_path)
+        with open("/proc/locks") as f:
+            lines = f.read().splitlines()
+    except OSError:
+        return None
+    for line in lines:  # "1: FLOCK  ADVISORY  WRITE 4242 00:1a:1234 0 EOF"
+        parts = line.split()
+        if len(parts) >= 6 and parts[1] == "FLOCK":
+            try:
+                dev_major, dev_minor, inode = parts[5].split(":")
+                if int(inode) == st.st_ino and os.makedev(int(dev_major, 16), int(dev_minor, 16)) == st.st_dev:
+                    return int(parts[4])
+            except ValueError:
+                continue
+    return None
+
+
+class Ros2Watch:
+    """One node's part in watching its DDS domain for ROS 2 (see the module's text)."""
+
+    def __init__(self, domain: int, participant: Callable[[], Optional[DDSParticipant]]) -> None:
+        self.domain = domain
+        self.lock_path, self.marker = watch_paths(domain)
+        self._participant = participant
+        self._fd: Optional[int] = None
+        self._reader: Any = None
+        self._alive: Any = None
+        self._since = 0.0              # when this node became the watcher
+        self._foreign: FrozenSet[str] = frozenset()
+        self.failed = False            # the watcher's participant could not start: said once, not tried again
+
+    @property
+    def watching(self) -> bool:
+        return self._reader is not None
+
+    def poll(self) -> bool:
+        """True once ROS 2 is on the domain (the marker is there, or this watcher sees it); a cheap call."""
+        if self._reader is None and not self.failed and self._take_lock():
+            self._start_watching()
+        if self._reader is not None:
+            self._look()
+        return os.path.exists(self.marker)
+
+    def foreign(self) -> FrozenSet[str]:
+        """GUIDs of the participants that are not micros_rt's, as this watcher saw them last (empty elsewhere)."""
+        return self._foreign
+
+    def _take_lock(self) -> bool:
+        try:
+            if self._fd is None:
+                self._fd = os.open(self.lock_path, os.O_RDWR | os.O_CREAT, 0o600)
+            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return True
+        except OSError as exc:
+            if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN):
+                self.failed = True  # another user's file, a read-only /dev/shm: this node never watches
+                _log.warning("micros_rt: cannot take part in watching DDS domain %d for ROS 2 nodes (%s: %s); "
+                             "this node's topics become ROS 2 topics only when another micros_rt node of this "
+                             "host sees ROS 2, or with MICROS_RT_ROS2=on", self.domain, self.lock_path, exc)
+            return False
+
+    def _start_watching(self) -> None:
+        participant = self._participant()
+        if participant is None:
+            self.failed = True  # DDS cannot start here: the participant said why, once
+            self._release()
+            return
+        from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsParticipant
+        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState
+
+        self._reader = BuiltinDataReader(participant.dp, BuiltinTopicDcpsParticipant)
+        self._alive = ReadCondition(self._reader, SampleState.Any | ViewState.Any | InstanceState.Alive)
+        self._since = time.monotonic()
+        _log.info("micros_rt: this node watches DDS domain %d for ROS 2 nodes on this host (%s)", self.domain,
+                  self.lock_path)
+
+    def _look(self) -> None:
+        from cyclonedds.core import DDSException
+        from cyclonedds.qos import Policy
+
+        try:
+            found = self._reader.read(N=4096, condition=self._alive)
+        except DDSException as exc:
+            _log.debug("micros_rt: reading DCPSParticipant: %s", exc)
+            return
+        foreign = set()
+        for p in found:
+            try:
+                user_data = p.qos[Policy.Userdata].data
+            except (KeyError, AttributeError, TypeError):
+                user_data = None
+            if not is_micros_rt_participant(user_data):
+                foreign.add(str(p.key))
+        if foreign != self._foreign:
+            if foreign - self._foreign:
+                _log.info("micros_rt: %d DDS participant(s) that are not micros_rt on domain %d (ROS 2 nodes or "
+                          "tools): this host's micros_rt nodes make their topics ROS 2 topics", len(foreign),
+                          self.domain)
+            self._foreign = frozenset(foreign)
+        if foreign:
+            self._write_marker(foreign)
+        elif time.monotonic() - self._since > TAKEOVER_GRACE:
+            self._remove_marker()
+
+    def _write_marker(self, foreign: "set[str]") -> None:
+        text = "".join(sorted(g + "\n" for g in foreign))
+        try:
+            with open(self.marker, "r") as f:
+                if f.read() == text:
+                    return
+        except OSError:
+            pass
+        tmp = f"{self.marker}.{os.getpid()}"
+        try:
+            with open(tmp, "w") as f:
+                f.write(text)
+            os.replace(tmp, self.marker)  # readers see the whole file or none
+        except OSError as exc:
+            _log.warning("micros_rt: cannot write %s (%s): other micros_rt nodes of this host will not make their "
+                         "topics ROS 2 topics; MICROS_RT_ROS2=on does it without the watcher", self.marker, exc)
+
+    def _remove_marker(self) -> None:
+        try:
+            os.unlink(self.marker)
+        except FileNotFoundError:
+            pass
+        except OSError as exc:
+            _log.debug("micros_rt: removing %s: %s", self.marker, exc)
+
+    def _release(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)  # the lock goes with the descriptor
+            self._fd = None
+
+    def close(self) -> None:
+        """Stop watching (at shutdown; the next node to try takes over). The marker stays for the next watcher."""
+        self._reader = self._alive = None  # deleted with the participant
+        self._release()

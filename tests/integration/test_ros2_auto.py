@@ -1,0 +1,151 @@
+"""ROS 2 visibility ``auto``, the default: micros_rt nodes of one host make no DDS participant of their own while
+nothing but micros_rt is on the DDS domain (one node, the host's watcher, has one with no topics), and their
+topics become ROS 2 topics once an rclpy node appears, whichever starts first; the watcher's death hands the
+watch to another node.
+
+The rest of the suite runs with visibility on (tests/harness.py, dds_env); these tests set ``auto`` and use
+a DDS domain of their own, so no ROS 2 peer of another test (or its lingering discovery data) is seen here.
+Nodes of one host talk over shared memory, as by default. A process has a DDS participant exactly when it has
+UDP sockets (rospy and shared memory use none).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from pathlib import Path
+from typing import Any, Dict, Iterator, List
+
+import pytest
+
+import harness
+from helpers import mrt
+
+pytestmark = pytest.mark.integration
+
+T = 20.0  # per-wait bound, seconds (generous: a loaded machine)
+#: a domain only these tests use in this run (the run's own is 1..200)
+AUTO_DOMAIN = 201 + os.getpid() % 20
+
+
+@pytest.fixture
+def auto_env(ros_master: harness.RosMaster) -> Iterator[Dict[str, str]]:
+    env = {**ros_master.env, "MICROS_RT_ROS2": "auto", "MICROS_RT_DISABLE_SHM": "0",
+           "ROS_DOMAIN_ID": str(AUTO_DOMAIN)}
+    yield env
+    for path in Path("/dev/shm").glob(f"micros_rt_ros2_u{os.getuid()}_*_d{AUTO_DOMAIN}.*"):
+        path.unlink(missing_ok=True)
+
+
+def udp_sockets(pid: int) -> int:
+    """UDP sockets the process has open (a Cyclone participant has several; a node without one has none)."""
+    udp: set[str] = set()
+    for table in ("udp", "udp6"):
+        try:
+            with open(f"/proc/{pid}/net/{table}") as f:
+                udp.update(line.split()[9] for line in f.readlines()[1:])
+        except OSError:
+            pass
+    mine = set()
+    try:
+        for fd in os.listdir(f"/proc/{pid}/fd"):
+            try:
+                link = os.readlink(f"/proc/{pid}/fd/{fd}")
+            except OSError:
+                continue
+            if link.startswith("socket:["):
+                mine.add(link[8:-1])
+    except OSError:
+        return 0
+    return len(mine & udp)
+
+
+def with_participant(peers: List[harness.Peer]) -> List[str]:
+    return [p.name for p in peers if p.alive() and udp_sockets(p.proc.pid) > 0]
+
+
+def watchers(peer: harness.Peer) -> bool:
+    return any("watches DDS domain" in (e.get("text") or "") for e in peer.events("log"))
+
+
+def wait_until(predicate: Any, timeout: float, what: str) -> None:
+    end = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > end:
+            raise AssertionError(f"not within {timeout:.0f} s: {what}")
+        time.sleep(0.05)
+
+
+def ros2(*args: Any) -> List[str]:
+    return harness.ros2_peer_argv(*[str(a) for a in args])
+
+
+def test_no_ros2_one_participant_then_an_rclpy_node_hears_and_is_heard(auto_env: Dict[str, str],
+                                                                        spawn: harness.Spawner) -> None:
+    talker = spawn(mrt("talk", "--topic", "/auto/out", "--count", 100000, "--rate", 20, "--duration", 90),
+                   env=auto_env, name="mrt_talker")
+    near = spawn(mrt("listen", "--topic", "/auto/out", "--duration", 90, "--node-name", "near"), env=auto_env, name="mrt_listener")
+    far = spawn(mrt("listen", "--topic", "/auto/in", "--duration", 90, "--node-name", "far"), env=auto_env, name="mrt_ros2_listener")
+    nodes = [talker, near, far]
+    for peer in (near, far):
+        peer.wait_for("ready", T)
+    first = near.wait_for("recv", T)
+    assert first["transport"] == "SHM", first
+    # one node of the three watches the domain; the others have no participant
+    wait_until(lambda: sum(watchers(p) for p in nodes) == 1, T, "one node watching the DDS domain")
+    near.wait_for_count("recv", 40, T)
+    assert with_participant(nodes) == [p.name for p in nodes if watchers(p)], \
+        [(p.name, udp_sockets(p.proc.pid)) for p in nodes]
+
+    # an rclpy node appears: it hears the micros_rt talker, and its talker reaches the micros_rt listener
+    listener = spawn(ros2("listen", "--topic", "/auto/out", "--count", 5, "--duration", 60),
+                     env=auto_env, name="rclpy_listener")
+    ros2_talker = spawn(ros2("talk", "--topic", "/auto/in", "--count", 1000, "--rate", 20, "--duration", 60),
+                        env=auto_env, name="rclpy_talker")
+    ready = listener.wait_for("ready", T)
+    heard = listener.wait_for("recv", T)
+    talker_ready = ros2_talker.wait_for("ready", T)
+    got = far.wait_for("recv", T)
+    print(f"\nauto visibility: an rclpy listener heard the micros_rt talker {heard['_rx'] - ready['_rx']:.2f} s after "
+          f"it was ready; a micros_rt listener heard an rclpy talker {got['_rx'] - talker_ready['_rx']:.2f} s after "
+          f"that was ready")
+    assert got["transport"] == "DDS", got
+    wait_until(lambda: len(with_participant(nodes)) == 3, T, "every micros_rt node with a participant")
+
+    # the local subscriber keeps its shared-memory link and gets every message once
+    count = len(near.events("recv"))
+    near.wait_for_count("recv", count + 40, T)
+    data = [e["data"] for e in near.events("recv")]
+    assert len(data) == len(set(data)), "a message delivered twice (shared memory and DDS)"
+    assert {e["transport"] for e in near.events("recv")} == {"SHM"}
+
+
+def test_an_rclpy_node_started_first_is_heard(auto_env: Dict[str, str], spawn: harness.Spawner) -> None:
+    ros2_talker = spawn(ros2("talk", "--topic", "/auto/early", "--count", 1000, "--rate", 20, "--duration", 60),
+                        env=auto_env, name="rclpy_talker")
+    ros2_talker.wait_for("ready", T)
+    listener = spawn(mrt("listen", "--topic", "/auto/early", "--duration", 60), env=auto_env, name="mrt_listener")
+    ready = listener.wait_for("ready", T)
+    got = listener.wait_for("recv", T)
+    print(f"\nauto visibility: a micros_rt listener started after an rclpy talker heard it "
+          f"{got['_rx'] - ready['_rx']:.2f} s after it was ready")
+    assert got["transport"] == "DDS", got
+
+
+def test_the_watcher_killed_another_node_takes_over(auto_env: Dict[str, str], spawn: harness.Spawner) -> None:
+    nodes = [spawn(mrt("talk", "--topic", f"/auto/t{i}", "--count", 100000, "--rate", 10, "--duration", 90,
+                       "--node-name", f"talker{i}"),
+                   env=auto_env, name=f"mrt_talker{i}") for i in range(2)]
+    for peer in nodes:
+        peer.wait_for("ready", T)
+    wait_until(lambda: sum(watchers(p) for p in nodes) == 1, T, "one node watching the DDS domain")
+    watcher = next(p for p in nodes if watchers(p))
+    survivor = next(p for p in nodes if p is not watcher)
+    os.kill(watcher.proc.pid, signal.SIGKILL)
+    wait_until(lambda: watchers(survivor), T, "the other node watching the domain after the watcher died")
+    topic = "/auto/t0" if survivor is nodes[0] else "/auto/t1"
+    listener = spawn(ros2("listen", "--topic", topic, "--count", 3, "--duration", 60), env=auto_env,
+                     name="rclpy_listener")
+    listener.wait_for("ready", T)
+    listener.wait_for("recv", T)
