@@ -593,8 +593,15 @@ class Subscriber:
         self.md5sum = sub.data_class._md5sum
 
     def get_num_connections(self) -> int:
-        """Publishers connected, over DDS and TCPROS."""
-        return len(self.connection_transports())
+        """Publishers connected: what they publish from now on arrives. A DDS publisher counts once this
+        subscription's reader has matched its writer (what the writer sent before is not for a volatile reader),
+        as a TCPROS one once its connection is up."""
+        sub = self._sub
+        links = self.connection_transports()
+        if sub is not None and sub.tcpros is not None:
+            for uri in sub.tcpros.unmatched_dds():
+                links.pop(uri, None)
+        return len(links)
 
     def connection_transports(self) -> Dict[str, str]:
         """Publisher URI -> 'DDS' or 'TCPROS' for every current connection (and the MQTT link's URI -> 'MQTT')."""

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import collections
 import re
+import signal
 import subprocess
 from typing import Any, Dict, Iterator, List, NamedTuple, Optional
 
@@ -60,7 +61,10 @@ def dscp_pair(dds_domain: int) -> Iterator[Hosts]:
 
 
 def capture_marks(capture: "subprocess.Popen[str]") -> "collections.Counter[Any]":
-    """What tcpdump saw leave a host, counted by (TOS byte, protocol)."""
+    """What tcpdump saw leave a host, counted by (TOS byte, protocol); called once the publisher is done, so the
+    capture stops now (it used to wait 30 s for a packet count a short run never reaches)."""
+    if capture.poll() is None:
+        capture.send_signal(signal.SIGINT)  # `ip netns exec` runs tcpdump itself: it prints what it has and exits
     try:
         dump, _ = capture.communicate(timeout=30)
     except subprocess.TimeoutExpired:

@@ -180,6 +180,8 @@ def main() -> int:
     ap.add_argument("--linger", type=float, default=0.5, help="seconds to stay up after the last message")
     ap.add_argument("--start-delay", type=float, default=0.0,
                     help="talk: seconds to wait after the subscribers are there (a ROS 2 reader's own discovery)")
+    ap.add_argument("--warmup-file", default="",
+                    help="talk: publish 'warmup' every 50 ms until this file exists, then the counted messages")
     ap.add_argument("--deadline-events", action="store_true")
     ap.add_argument("--callback-sleep", type=float, default=0.0,
                     help="listen: seconds every callback sleeps after printing (a slow subscriber)")
@@ -262,6 +264,14 @@ def main() -> int:
             emit("dds_matched", n=dds_readers(), participant=writer.participant.guid if writer is not None else None,
                  process_participant=backend.participant.guid if backend is not None else None)
         values = json.loads(args.data_json) if args.data_json else None
+        # until the test says start (it has seen one arrive): "warmup" messages, so the counted ones go out once
+        # the subscriber's DDS reader hears this writer (it joins a writer's stream at the first heartbeat it
+        # hears; over a lossy link the writer's first ones can come before that and are not delivered to it)
+        while args.warmup_file and not os.path.exists(args.warmup_file) and time.monotonic() < deadline + 60:
+            if micros_rt.is_shutdown():
+                break
+            pub.publish(fill(data_class(), "warmup", -1, False, 0.0))
+            time.sleep(0.05)
         time.sleep(args.start_delay)
         period = 1.0 / args.rate if args.rate > 0 else 0.0
         start = time.monotonic()

@@ -22,6 +22,10 @@ import micros_rt
 from std_msgs.msg import UInt8MultiArray
 
 
+#: the sequence number of a warm-up message (never counted)
+WARMUP = 2 ** 64 - 1
+
+
 def emit(event: str, **fields: Any) -> None:
     fields["event"] = event
     sys.stdout.write(json.dumps(fields, default=str) + "\n")
@@ -43,7 +47,10 @@ def send(a: argparse.Namespace, nh: micros_rt.NodeHandle) -> int:
     while pub.get_num_connections() < a.subscribers and time.monotonic() < deadline:
         time.sleep(0.01)
     emit("ready", connections=pub.get_num_connections())
+    warm = UInt8MultiArray(data=struct.pack("<Q", WARMUP) + bytes(max(a.size - 8, 0)))
     while a.start_file and not os.path.exists(a.start_file) and time.monotonic() < deadline + a.timeout:
+        if a.warmup:
+            pub.publish(warm)  # until the subscriber has heard one (the test then says start)
         time.sleep(0.05)  # the test says when the subscriber has matched this writer too
     time.sleep(0.3)
     pad = bytes(max(a.size - 8, 0))
@@ -71,9 +78,16 @@ def send(a: argparse.Namespace, nh: micros_rt.NodeHandle) -> int:
 def recv(a: argparse.Namespace, nh: micros_rt.NodeHandle) -> int:
     seen: List[int] = []
     arrivals: List[float] = []
+    warmed: List[bool] = []
 
     def cb(msg: Any) -> None:
-        seen.append(struct.unpack_from("<Q", msg.data)[0])
+        seq = struct.unpack_from("<Q", msg.data)[0]
+        if seq == WARMUP:
+            if not warmed:
+                warmed.append(True)
+                emit("warmed")
+            return
+        seen.append(seq)
         arrivals.append(time.monotonic())
         if a.slow:
             time.sleep(a.slow)
@@ -138,6 +152,9 @@ def main() -> int:
     ap.add_argument("--idle", type=float, default=5.0, help="stop after this long without a new message")
     ap.add_argument("--linger", type=float, default=3.0)
     ap.add_argument("--start-file", default="", help="send: publish once this file exists (recv says 'connected')")
+    ap.add_argument("--warmup", action="store_true",
+                    help="send: until the start file exists, publish a warm-up message (not counted; recv says "
+                         "'warmed' at the first) every 50 ms")
     ap.add_argument("--rate", type=float, default=0.0, help="send: messages (with --burst, bursts) per second (0: as fast as possible)")
     ap.add_argument("--burst", type=int, default=1, help="send: with --rate, this many messages back to back each time")
     ap.add_argument("--progress", type=int, default=0, help="send: a progress event every N messages")

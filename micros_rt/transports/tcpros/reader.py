@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any, Callable, Optional
 
-from ...negotiation import TCPROS
+from ...negotiation import DDS, TCPROS
 from . import patches
 
 __all__ = ["TcprosReader"]
@@ -26,6 +26,15 @@ class TcprosReader:
         if impl is None:
             return {}
         return {c.endpoint_id: getattr(c, "transport_type", TCPROS) for c in impl.connections}
+
+    def unmatched_dds(self) -> set[str]:
+        """Publisher URIs of DDS links whose writer this subscription's reader has not matched yet: DDS delivers a
+        volatile reader only what its writer sends after the reader found it (on a lossy link, seconds later)."""
+        impl = self._sub.impl
+        if impl is None:
+            return set()
+        return {c.endpoint_id for c in impl.connections
+                if getattr(c, "transport_type", TCPROS) == DDS and not getattr(c, "seen", True)}
 
     def close(self) -> None:
         self._sub.unregister()
