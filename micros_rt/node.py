@@ -196,6 +196,9 @@ def _close_all() -> None:
     close_profile_backends()  # MQTT: disconnect cleanly now, not at interpreter exit
     with _node.lock:
         dds, _node.dds = _node.dds, None
+        watch, _node.ros2_watch = _node.ros2_watch, None
+    if watch is not None:
+        watch.close()  # another node of the host takes the watch over at its next tick
     if dds is not None:
         dds.close()
     close_participant()

@@ -112,7 +112,8 @@ def note_ros2_at_start(profile: Optional[QoSProfile]) -> None:
 def watch_ros2() -> bool:
     """With ``auto`` visibility, a housekeeping tick: take part in watching the DDS domain for ROS 2; True once,
     on the tick ROS 2 is first seen (the caller opens the topics' DDS sides)."""
-    if os.environ.get("MICROS_RT_DISABLE_DDS", "") not in ("", "0") or ros2_mode(_node.profile) != AUTO:
+    if (os.environ.get("MICROS_RT_DISABLE_DDS", "") not in ("", "0") or ros2_mode(_node.profile) != AUTO
+            or rospy.is_shutdown()):
         return False
     watch = _node.ros2_watch
     if watch is None:
