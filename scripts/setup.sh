@@ -30,6 +30,7 @@ APT_PACKAGES=(
     python3-std-srvs python3-roslaunch python3-rosservice python3-dev gcc
     mosquitto mosquitto-clients libmsgpack-dev graphviz openssl
     python3-actionlib python3-actionlib-msgs
+    g++ pkgconf libroscpp-dev libstd-srvs-dev    # the stock roscpp test peer, tests/peers/roscpp_setbool.cpp
 )
 
 missing=()
