@@ -126,7 +126,11 @@ def test_topics_both_ways_and_the_stock_tools(setup: Setup) -> None:
 
 
 def test_services_both_ways(setup: Setup) -> None:
-    # a stock `rosservice call` in ROS 1 reaches the rclpy server through the relay
+    # a stock `rosservice call` in ROS 1 reaches the rclpy server through the relay, once the relay offers it (when
+    # its ROS 2 helper has found the server: about 2 s after the relay first sees it)
+    master = harness.xmlrpc_proxy(setup.master.uri)
+    harness.wait_until(lambda: master.lookupService("/test", "/ros2_trigger")[0] == 1, T,
+                       message="the relay offering /ros2_trigger in ROS 1")
     answer = _tool(setup.master, ROSSERVICE, "call", "/ros2_trigger")
     assert "success: True" in answer and "triggered" in answer, answer
     setup.ros2.wait_for(lambda e: e.get("event") == "served" and e.get("name") == "/ros2_trigger", timeout=T)
