@@ -109,6 +109,20 @@ def dds_env(domain_id: int) -> Dict[str, str]:
     }
 
 
+def delete_netns(names: Sequence[str]) -> None:
+    """Delete network namespaces, and the files micros_rt nodes in them left in /dev/shm (the host ROS 2 watcher's
+    lock and marker, one per user, namespace and domain: a real host keeps one, a test run would pile them up)."""
+    for ns in names:
+        try:
+            inode = os.stat(f"/run/netns/{ns}").st_ino
+        except OSError:
+            inode = None
+        subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=20)
+        if inode is not None:
+            for path in Path("/dev/shm").glob(f"micros_rt_ros2_u*_n{inode}_d*"):
+                path.unlink(missing_ok=True)
+
+
 def child_env(extra: Optional[Mapping[str, str]] = None) -> Dict[str, str]:
     """os.environ without the caller's ROS/Python leftovers, plus ``extra`` and unbuffered output."""
     env = {k: v for k, v in os.environ.items() if k not in _SCRUB_ENV}

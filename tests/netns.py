@@ -136,5 +136,4 @@ class Hosts:
                 self.master.wait(5)
             except subprocess.TimeoutExpired:
                 self.master.kill()
-        for ns in [*self.names, self.bridge_ns]:
-            subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=20)
+        harness.delete_netns([*self.names, self.bridge_ns])

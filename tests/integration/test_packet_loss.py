@@ -83,8 +83,7 @@ class TwoHosts:
                 self.master.wait(5)
             except subprocess.TimeoutExpired:
                 self.master.kill()
-        for ns in (self.a, self.b):
-            subprocess.run(["ip", "netns", "del", ns], capture_output=True, timeout=20)
+        harness.delete_netns([self.a, self.b])
 
 
 @pytest.fixture

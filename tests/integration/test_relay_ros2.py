@@ -129,7 +129,7 @@ def test_services_both_ways(setup: Setup) -> None:
     # a stock `rosservice call` in ROS 1 reaches the rclpy server through the relay, once the relay offers it (when
     # its ROS 2 helper has found the server: about 2 s after the relay first sees it)
     master = harness.xmlrpc_proxy(setup.master.uri)
-    harness.wait_until(lambda: master.lookupService("/test", "/ros2_trigger")[0] == 1, T,
+    harness.wait_until(lambda: list(master.lookupService("/test", "/ros2_trigger"))[0] == 1, T,  # type: ignore[arg-type]
                        message="the relay offering /ros2_trigger in ROS 1")
     answer = _tool(setup.master, ROSSERVICE, "call", "/ros2_trigger")
     assert "success: True" in answer and "triggered" in answer, answer
