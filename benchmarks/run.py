@@ -882,7 +882,7 @@ def plots(figs, samples, transports, outdir, targets=None):
 def summary_rows(results=RESULTS):
     """The README's summary: micros_rt against stock rospy in the same run, one row per figure, read from the
     committed results (nothing is measured): (section, words, stack, ratio, target ratio or None, lower is
-    better). One host: the SHM run (one_host/, one_host_scale/); between hosts: cross_host.py at 1 Gbit/s,
+    better). One host: the SHM run (one_host/); between hosts: cross_host.py at 1 Gbit/s,
     MTU 1500; a 40 Mbit/s link: constrained_link.py (control p99, medians of rounds; targets from issue 19)."""
     import json as _json
     rows = []
@@ -899,9 +899,16 @@ def summary_rows(results=RESULTS):
                        ("image_vga_msgs_per_s", "Image 640x480, msg/s")):
         rows.append(("one host", words, "micros_rt_shm", shm[fig] / base[fig], tg.get(fig, (None,))[0],
                      LOWER_BETTER(fig)))
-    scale = _json.loads((Path(results) / "one_host_scale" / "latest.json").read_text())["figures"]
-    rows.append(("one host", "60 nodes, CPU", "micros_rt_shm",
-                 scale["micros_rt_shm"]["scale60_cpu_pct"] / scale[BASE]["scale60_cpu_pct"], None, True))
+    # the many-node figures: the default (ROS 2 visibility auto, no ROS 2 node), on (a participant per node, what
+    # auto becomes with a ROS 2 node on the domain) and off; targets from issue 34
+    for stack, words, cpu_target in (("micros_rt_shm", "default", 1.2), ("micros_rt_shm_ros2", "ROS 2 visibility on", 1.2),
+                                     ("micros_rt_shm_local", "ROS 2 visibility off", 1.0)):
+        if stack not in figs or "scale60_cpu_pct" not in figs[stack]:
+            continue
+        rows.append(("one host", f"60 nodes, CPU ({words})", stack,
+                     figs[stack]["scale60_cpu_pct"] / base["scale60_cpu_pct"], cpu_target, True))
+    rows.append(("one host", "60 nodes, connect (default)", "micros_rt_shm",
+                 shm["scale60_connect_s"] / base["scale60_connect_s"], 1.0, True))
     latest = _json.loads((Path(results) / "latest.json").read_text())
     cross = latest["cross_host"]["summary"]["1500@1gbit"]
     for key, words in (("rtt_b64_p50_us", "round trip 64 B, p50"),
@@ -928,6 +935,8 @@ def plot_summary(rows, path):
 
     colours = dict(COLOURS, micros_rt_paced="#2ca02c", micros_rt="#1f77b4")
     names = {"micros_rt_shm": "micros_rt, shared memory (its default on one host)",
+             "micros_rt_shm_ros2": "micros_rt, shared memory, ROS 2 visibility on",
+             "micros_rt_shm_local": "micros_rt, shared memory, ROS 2 visibility off",
              "micros_rt_dds": "micros_rt, DDS", "micros_rt_paced": "micros_rt, camera on paced TCPROS"}
     sides = [[r for r in rows if r[5]], [r for r in rows if not r[5]]]
     fig, axes = plt.subplots(2, 1, figsize=(10, 1.6 + 0.3 * len(rows)),
@@ -972,7 +981,22 @@ def main():
     ap.add_argument("--scale-ns", help="override the scale figure's graph sizes, e.g. 2,10,30,60")
     ap.add_argument("--out", default=str(RESULTS), help="results directory")
     ap.add_argument("--keep-logs", action="store_true")
+    ap.add_argument("--summary", action="store_true",
+                    help="measure nothing: print README's summary table from the committed results and redraw "
+                         "results/summary.png")
     args = ap.parse_args()
+    if args.summary:
+        rows = summary_rows()
+        print("| where (micros_rt's transport) | figure | better | micros_rt / rospy | target |\n|---|---|---|---|---|")
+        for section, words, stack, ratio, target, lower in rows:
+            where = {"micros_rt_paced": f"{section} (paced TCPROS camera)"}.get(
+                stack, f"{section} ({'DDS' if stack in ('micros_rt_dds', 'micros_rt') else 'SHM'})")
+            verdict = "—" if target is None else (
+                f"{'≤' if lower else '≥'} {target:g}x {'met' if (ratio <= target if lower else ratio >= target) else 'missed'}")
+            print(f"| {where} | {words} | {'lower' if lower else 'higher'} | {ratio:.2g}x | {verdict} |"
+                  if ratio < 0.1 else f"| {where} | {words} | {'lower' if lower else 'higher'} | {ratio:.2f}x | {verdict} |")
+        plot_summary(rows, RESULTS / "summary.png")
+        return
     args.only = [t.strip() for t in args.only.split(",") if t.strip()]
     args.figures = [f.strip() for f in args.figures.split(",") if f.strip()]
     for t in args.only:
@@ -1080,8 +1104,9 @@ def main():
           f"Python {mach['python']}, cyclonedds {mach['cyclonedds']}, rclpy {mach['rclpy']}. "
           "Every endpoint is its own process, loopback only; figures are medians over rounds (loss: the worst "
           "round). Latency: ping-pong round trip in µs. Throughput: one-way, measured at the receiver; lost = "
-          "sent − received. The last three columns compare micros_rt DDS with stock rospy TCPROS measured in "
-          "the same run against the targets of issue 8.", "",
+          f"sent − received. The last three columns compare {headline(transports)} (micros_rt's default on one "
+          "host when measured) with stock rospy TCPROS measured in the same run, against the targets of "
+          "issue 34.", "",
           table(figs, spread, transports, md=True), "",
           "Configurations:", ""]
     md += [f"- **{t}**: {CONFIG[t]}" for t in transports]
