@@ -10,27 +10,35 @@ unless ``force`` asks to reset an earlier marking.
 from __future__ import annotations
 
 import socket
-from typing import Optional
+from typing import List, Optional, Tuple
 
 from ..qos.options import TransportPriority, priority_socket_priority, priority_tos
 
-__all__ = ["mark_socket", "mark_socket_tos"]
+__all__ = ["mark_socket", "mark_socket_tos", "tos_options"]
+
+
+def tos_options(tos: int, so_priority: Optional[int], family: int) -> List[Tuple[int, int, int]]:
+    """The ``(level, option, value)`` settings that mark a socket of ``family`` with ``tos`` (and ``so_priority``
+    when given); empty for a family that carries no TOS (unix)."""
+    if family == socket.AF_INET6:
+        options = [(socket.IPPROTO_IPV6, socket.IPV6_TCLASS, tos)]
+    elif family == socket.AF_INET:
+        options = [(socket.IPPROTO_IP, socket.IP_TOS, tos)]
+    else:
+        return []
+    if so_priority is not None and hasattr(socket, "SO_PRIORITY"):
+        options.append((socket.SOL_SOCKET, socket.SO_PRIORITY, so_priority))
+    return options
 
 
 def mark_socket_tos(sock: socket.socket, tos: int, so_priority: Optional[int] = None, *,
                     family: Optional[int] = None) -> bool:
     """Set ``tos`` (and ``so_priority`` when given) on ``sock``; returns False for a socket that carries
     no TOS (unix). Raises ``OSError`` when the kernel refuses."""
-    family = sock.family if family is None else family
-    if family == socket.AF_INET6:
-        sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_TCLASS, tos)
-    elif family == socket.AF_INET:
-        sock.setsockopt(socket.IPPROTO_IP, socket.IP_TOS, tos)
-    else:
-        return False
-    if so_priority is not None and hasattr(socket, "SO_PRIORITY"):
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_PRIORITY, so_priority)
-    return True
+    options = tos_options(tos, so_priority, sock.family if family is None else family)
+    for level, option, value in options:
+        sock.setsockopt(level, option, value)
+    return bool(options)
 
 
 def mark_socket(sock: socket.socket, priority: TransportPriority, *, force: bool = False,

@@ -87,7 +87,16 @@ def test_1x_bridge_and_2x_bridge_read_each_other_with_latencies(
         assert [e["data"] for e in texts_b] == [f"from a {i}" for i in range(N)]
         assert [e["data"] for e in texts_a] == [f"from b {i}" for i in range(N)]
         for graph, other in (("b", "a"), ("a", "b")):
-            got = [e["msg"] for e in listeners[f"{graph}_pose"].wait_for_count("recv", N, timeout=90)]
+            try:
+                received = listeners[f"{graph}_pose"].wait_for_count("recv", N, timeout=90)
+            except AssertionError:  # which hop lost them: the talker, either bridge (its counters and log)
+                print(f"talker: {talkers[1 if other == 'a' else 3].events()[-4:]}\n"
+                      f"bridge_{other}: {bridge_a.events()[-6:] if other == 'a' else bridge_b.events()[-6:]}\n"
+                      f"{(bridge_a if other == 'a' else bridge_b).stderr_tail(3000)}\n"
+                      f"bridge_{graph}: {bridge_b.events()[-6:] if graph == 'b' else bridge_a.events()[-6:]}\n"
+                      f"{(bridge_b if graph == 'b' else bridge_a).stderr_tail(3000)}")
+                raise
+            got = [e["msg"] for e in received]
             sent = [e["msg"] for e in talkers[1 if other == "a" else 3].wait_for_count("sent", N, timeout=30)]
             for msg in got + sent:
                 msg["header"].pop("seq", None)   # the republishing node numbers Header.seq itself
