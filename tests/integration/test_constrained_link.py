@@ -24,12 +24,26 @@ from netns import Hosts
 
 LINK = str(harness.PEERS_DIR / "mrt_link.py")
 SECONDS = 6.0
-#: The control topic's p99 (ms) when the camera's traffic is kept out of the link's 50 ms queue (paced by the
-#: link's rate in a profile, or served after the control topic by a DSCP-honouring link). Measured on 2 cores with the camera, tcpdump and both hosts' nodes sharing them:
-#: 3.7-19.1 ms over 8 runs (the subscriber's GIL, held decoding 921 kB frames, is most of the tail); with the
-#: queue full, 22-55 ms. The benchmark (benchmarks/constrained_link.py) measures the difference; here the
-#: bound catches a queue that fills, and the mechanism (the pacing rate, the DSCP marks) is asserted itself.
-PACED_P99_MS = 25.0
+#: The control topic's latency (ms) when the camera's traffic is kept out of the link's 50 ms queue (paced by the
+#: link's rate in a profile, or served after the control topic by a DSCP-honouring link), on 2 cores with the
+#: camera, tcpdump and both hosts' nodes sharing them. The tail is mostly the subscriber's GIL, held decoding
+#: 921 kB frames: p99 3.7-19.1 ms over 8 runs, and 26.2 ms once in a full suite run (p50 4.6 ms). A queue that
+#: fills moves the whole distribution instead: with the camera unpaced, p50 21.8-22.2, p90 27.6-28.1, p99 34-39 ms;
+#: paced, p50 3.6-3.7, p90 4.8, p99 5.7-6.1 (2 runs each). So the bound is on the 90th percentile, which tells the
+#: two apart by 5x, and the 99th only has to stay inside the link's queue. The benchmark
+#: (benchmarks/constrained_link.py) measures the difference; the mechanism (the pacing rate, the DSCP marks) is
+#: asserted itself.
+PACED_P90_MS = 12.0
+PACED_P99_MS = 50.0
+#: the camera over paced TCPROS: its segments still share the link's queue in bursts (p50 5.7, p90 11.0, p99 22.0 ms
+#: once; unpaced p90 20.9, p99 44.4), so that test keeps its p99 bound of before (every recorded full run below it)
+PACED_TCP_P99_MS = 25.0
+
+
+def kept_out_of_the_queue(summary: Dict[str, Any], *, p90_ms: Optional[float] = PACED_P90_MS,
+                          p99_ms: float = PACED_P99_MS) -> None:
+    assert (p90_ms is None or p90(summary) < p90_ms) and summary["p99_ms"] < p99_ms, \
+        (p90(summary), {k: v for k, v in summary.items() if k != "control_cdf_ms"})
 
 
 def link(*args: Any) -> List[str]:
@@ -82,6 +96,12 @@ def start_capture(hosts: Hosts, count: int = 3000) -> "subprocess.Popen[str]":
                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
 
 
+def p90(summary: Dict[str, Any]) -> float:
+    """The control topic's 90th percentile latency (ms), from the subscriber's 200-point distribution."""
+    cdf = summary.get("control_cdf_ms") or [float("inf")]
+    return float(cdf[min(len(cdf) - 1, 180)])
+
+
 class Run(NamedTuple):
     ready: Dict[str, Any]      # the publisher's 'ready' event
     published: Dict[str, Any]  # its 'published' event: counts, statistics, links
@@ -104,7 +124,8 @@ def run_pair(hosts: Hosts, spawn: harness.Spawner, label: str, *, pub_env: Optio
     summary = sub.wait_for("summary", 120)
     marks = capture_marks(dump) if dump is not None else collections.Counter()
     print(f"\n40 Mbit/s {label}: control published {published['control']} of {published['intended_control']}, "
-          f"delivered {summary['control']} (p50 {summary['p50_ms']:.1f} ms, p99 {summary['p99_ms']:.1f} ms); images "
+          f"delivered {summary['control']} (p50 {summary['p50_ms']:.1f} ms, p90 {p90(summary):.1f} ms, p99 "
+          f"{summary['p99_ms']:.1f} ms); images "
           f"published {published['image']}, delivered {summary['image']}; publisher statistics "
           f"{published['statistics']}; links {published['links']}")
     return Run(ready, published, summary, marks)
@@ -137,7 +158,7 @@ def test_two_dds_topics_of_one_process_leave_with_their_own_dscp_and_the_link_se
     assert summary["control"] >= 0.99 * published["control"], (summary, published)
     # the camera never delays the control topic in the sender's socket nor in the link's queue (p99 0.5-4.8 ms;
     # 16 ms once beside another test run; both marked AF41, the benchmark's control p99 was 121-124 ms)
-    assert summary["p99_ms"] < PACED_P99_MS, summary
+    kept_out_of_the_queue(summary)
     assert summary["image"] >= 10, summary
 
 
@@ -179,8 +200,8 @@ def test_the_links_rate_in_the_publishers_profile_keeps_dds_control_within_milli
     assert summary["transports"] == ["DDS"] and summary["image_transports"] == ["DDS"], summary
     assert published["control"] >= 0.9 * published["intended_control"], published
     assert summary["control"] >= 0.99 * published["control"], (summary, published)
-    # benchmark: p99 4.9-5.2 ms (rospy 39-57 ms; without the link's rate 28 ms); see PACED_P99_MS
-    assert summary["p99_ms"] < PACED_P99_MS, summary
+    # benchmark: p99 4.9-5.2 ms (rospy 39-57 ms; without the link's rate 28 ms); see PACED_P90_MS
+    kept_out_of_the_queue(summary)
     assert summary["image"] >= 10, summary
 
 
@@ -226,5 +247,5 @@ def test_a_link_in_the_publishers_profile_paces_the_camera_and_control_keeps_mil
     assert 1e6 < camera["rate_bps"] <= 36e6 + 1, radio
     assert published["control"] >= 0.9 * published["intended_control"], published
     assert summary["control"] >= 0.99 * published["control"], (summary, published)
-    assert summary["p99_ms"] < PACED_P99_MS, summary
+    kept_out_of_the_queue(summary, p90_ms=None, p99_ms=PACED_TCP_P99_MS)
     assert summary["image"] >= 10, summary
