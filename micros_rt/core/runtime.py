@@ -62,6 +62,7 @@ def _graph_id() -> str:
 _OFF = ("0", "off", "false", "no")
 _ON = ("1", "on", "true", "yes")
 ON, OFF, AUTO = "on", "off", "auto"
+_warned_modes: set[str] = set()
 
 
 def ros2_mode(profile: Optional[QoSProfile] = None) -> str:
@@ -77,7 +78,8 @@ def ros2_mode(profile: Optional[QoSProfile] = None) -> str:
         return OFF
     if raw in _ON:
         return ON
-    if raw and raw != AUTO:
+    if raw and raw != AUTO and raw not in _warned_modes:
+        _warned_modes.add(raw)  # asked per topic and per housekeeping tick: said once
         _log.warning("micros_rt: MICROS_RT_ROS2=%r is not on, off or auto; auto it is", raw)
     if not raw and profile is not None and profile.ros2 is not None:
         return ON if profile.ros2 else OFF
