@@ -22,6 +22,7 @@ import time
 import uuid
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Mapping, Optional, Set
+from ..cyclone import import_cyclonedds
 
 __all__ = ["DEFAULT_WAIT", "NAMES_WAIT", "DdsEndpoint", "DdsView", "Ros2Node", "discover", "ros2_type_name"]
 
@@ -105,6 +106,7 @@ def discover(wait: float = DEFAULT_WAIT, env: Mapping[str, str] = os.environ, *,
     if env.get("MICROS_RT_DISABLE_DDS", "") not in ("", "0"):
         return DdsView(False, "DDS is disabled (MICROS_RT_DISABLE_DDS is set)")
     try:
+        import_cyclonedds()
         from cyclonedds.builtin import (BuiltinDataReader, BuiltinTopicDcpsParticipant,
                                         BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription)
         from cyclonedds.core import DDSException, InstanceState, Policy, Qos, ReadCondition, SampleState, ViewState

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import threading
 from typing import TYPE_CHECKING, Any, Callable, Dict, List, Optional
+from ..cyclone import import_cyclonedds
 
 if TYPE_CHECKING:
     from ..transports.dds.participant import DDSParticipant
@@ -26,6 +27,7 @@ class Inbox:
         self.waitset: Any = None
         self.guard: Any = None
         if participant is not None:
+            import_cyclonedds()
             from cyclonedds.core import GuardCondition, WaitSet
 
             self.waitset = WaitSet(participant.dp)

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Optional
 
 import rospy
 
+from ..cyclone import import_cyclonedds
 from .registry import EndpointRegistry
 from ..transports.dds.participant import get_participant
 from ..exceptions import MicrosRtError, NodeNotInitializedError
@@ -158,7 +159,7 @@ def start_dds_early(profile: Optional[QoSProfile] = None) -> None:
 
     def start() -> None:
         try:
-            import cyclonedds.domain  # noqa: F401
+            import_cyclonedds()
             from ..transports.dds import backend  # noqa: F401
         except Exception:  # the first topic imports them again and reports what is wrong, in words
             pass

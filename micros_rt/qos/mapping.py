@@ -52,6 +52,7 @@ _DDS_INFINITY = 0x7FFFFFFFFFFFFFFF
 
 from micros_rt.exceptions import QoSTypeError, QoSValueError
 from micros_rt.qos.options import AdvertiseQoSOptions, SubscribeQoSOptions, options_of
+from ..cyclone import import_cyclonedds
 
 __all__ = [
     "PUBLISH_BLOCK_TIMEOUT",
@@ -120,6 +121,7 @@ def history_depth(queue_size: int | None) -> int:
 
 
 def _reliability(best_effort: bool, blocking: float = RELIABLE_MAX_BLOCKING_TIME) -> object:
+    import_cyclonedds()
     from cyclonedds.qos import Policy
 
     if best_effort:
@@ -128,6 +130,7 @@ def _reliability(best_effort: bool, blocking: float = RELIABLE_MAX_BLOCKING_TIME
 
 
 def _user_data(user_data: bytes) -> list[object]:
+    import_cyclonedds()
     from cyclonedds.qos import Policy
 
     if not isinstance(user_data, (bytes, bytearray, memoryview)):
@@ -141,6 +144,7 @@ def _user_data(user_data: bytes) -> list[object]:
 def _policy_builders() -> dict[str, Callable[[Any, str], list[object]]]:
     """How a value of an option becomes DDS policies, per DDS policy the catalogue names (``dds_policy``); made
     once, on first use (cyclonedds is imported only by a node that uses DDS)."""
+    import_cyclonedds()
     from cyclonedds.qos import Policy
 
     return {
@@ -191,6 +195,7 @@ def writer_qos(
     >>> writer_qos(AdvertiseQoSOptions(), queue_size=10, latch=False)[Policy.History]
     Policy.History.KeepLast(depth=10)
     """
+    import_cyclonedds()
     from cyclonedds.qos import Policy, Qos
 
     if not isinstance(options, AdvertiseQoSOptions):
@@ -235,6 +240,7 @@ def reader_qos(
       enforces ``deadline``/``deadline_cb`` itself with a timer, on DDS and TCPROS links alike.
     - Userdata(user_data) when non-empty.
     """
+    import_cyclonedds()
     from cyclonedds.qos import Policy, Qos
 
     if not isinstance(options, SubscribeQoSOptions):

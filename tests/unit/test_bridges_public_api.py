@@ -26,6 +26,7 @@ PUBLIC = frozenset({
     "micros_rt.log",
     "micros_rt.ratelimit",
     "micros_rt.rostypes",
+    "micros_rt.cyclone",   # the one first import of cyclonedds (a relay reading DDS discovery goes through it)
     "micros_rt.extend",
     "micros_rt.qos",
     "micros_rt.qos.options",

@@ -47,6 +47,7 @@ from micros_rt.log import nonblocking_logger
 from micros_rt.qos import SubscribeQoSOptions
 from micros_rt.transports.base import EndpointSpec, PushReader, TransportWriter
 
+from ...cyclone import import_cyclonedds
 from .config import ExportRule, Ros2Entry
 from .msgtypes import TypeLearningError, class_from_definition, installed_class, publisher_header
 from .services import ServiceCallError, call_service
@@ -102,6 +103,7 @@ class Ros2Directory:
     and QoS (Cyclone's built-in DCPSPublication and DCPSSubscription topics, read, never taken)."""
 
     def __init__(self, backend: Any, tagged: Any) -> None:
+        import_cyclonedds()
         from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription
         from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState
 
@@ -115,6 +117,7 @@ class Ros2Directory:
 
     def endpoints(self, kind: str, dds_topic: str) -> List[DiscoveredEndpoint]:
         """Writers (``kind="writers"``) or readers of ``dds_topic`` alive now."""
+        import_cyclonedds()
         from cyclonedds.core import DDSException
         from cyclonedds.qos import Policy
 

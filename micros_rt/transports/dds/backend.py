@@ -8,6 +8,8 @@ import threading
 import time
 from typing import Any, Callable, Dict, List, Optional, Sequence, Set, Tuple, TypeVar
 
+from ...cyclone import import_cyclonedds
+import_cyclonedds()
 from cyclonedds.core import DDSException, Listener
 
 from ..base import SOURCE_ORDER, TIME_FILTER, EndpointSpec, RemoteWriter, Sample, send_with_backoff

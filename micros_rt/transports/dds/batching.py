@@ -41,6 +41,7 @@ import threading
 import time
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
+from ...cyclone import import_cyclonedds
 from ...log import nonblocking_logger
 
 __all__ = ["BURST_AGE", "BURST_GAP", "BURST_IDLE", "BURST_TAIL", "MAX_BATCH_WINDOW", "Flusher", "adaptive_write",
@@ -75,6 +76,7 @@ def batch_window(latency_budget: float) -> float:
 
 def c_function(name: str, argtypes: List[Any], restype: Any) -> Any:
     """Cyclone's C function ``name`` through ctypes (which releases the GIL during the call)."""
+    import_cyclonedds()
     from cyclonedds.internal import load_cyclonedds
 
     fn = getattr(load_cyclonedds(), name)
@@ -158,6 +160,7 @@ def batching_writer_class() -> Any:
     micros_rt's own topic writers batch; every other writer in the process sends as Cyclone always does."""
     global _writer_class
     if _writer_class is None:
+        import_cyclonedds()
         from cyclonedds.pub import DataWriter
 
         qset = c_function("dds_qset_writer_batching", [ctypes.c_void_p, ctypes.c_bool], None)

@@ -13,6 +13,8 @@ import time
 from typing import Any, Callable, Dict, List, Optional, Set, Tuple
 
 
+from ...cyclone import import_cyclonedds
+import_cyclonedds()
 from cyclonedds._clayer import ddspy_take, ddspy_write
 from cyclonedds.core import DDSException, InstanceState, Listener, ReadCondition, SampleState, ViewState
 from cyclonedds.sub import DataReader
@@ -81,6 +83,7 @@ def matched_handles(get: Callable[[], List[int]]) -> List[int]:
 
 def _user_data_tag(data: Any) -> Optional[Dict[str, str]]:
     """The micros_rt tag in a discovered endpoint's USER_DATA (None: none, a foreign endpoint)."""
+    import_cyclonedds()
     from cyclonedds.qos import Policy
 
     try:
@@ -326,6 +329,7 @@ class DDSReader:
         data = matched_data(self._reader.get_matched_publication_data, handle)
         if data is None:
             return None
+        import_cyclonedds()
         from cyclonedds.qos import Policy
 
         user_data = None

@@ -20,6 +20,8 @@ import threading
 import time
 from typing import Any, Callable, Dict, FrozenSet, List, NamedTuple, Optional, Tuple
 
+from ...cyclone import import_cyclonedds
+import_cyclonedds()
 from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription
 from cyclonedds.core import DDSException, InstanceState, Listener, ReadCondition, SampleState, ViewState
 from cyclonedds.qos import Policy, Qos

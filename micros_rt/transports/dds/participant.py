@@ -18,6 +18,7 @@ import socket
 import threading
 from typing import Any, Dict, List, Mapping, Optional, Tuple
 
+from ...cyclone import import_cyclonedds
 from ...exceptions import DDSUnavailableError
 from ..netif import interface_mtu_of, interface_of
 from ...log import nonblocking_logger
@@ -296,6 +297,7 @@ class DDSParticipant:
     """
 
     def __init__(self, domain_id: int, config: str, *, local_id: Optional[int] = None) -> None:
+        import_cyclonedds()
         from cyclonedds.core import DDSException
         from cyclonedds.domain import Domain, DomainParticipant
         from cyclonedds.qos import Policy, Qos
@@ -315,7 +317,7 @@ class DDSParticipant:
             self.dp = DomainParticipant(self.local_id, qos=Qos(Policy.Userdata(PARTICIPANT_USER_DATA)))
         except DDSException as exc:
             raise DDSUnavailableError(
-                f"cannot start a Cyclone DDS participant on domain {domain_id}: {exc}") from exc
+                f"cannot start a Cyclone DDS participant on domain {domain_id}: {exc}; {_config_advice()}") from exc
         self.guid = str(self.dp.guid)
         # the sockets Cyclone just opened: what transport priority marks (see marking.py)
         self._sockets = set(process_udp_sockets()) - before
@@ -397,6 +399,7 @@ class DDSParticipant:
             return topic
 
     def _new_topic(self, name: str, idl_class: Any) -> Any:
+        import_cyclonedds()
         from cyclonedds.core import DDSException
         from cyclonedds.topic import Topic
 
@@ -450,6 +453,15 @@ def delete_entity(entity: Any) -> None:
         _log.debug("deleting DDS entity: %s", exc)
 
 
+def _config_advice(env: Mapping[str, str] = os.environ) -> str:
+    """What to check when Cyclone refuses to start a participant: the configuration it was given."""
+    user = env.get("CYCLONEDDS_URI", "").strip()
+    if user:
+        return f"check the Cyclone configuration CYCLONEDDS_URI names ({user[:200]})"
+    return (f"check that this host has the interface of ROS_IP/ROS_HOSTNAME's address ({_ros_address(env)}), "
+            "or point CYCLONEDDS_URI at a Cyclone configuration")
+
+
 _lock = threading.Lock()
 _participant: Optional[DDSParticipant] = None
 _failed: Optional[str] = None
@@ -472,22 +484,12 @@ def get_participant() -> Optional[DDSParticipant]:
             _log.warning("micros_rt: DDS disabled (MICROS_RT_DISABLE_DDS is set); using TCPROS for every topic")
             return None
         try:
-            # cyclonedds's modules import each other in a cycle: two threads importing them at once (the host
-            # watcher's housekeeping tick and a lazy DDS open for a peer) could meet one half-initialised, so the
-            # first import happens here, under the lock every DDS user of the process comes through
-            import cyclonedds.builtin  # noqa: F401
-            import cyclonedds.domain  # noqa: F401
-            import cyclonedds.idl  # noqa: F401
-            import cyclonedds.pub  # noqa: F401
-            import cyclonedds.sub  # noqa: F401
-            import cyclonedds.topic  # noqa: F401
-
+            import_cyclonedds()  # once per process, whole, by one thread (micros_rt/cyclone.py)
             _participant = DDSParticipant(domain_id_from_env(), cyclone_config())
         except Exception as exc:
             _failed = str(exc)
-            _log.warning(
-                "micros_rt: DDS is unavailable in this process (%s); every topic falls back to TCPROS. "
-                "Check ROS_DOMAIN_ID, CYCLONEDDS_URI and the network interface named by ROS_IP.", exc)
+            _log.warning("micros_rt: DDS is unavailable in this process (%s); every topic falls back to TCPROS "
+                         "or shared memory", exc)
             return None
         return _participant
 

@@ -14,6 +14,8 @@ import threading
 import uuid
 from typing import Any, Set, Tuple
 
+from ...cyclone import import_cyclonedds
+import_cyclonedds()
 from cyclonedds.idl import make_idl_struct
 from cyclonedds.idl import types as _t
 from ...log import nonblocking_logger
@@ -52,6 +54,7 @@ class Ros2GraphAnnouncer:
     """Publishes this process's node and its endpoints on ``ros_discovery_info`` (latched)."""
 
     def __init__(self, participant: Any, caller_id: str) -> None:
+        import_cyclonedds()
         from cyclonedds.core import Policy, Qos
         from cyclonedds.pub import DataWriter
         from cyclonedds.topic import Topic

@@ -22,6 +22,7 @@ import threading
 from pathlib import Path
 from typing import Any, Mapping, Optional, Tuple
 
+from ...cyclone import import_cyclonedds
 from ...log import nonblocking_logger
 
 __all__ = ["cache_dir", "load_type_data", "save_type_data", "type_key"]
@@ -67,6 +68,7 @@ class _Deferred:
         self._index = index
 
     def __getattr__(self, name: str) -> Any:
+        import_cyclonedds()
         from cyclonedds.idl._xt_builder import XTBuilder
 
         idl = self._idl

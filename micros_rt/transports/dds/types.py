@@ -31,6 +31,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple, Type
 import genpy
 import roslib.message
 
+from ...cyclone import import_cyclonedds
 from ...rostypes import BYTES_TYPES, FLOAT_TYPES, INT_RANGES, TIME_TYPES, parse_slot_type
 from ...exceptions import MicrosRtError, TypeMappingError
 from .typecache import type_key
@@ -126,6 +127,7 @@ _idl_cache: Dict[str, Any] = {}
 
 
 def _idl_class(ros_type: str) -> Any:
+    import_cyclonedds()
     from cyclonedds.idl import make_idl_struct
     from cyclonedds.idl import types as _t
 

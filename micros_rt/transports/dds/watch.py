@@ -24,6 +24,7 @@ import tempfile
 import time
 from typing import Any, Callable, FrozenSet, Optional
 
+from ...cyclone import import_cyclonedds
 from ...log import nonblocking_logger
 from .participant import PARTICIPANT_USER_DATA, DDSParticipant
 
@@ -125,6 +126,7 @@ class Ros2Watch:
             self.failed = True  # DDS cannot start here: the participant said why, once
             self._release()
             return
+        import_cyclonedds()
         from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsParticipant
         from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState
 
@@ -135,6 +137,7 @@ class Ros2Watch:
                   self.lock_path)
 
     def _look(self) -> None:
+        import_cyclonedds()
         from cyclonedds.core import DDSException
         from cyclonedds.qos import Policy
 
