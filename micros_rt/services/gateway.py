@@ -27,7 +27,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from ..exceptions import MicrosRtError
 from ..log import nonblocking_logger
-from ..transports.dds.participant import _is_loopback
+from ..transports.dds.participant import HELPER_ENCLAVE, _is_loopback
 
 __all__ = ["Ros2Gateway", "Ros2Unavailable", "gateway", "close_gateway", "ros2_python"]
 
@@ -131,7 +131,7 @@ class Ros2Gateway:
         env, scratch = self._helper_env()
         try:
             self._proc = subprocess.Popen(
-                [python, str(HELPER), str(theirs.fileno()), _ros2_node_name(node_name)],
+                [python, str(HELPER), str(theirs.fileno()), _ros2_node_name(node_name), HELPER_ENCLAVE],
                 pass_fds=(theirs.fileno(),), env=env, stdin=subprocess.DEVNULL, close_fds=True)
         except OSError as exc:
             ours.close()

@@ -592,7 +592,10 @@ def main() -> None:
     fd, node_name = int(sys.argv[1]), sys.argv[2]
     sock = socket.socket(fileno=fd)
     sock.setblocking(True)   # the descriptor may come non-blocking (a default timeout in the micros_rt process)
-    rclpy.init(args=[])
+    # the enclave rmw writes in the participant's user data ("enclave=/micros_rt;"): by it the host's ROS 2 watcher
+    # (micros_rt/transports/dds/watch.py) knows this participant as micros_rt's, not a ROS 2 node's
+    enclave = sys.argv[3] if len(sys.argv) > 3 else "/"
+    rclpy.init(args=["--ros-args", "--enclave", enclave])
     helper = Helper(sock, node_name)
     executor = SingleThreadedExecutor()
     executor.add_node(helper.node)

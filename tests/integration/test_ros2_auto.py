@@ -11,6 +11,7 @@ UDP sockets (rospy and shared memory use none).
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import time
@@ -149,3 +150,41 @@ def test_the_watcher_killed_another_node_takes_over(auto_env: Dict[str, str], sp
                      name="rclpy_listener")
     listener.wait_for("ready", T)
     listener.wait_for("recv", T)
+
+
+def test_a_node_offering_a_service_leaves_the_host_off_dds_and_rclpy_still_calls_it(
+        auto_env: Dict[str, str], spawn: harness.Spawner) -> None:
+    """The service's ROS 2 helper (an rclpy process of micros_rt's) is a DDS participant but no ROS 2 node: it must
+    not make the host's nodes ROS 2-visible (before, it did, and a 60-node ring with one service cost 2.2x rospy's
+    CPU). An rclpy client is a ROS 2 node: the service answers it."""
+    service = "/auto/trigger"
+    server = spawn([harness.MICROS_RT_PYTHON, str(harness.PEERS_DIR / "ros1_service_peer.py"), "--impl", "micros_rt",
+                    "serve", "--services", json.dumps([{"name": service, "type": "std_srvs/Trigger"}]),
+                    "--seconds", "90"], env=auto_env, name="mrt_server")
+    talker = spawn(mrt("talk", "--topic", "/auto/svc_out", "--count", 100000, "--rate", 20, "--duration", 90),
+                   env=auto_env, name="mrt_talker")
+    listener = spawn(mrt("listen", "--topic", "/auto/svc_out", "--duration", 90, "--node-name", "svc_near"),
+                     env=auto_env, name="mrt_listener")
+    assert server.wait_for("ready", T)["ros2"] == [service]
+    assert listener.wait_for("recv", T)["transport"] == "SHM"
+    nodes = [talker, listener]
+    # whichever micros_rt process watches the domain has seen the helper (and said it is micros_rt's) ...
+    def said(peer: harness.Peer, words: str) -> bool:  # in a JSON log event, or rospy's own output of the server
+        return any(words in (e.get("text") or e.get("line") or "") for e in peer.events()) or \
+            words in peer.stderr_tail(400)
+
+    marker = Path(f"/dev/shm/micros_rt_ros2_u{os.getuid()}_n{os.stat('/proc/self/ns/net').st_ino}_d{AUTO_DOMAIN}.seen")
+    wait_until(lambda: any(said(p, "ROS 2 helper joined") for p in [server, *nodes]) or marker.exists(), T,
+               "the host's watcher seeing the service's ROS 2 helper")
+    count = len(listener.events("recv"))
+    listener.wait_for_count("recv", count + 20, T)  # a second more: the nodes' housekeeping ticks ran
+    # ... and no node made a participant for it: only the watcher has one, and no marker was written
+    assert not marker.exists(), marker.read_text()
+    assert len(with_participant(nodes)) <= 1, [(p.name, udp_sockets(p.proc.pid)) for p in nodes]
+    assert not any(said(p, "make their topics ROS 2 topics") for p in [server, *nodes])
+
+    client = spawn([harness.ROS2_PYTHON, str(harness.PEERS_DIR / "ros2_service_peer.py"), "call", "--plan",
+                    json.dumps([{"name": service, "type": "std_srvs/srv/Trigger", "count": 3, "timeout": 10}])],
+                   env=auto_env, name="rclpy_client")
+    summary = client.wait_for("summary", 60)
+    assert summary["ok"] == 3, summary

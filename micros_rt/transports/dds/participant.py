@@ -30,6 +30,7 @@ __all__ = [
     "LOOPBACK_CONFIG",
     "DDSParticipant",
     "PARTICIPANT_USER_DATA",
+    "HELPER_ENCLAVE",
     "DEFAULT_LEASE_DURATION",
     "DEFAULT_SHM_LEASE_DURATION",
     "DEFAULT_NETWORK_LEASE_DURATION",
@@ -286,6 +287,10 @@ def domain_id_from_env(env: Mapping[str, str] = os.environ) -> int:
 #: User data of every micros_rt participant: rmw's ``enclave=/;`` (what ROS 2 nodes announce, so ROS 2 tools read
 #: it as theirs) and micros_rt's mark, by which the host's ROS 2 watcher (:mod:`.watch`) tells micros_rt from ROS 2
 PARTICIPANT_USER_DATA = b"enclave=/;micros_rt=1;"
+#: The ROS 2 enclave of micros_rt's own rclpy processes (the services helper, :mod:`micros_rt.services.gateway`):
+#: rmw puts ``enclave=/micros_rt;`` in their participants' user data, by which the watcher tells them from ROS 2
+#: nodes. Without security (``ROS_SECURITY_ENABLE``) an enclave names nothing else.
+HELPER_ENCLAVE = "/micros_rt"
 
 
 class DDSParticipant:

@@ -22,11 +22,11 @@ import fcntl
 import os
 import tempfile
 import time
-from typing import Any, Callable, FrozenSet, Optional
+from typing import Any, Callable, FrozenSet, Optional, Set
 
 from ...cyclone import import_cyclonedds
 from ...log import nonblocking_logger
-from .participant import PARTICIPANT_USER_DATA, DDSParticipant
+from .participant import HELPER_ENCLAVE, PARTICIPANT_USER_DATA, DDSParticipant
 
 __all__ = ["PARTICIPANT_USER_DATA", "Ros2Watch", "is_micros_rt_participant", "watch_paths", "watcher_pid"]
 
@@ -37,9 +37,18 @@ _log = nonblocking_logger("rosout.micros_rt.dds")
 TAKEOVER_GRACE = 10.0
 
 
+_HELPER_USER_DATA = f"enclave={HELPER_ENCLAVE};".encode()
+
+
 def is_micros_rt_participant(user_data: Optional[bytes]) -> bool:
-    """Whether a participant's user data is micros_rt's (:data:`PARTICIPANT_USER_DATA`)."""
-    return bool(user_data) and b"micros_rt=1;" in bytes(user_data or b"")
+    """Whether a participant's user data is micros_rt's: a node's (:data:`PARTICIPANT_USER_DATA`) or one of its rclpy
+    helpers' (:data:`HELPER_ENCLAVE`), which must not make the host's nodes ROS 2-visible by themselves.
+
+    >>> is_micros_rt_participant(b"enclave=/micros_rt;"), is_micros_rt_participant(b"enclave=/;")
+    (True, False)
+    """
+    data = bytes(user_data or b"")
+    return b"micros_rt=1;" in data or data.startswith(_HELPER_USER_DATA)
 
 
 def _netns() -> str:
@@ -88,6 +97,7 @@ class Ros2Watch:
         self._alive: Any = None
         self._since = 0.0              # when this node became the watcher
         self._foreign: FrozenSet[str] = frozenset()
+        self._helpers: Set[str] = set()  # micros_rt's own rclpy helpers seen (said once each)
         self.failed = False            # the watcher's participant could not start: said once, not tried again
 
     @property
@@ -154,6 +164,10 @@ class Ros2Watch:
                 user_data = None
             if not is_micros_rt_participant(user_data):
                 foreign.add(str(p.key))
+            elif bytes(user_data or b"").startswith(_HELPER_USER_DATA) and str(p.key) not in self._helpers:
+                self._helpers.add(str(p.key))
+                _log.info("micros_rt: a micros_rt ROS 2 helper joined DDS domain %d (%s); it is not a ROS 2 node, "
+                          "and this host's topics stay off DDS for it", self.domain, p.key)
         if foreign != self._foreign:
             if foreign - self._foreign:
                 _log.info("micros_rt: %d DDS participant(s) that are not micros_rt on domain %d (ROS 2 nodes or "
