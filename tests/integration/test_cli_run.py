@@ -14,6 +14,8 @@ import subprocess
 from pathlib import Path
 from typing import Any, Dict, List, Optional
 
+import pytest
+
 import harness
 from helpers import bus_info, data_links_between, received, tcp_links_between, transports
 
@@ -25,6 +27,14 @@ PLAIN_SERVICE = str(harness.PEERS_DIR / "plain_service.py")
 ROS2_SERVICE_PEER = str(harness.PEERS_DIR / "ros2_service_peer.py")
 PLAIN_ACTION_CLIENT = str(harness.PEERS_DIR / "plain_action_client.py")
 ROS2_ACTION_PEER = str(harness.PEERS_DIR / "ros2_action_peer.py")
+
+
+ROS1_ACTION_PEER = str(harness.PEERS_DIR / "ros1_action_peer.py")
+
+
+def user_defaults(env: Dict[str, str]) -> Dict[str, str]:
+    """``env`` with what users get: shared memory and ROS 2 visibility auto (the suite's harness sets other modes)."""
+    return {k: v for k, v in env.items() if k not in ("MICROS_RT_DISABLE_SHM", "MICROS_RT_ROS2")}
 
 
 def run(script: str, *args: str, profile: Optional[Path] = None, hints: Optional[str] = None) -> List[str]:
@@ -197,8 +207,10 @@ def test_an_unmodified_actionlib_client_reaches_a_ros2_action_server_under_run(r
     assert plain.wait(60) == 1, plain.stderr_tail()
     assert plain.events("unavailable") and not plain.events("active"), plain.events()
     # the same script under micros-rt run reaches the rclpy server
+    # under what users get (shared memory, ROS 2 visibility auto): the script's own links to the action's topics
+    # are shared-memory links, whose callerid_pub actionlib reads
     client = spawn(run(PLAIN_ACTION_CLIENT, name, "--order", "20", "__name:=run_plain_action_client"),
-                   name="run_plain_action_client")
+                   env=user_defaults(ros_master.env), name="run_plain_action_client")
     assert client.wait(60) == 0, client.stderr_tail()
     print("micros-rt run actionlib client:", json.dumps([{k: v for k, v in e.items() if k != "_rx"}
                                                          for e in client.events() if e["event"] != "_raw"]))
@@ -215,6 +227,33 @@ def test_an_unmodified_actionlib_client_reaches_a_ros2_action_server_under_run(r
     assert server.wait_for(lambda e: e.get("event") == "finished" and e["status"] == "CANCELED", 10)
     assert len(server.events("cancel_received")) == 1, server.events()
     assert "Traceback" not in client.stderr_tail(200), client.stderr_tail(200)   # a clean exit, offer and all
+
+
+@pytest.mark.parametrize("hints", [None, "tcp"])
+def test_an_unmodified_actionlib_client_and_server_both_under_run(ros_master: harness.RosMaster,
+                                                                  spawn: harness.Spawner, hints: Optional[str]) -> None:
+    """actionlib's client is ready only when its result and feedback connections name the server's node
+    (``callerid_pub``): on shared-memory links it once saw the publisher's URI and waited forever. With ``--hints
+    tcp`` every link is TCPROS, as a launch file may ask."""
+    env = user_defaults(ros_master.env)
+    name = f"/run_both{'_' + hints if hints else ''}/fib"
+    server = spawn(run(ROS1_ACTION_PEER, "serve", "--name", name, "--period", "0.01", hints=hints), env=env,
+                   name="run_action_server")
+    server.wait_for("ready", 60)
+    client = spawn(run(PLAIN_ACTION_CLIENT, name, "--order", "20", "--wait", "20", "__name:=run_both_client",
+                       hints=hints), env=env, name="run_action_client")
+    assert client.wait(90) == 0, (client.events()[-6:], client.stderr_tail())
+    available = client.wait_for("available", 1)
+    print(f"\nactionlib client under micros-rt run (hints {hints}): server available after "
+          f"{available['elapsed']:.2f} s")
+    assert available["elapsed"] < 5.0, available
+    results = {e["label"]: e for e in client.events("result")}
+    fib = results["fib"]
+    assert (fib["status_name"], fib["feedback"], fib["feedback_in_order"], fib["sequence_ok"]) == \
+        ("SUCCEEDED", 20, True, True), fib
+    cancel = results["cancel"]
+    assert cancel["status_name"] == "PREEMPTED" and cancel["feedback_in_order"] and cancel["feedback"] >= 5, cancel
+    assert server.wait_for(lambda e: e.get("event") == "finished" and e["status"] == "PREEMPTED", 10)
 
 
 def _run_cli(argv: List[str], env: Dict[str, str], cwd: Optional[Path] = None) -> "subprocess.CompletedProcess[str]":

@@ -137,7 +137,8 @@ class DDSSubscription(SubscriptionSide):
         source = (f"straight from the writers of graph {answer.via}'s relay (now {answer.writer}), no hop through "
                   f"{answer.node or pub_uri}") if answer.via else f"from writer {answer.writer}"
         conn = patches.DDSConnection(host.topic, pub_uri, "i", f"DDS connection on topic {dds_topic} {source}",
-                                    peer_guid=answer.writer, on_close=host.writers.connection_closed)
+                                    peer_guid=answer.writer, on_close=host.writers.connection_closed,
+                                    callerid_pub=answer.node)
         accepted = Accepted(pub_uri, answer.node, answer.latch, conn)
         host.writers.accept(answer.writer, accepted, answer.qos)
         if answer.via:

@@ -70,7 +70,7 @@ class ShmSubscription(SubscriptionSide):
                   "md5sum": host.data_class._md5sum, "transport": SHM}
         conn = patches.DDSConnection(host.topic, pub_uri, "i", f"SHM connection on channel {answer.channel} from "
                                     f"{node}", peer_guid=answer.channel, on_close=self._connection_closed,
-                                    transport=SHM)
+                                    transport=SHM, callerid_pub=node)
         put: Callable[[Any, int, Any], None] = self.inlet.put
         if answer.latch:
             queue_put = self.inlet.put

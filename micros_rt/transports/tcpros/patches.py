@@ -142,7 +142,8 @@ class DDSConnection:
     latch = None
 
     def __init__(self, topic: str, endpoint_id: str, direction: str, info: str, peer_guid: str = "",
-                 on_close: Optional[Callable[["DDSConnection"], None]] = None, *, transport: str = DDS) -> None:
+                 on_close: Optional[Callable[["DDSConnection"], None]] = None, *, transport: str = DDS,
+                 callerid_pub: str = "") -> None:
         self.id = next(_ids)
         self.transport_type = transport
         self.peer_guid = peer_guid  # the DDS reader (publisher side) or writer (subscriber side)
@@ -156,7 +157,10 @@ class DDSConnection:
         self.cleanup_cb: Optional[Callable[[Any], None]] = None
         self.stat_bytes = 0
         self.stat_num_msg = 0
-        self.callerid_pub = endpoint_id
+        # rospy's connection interface: an inbound TCPROS connection's ``callerid_pub`` is the publisher's node name
+        # (from its connection header), ``endpoint_id`` its URI. actionlib's wait_for_server compares the result and
+        # feedback connections' callerid_pub with the server's node name: a URI there kept it waiting forever.
+        self.callerid_pub = callerid_pub or endpoint_id
         self._on_close = on_close
 
     def fileno(self) -> None:
