@@ -233,7 +233,10 @@ def test_another_unix_user_falls_back_to_dds_in_words(ros_master: harness.RosMas
     request.addfinalizer(lambda: shutil.rmtree(home, ignore_errors=True))
     env = {**shm_env(ros_master), "HOME": home, "ROS_HOME": home, "ROS_LOG_DIR": home}
     topic = "/shm/two_users"
+    # the clone may sit in a directory only root can enter (/root, or a home of mode 0700): the listener may read
+    # and search what it needs to run (CAP_DAC_READ_SEARCH, nothing else; it writes and owns as nobody)
     listener = spawn(["setpriv", f"--reuid={nobody.pw_uid}", f"--regid={nobody.pw_gid}", "--clear-groups",
+                      "--inh-caps=+dac_read_search", "--ambient-caps=+dac_read_search",
                       *mrt("listen", "--topic", topic, "--exit-after", 5, "--duration", T)], env,
                      name="other_user_listener")
     listener.wait_for("ready", T)
