@@ -15,7 +15,7 @@ the patched name and for rospy's original class. What stays on stock rospy (TCPR
 ``rospy.AnyMsg`` endpoints (no type to map to DDS) and endpoints made before ``init_node`` (rospy allows
 that; micros_rt needs the node first).
 
->>> from micros_rt.core import drop_in
+>>> from micros_rt import drop_in
 >>> drop_in.install(profile="qos.yaml")           # doctest: +SKIP
 >>> import rospy; rospy.init_node("talker")         # a micros_rt node now  # doctest: +SKIP
 """

@@ -9,6 +9,11 @@ Fixtures
 
 At import time (before any test creates a DDS participant) this module points the in-process
 Cyclone DDS and Fast DDS at the loopback-only configs, so nothing leaves on the LAN.
+
+Markers, by directory: ``unit`` (pure logic, no process), ``contract`` (every transport against one contract),
+``integration`` (real rosmaster, peers, hosts); ``smoke``: the integration tests of :data:`SMOKE`, one per transport
+and per program. ``scripts/test.sh --fast`` runs ``not integration or smoke`` (the edit loop's tier, < 3 min on 2
+cores); ``scripts/test.sh`` runs everything.
 """
 
 from __future__ import annotations
@@ -16,7 +21,7 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
-from typing import Iterator, Optional
+from typing import Iterator, List, Optional
 
 import pytest
 
@@ -30,6 +35,40 @@ os.environ.update(harness.dds_env(_DOMAIN_ID))
 for _k in ("ROS_HOSTNAME",):
     os.environ.pop(_k, None)
 os.environ["ROS_IP"] = "127.0.0.1"
+
+
+#: One integration test per transport and per program: with the unit and contract tests (and the package's doctests,
+#: tests/unit/test_doctests.py), the fast tier. tests/unit/test_test_tiers.py checks that each still exists.
+SMOKE = (
+    "tests/integration/test_ros1_interop.py::test_stock_talker_heard_by_micros_rt_listener",          # TCPROS
+    "tests/integration/test_dds_plane.py::test_micros_rt_pair_uses_dds_not_tcp",                      # DDS
+    "tests/integration/test_shm.py::test_shm_tcpros_and_dds_on_one_topic_each_message_once",          # shared memory
+    "tests/integration/test_ros2_interop.py::test_rclpy_talker_to_micros_rt_listener[std_msgs/String]",  # ROS 2
+    "tests/integration/test_ros2_auto.py::test_a_node_offering_a_service_leaves_the_host_off_dds_and_rclpy_still_calls_it",
+    "tests/integration/test_services.py::test_rclpy_client_calls_micros_rt_server",                   # services
+    "tests/integration/test_actions.py::test_actionlib_client_drives_rclpy_server",                   # actions
+    "tests/integration/test_cli_run.py::test_an_unmodified_actionlib_client_and_server_both_under_run",  # micros-rt run
+    "tests/integration/test_relay.py::test_stock_cpp_and_python_topics_cross_to_another_graph",       # relay
+    "tests/integration/test_mqtt_bridge.py::test_talker_to_mosquitto_sub_as_json_and_text_and_mosquitto_pub_69_to_listener",
+    "tests/integration/test_mcu_bridge.py::test_imu_stream_at_100_hz_heard_by_micros_rt_listener_and_rostopic_echo",
+)
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    for name, what in (("unit", "pure logic, no process (tests/unit)"),
+                       ("contract", "every transport against one contract (tests/contract)"),
+                       ("smoke", "one integration test per transport and per program (conftest.SMOKE)")):
+        config.addinivalue_line("markers", f"{name}: {what}")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: List[pytest.Item]) -> None:
+    smoke = set(SMOKE)
+    for item in items:
+        kind = Path(str(item.fspath)).parent.name
+        if kind in ("unit", "contract", "integration"):
+            item.add_marker(kind)
+        if item.nodeid in smoke or item.nodeid.split("[")[0] in smoke:
+            item.add_marker("smoke")
 
 
 @pytest.fixture(scope="session")

@@ -192,6 +192,7 @@ def writer_qos(
       either kind (the subscriber's ``ordered_by_sending_timestamp`` decides).
     - Userdata(user_data) when non-empty (e.g. the graph tag).
 
+    >>> from cyclonedds.qos import Policy
     >>> writer_qos(AdvertiseQoSOptions(), queue_size=10, latch=False)[Policy.History]
     Policy.History.KeepLast(depth=10)
     """

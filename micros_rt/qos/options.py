@@ -5,7 +5,8 @@ same order, same defaults) as immutable, validated values. Derive variants with
 :func:`dataclasses.replace`::
 
     >>> opts = AdvertiseQoSOptions(transport_priority="high", latency_budget=0.005)
-    >>> dataclasses.replace(opts, using_best_effort_protocol=True)
+    >>> dataclasses.replace(opts, using_best_effort_protocol=True).using_best_effort_protocol
+    True
 
 Durations are float seconds inside: ``0.0`` is ``DURATION_MIN`` and ``math.inf`` is ``DURATION_MAX``.
 Strings exist only at the edges (:meth:`TransportPriority.parse`, ``to_dict``/``from_dict`` for XML-RPC
@@ -488,7 +489,8 @@ class AdvertiseQoSOptions:
     - ``data_centric_update``: refused with :class:`UnsupportedQoSError` (ROS 1 messages have no keys).
     - ``msg_valid_period``: lifespan of a message in seconds; ``math.inf`` = never expires.
 
-    >>> AdvertiseQoSOptions(transport_priority="HIGH", msg_valid_period=0.1)
+    >>> AdvertiseQoSOptions(transport_priority="HIGH", msg_valid_period=0.1).transport_priority
+    <TransportPriority.HIGH: 4>
     """
 
     transport_priority: TransportPriority = TransportPriority.NORMAL
@@ -532,7 +534,8 @@ class SubscribeQoSOptions:
     - ``using_best_effort_protocol``: ``True`` accepts both reliable and best-effort publishers.
     - ``data_centric_update``: refused with :class:`UnsupportedQoSError` (ROS 1 messages have no keys).
 
-    >>> SubscribeQoSOptions(deadline=0.5, deadline_cb=print, time_filter_duration=1.0)
+    >>> SubscribeQoSOptions(deadline=0.5, deadline_cb=print, time_filter_duration=1.0).time_filter_duration
+    1.0
     """
 
     deadline: float = DURATION_MAX
