@@ -5,7 +5,8 @@ Runs as a stock node (``/usr/bin/python3 plain_talker.py``) and unchanged under 
 (and from a launch file). Publishes ``std_msgs/String`` "<~greeting> <n>" on ``chatter`` (a relative
 name: remappings and namespaces apply). Prints JSON lines: ``ready`` (node, topic, pid, uri, greeting),
 ``done`` (sent). Options: --count N (0: until shutdown), --rate HZ (0: as fast as publish() returns),
---wait-subscribers N, --queue-size N, --latch.
+--wait-subscribers N, --queue-size N, --latch, --linger S (stay S seconds after the last message, a latched
+publisher serving late subscribers).
 """
 
 import argparse
@@ -32,6 +33,7 @@ def main() -> None:
     ap.add_argument("--wait-subscribers", type=int, default=0)
     ap.add_argument("--queue-size", type=int, default=100)
     ap.add_argument("--latch", action="store_true")
+    ap.add_argument("--linger", type=float, default=0.0)
     args = ap.parse_args(rospy.myargv()[1:])
 
     rospy.init_node("plain_talker")
@@ -53,6 +55,9 @@ def main() -> None:
         while period and not rospy.is_shutdown() and (left := next_t - time.monotonic()) > 0:
             time.sleep(min(0.05, left))
     emit("done", sent=sent, connections=pub.get_num_connections())
+    end = time.monotonic() + args.linger
+    while not rospy.is_shutdown() and time.monotonic() < end:
+        time.sleep(0.05)
 
 
 if __name__ == "__main__":

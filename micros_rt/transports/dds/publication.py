@@ -9,7 +9,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import threading
-from typing import TYPE_CHECKING, Callable, Dict, Optional, Set, Tuple, Union
+from typing import Any, TYPE_CHECKING, Callable, Dict, Optional, Set, Tuple, Union
 
 from ...exceptions import MicrosRtError
 from ...log import nonblocking_logger
@@ -99,8 +99,22 @@ class DDSPublication(PublicationSide):
             self._open_writer(backend)
             if self.dds is not None:
                 _log.info("micros_rt: topic %s: DDS writer made", self.host.topic)
+                replayed = self._replay_latched(None)
                 self.host.writers_changed()
+                self._replay_latched(replayed)  # a publish() between the two went to the writers before this one
             return self.dds is not None
+
+    def _replay_latched(self, done: Any) -> Any:
+        """A latched topic's last message, published before this writer existed (ROS 2 appeared later, under
+        ``auto``), into the writer's history, where a late ROS 2 subscriber (transient_local) finds it, as a late
+        TCPROS subscriber gets it from rospy. ``done``: the message already written (not again)."""
+        latched = self.host.latched_message() if self.host.latch else None
+        if latched is None or latched is done or self.dds is None:
+            return done
+        data = self.dds.prepare(latched)
+        if data is not None:
+            self.dds.send(data)
+        return latched
 
     def sending(self) -> bool:
         """The own writer stays out while every DDS subscriber is served by foreign writers (it would send each
