@@ -250,7 +250,7 @@ def test_an_unmodified_actionlib_client_and_server_both_under_run(ros_master: ha
     results = {e["label"]: e for e in client.events("result")}
     fib = results["fib"]
     assert (fib["status_name"], fib["feedback"], fib["feedback_in_order"], fib["sequence_ok"]) == \
-        ("SUCCEEDED", 20, True, True), fib
+        ("SUCCEEDED", 20, True, True), (fib, server.events()[-4:])
     cancel = results["cancel"]
     assert cancel["status_name"] == "PREEMPTED" and cancel["feedback_in_order"] and cancel["feedback"] >= 5, cancel
     assert server.wait_for(lambda e: e.get("event") == "finished" and e["status"] == "PREEMPTED", 10)

@@ -188,6 +188,8 @@ class DDSPublication(PublicationSide):
                     f"{foreign.options.transport_priority.name}); none of it passes through this node")
         conn = patches.DDSConnection(host.topic, subscriber, "o", info, peer_guid=offer.reader,
                                     on_close=self._connection_closed)
+        # a message written before the reader matched would not reach it: rospy's has_connection waits for that
+        conn.ready = lambda: conn.seen or conn.peer_guid in self._reached([conn], dds)
         with self.lock:
             old = self.connections.get(subscriber)
             self.connections[subscriber] = conn

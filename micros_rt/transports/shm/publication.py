@@ -70,6 +70,7 @@ class ShmPublication(PublicationSide):
                 f"priority {host.options.transport_priority.name})")
         conn = patches.DDSConnection(host.topic, subscriber, "o", info, peer_guid=channel.name,
                                     on_close=self._connection_closed, transport=SHM)
+        conn.ready = channel.attached  # a message sent before the subscriber's port attached would not reach it
         with self.lock:
             old = self.links.get(subscriber)
             self.links[subscriber] = conn

@@ -161,6 +161,9 @@ class DDSConnection:
         # (from its connection header), ``endpoint_id`` its URI. actionlib's wait_for_server compares the result and
         # feedback connections' callerid_pub with the server's node name: a URI there kept it waiting forever.
         self.callerid_pub = callerid_pub or endpoint_id
+        #: whether a message published now reaches the peer (an outbound link: the subscriber attached or matched);
+        #: what rospy's ``has_connection`` reads (:func:`_publisher_has_connection`)
+        self.ready: Callable[[], bool] = lambda: True
         self._on_close = on_close
 
     def fileno(self) -> None:
@@ -186,6 +189,20 @@ class DDSConnection:
                 self.cleanup_cb(self)
             except Exception:  # rospy's own cleanup; never break our close
                 _log.debug("cleanup callback failed", exc_info=True)
+
+
+def _publisher_has_connection(self: Any, endpoint_id: str) -> bool:
+    """rospy's ``_TopicImpl.has_connection`` for publishers: a subscriber's link counts once a message published
+    now reaches it. A TCPROS link enters rospy's list after its handshake, when the subscriber reads; a shared-memory
+    or DDS link enters it when the publisher answers ``requestTopic``, before the subscriber has attached or
+    matched (:attr:`DDSConnection.ready`). actionlib's ``wait_for_server`` asks this of the goal publisher: on a
+    loaded host its first goal went out before the server's subscriber attached, was lost, and the goal stayed
+    PENDING (4 of 18 runs of an actionlib client and server under ``micros-rt run``)."""
+    for c in self.connections:  # rospy replaces the list, never mutates it: no lock needed (as rospy's own)
+        if c.endpoint_id == endpoint_id:
+            ready = getattr(c, "ready", None)
+            return True if ready is None else bool(ready())
+    return False
 
 
 def add_pseudo_connection(topic: str, conn: DDSConnection, *, publisher: bool) -> bool:
@@ -672,5 +689,6 @@ def install(find_publication: Callable[[str], Optional[PublicationHook]],
         handler_cls.requestTopic = _wrapped_request_topic(handler_cls.requestTopic)
         pub_cls = rospy.topics._PublisherImpl
         pub_cls.add_connection = _wrapped_publisher_add_connection(pub_cls.add_connection)
+        pub_cls.has_connection = _publisher_has_connection
         rospy.impl.registration.RegManager.publisher_update = _merging_publisher_update
         _installed = True
