@@ -476,7 +476,7 @@ class _DDSSubscriberWatch:
                     if told is None:
                         continue
                     for conn in conns:
-                        if conn.seen and conn.id not in told:
+                        if conn.ready() and conn.id not in told:
                             told.add(conn.id)
                             try:
                                 listener.peer_subscribe(topic, listener.publish, listener.publish)

@@ -55,7 +55,9 @@ SMOKE = (
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    for name, what in (("unit", "pure logic, no process (tests/unit)"),
+    for name, what in (("env", "env(VAR=value, ..., why=...): the module runs with these settings instead of the "
+                               "defaults users get (applied by the module-scoped fixture _module_env)"),
+                       ("unit", "pure logic, no process (tests/unit)"),
                        ("contract", "every transport against one contract (tests/contract)"),
                        ("smoke", "one integration test per transport and per program (conftest.SMOKE)")):
         config.addinivalue_line("markers", f"{name}: {what}")
@@ -69,6 +71,33 @@ def pytest_collection_modifyitems(config: pytest.Config, items: List[pytest.Item
             item.add_marker(kind)
         if item.nodeid in smoke or item.nodeid.split("[")[0] in smoke:
             item.add_marker("smoke")
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _module_env(request: pytest.FixtureRequest) -> Iterator[None]:
+    """A module marked ``pytest.mark.env(VAR=value, ..., why="...")`` runs with those settings, in this process
+    and in every child started from ``ros_master.env`` (the session's master, changed in place for the module);
+    everything else runs the defaults users get. ``why`` is required: a mode users do not get needs a reason."""
+    marker = request.node.get_closest_marker("env")
+    if marker is None:
+        yield
+        return
+    settings = dict(marker.kwargs)
+    why = settings.pop("why", "")
+    assert why, f"{request.node.nodeid}: pytest.mark.env needs why=... (why this module leaves the defaults)"
+    master = request.getfixturevalue("ros_master")
+    saved = {k: (os.environ.get(k), master.env.get(k)) for k in settings}
+    os.environ.update(settings)
+    master.env.update(settings)
+    try:
+        yield
+    finally:
+        for key, (env_value, master_value) in saved.items():
+            for target, value in ((os.environ, env_value), (master.env, master_value)):
+                if value is None:
+                    target.pop(key, None)
+                else:
+                    target[key] = value
 
 
 @pytest.fixture(scope="session")

@@ -92,21 +92,24 @@ def dds_domain_id_for_pid(pid: Optional[int] = None) -> int:
 
 
 def dds_env(domain_id: int) -> Dict[str, str]:
-    """Environment for loopback-only DDS on ``domain_id`` (Cyclone and Fast DDS/rclpy)."""
+    """Environment for loopback-only DDS on ``domain_id`` (Cyclone and Fast DDS/rclpy), and no MICROS_RT_* setting:
+    the suite runs what users get (a module that tests another mode declares it, see :data:`DDS_BETWEEN_NODES`)."""
     return {
         "ROS_DOMAIN_ID": str(domain_id),
-        # The suite tests the DDS plane between micros_rt nodes of this one machine, as between hosts: shared
-        # memory (chosen first on one host) is off unless a test turns it on ("0"), as tests/integration/
-        # test_shm.py and the SHM contract tests do.
-        "MICROS_RT_DISABLE_SHM": "1",
-        # ... and every node's topics are ROS 2 topics from its start, whoever else is on the domain (the run's
-        # ROS 2 peers come and go on one domain, and auto visibility would follow them from test to test);
-        # tests/integration/test_ros2_auto.py tests the default, auto, with this removed
-        "MICROS_RT_ROS2": "on",
+        # what users get otherwise: shared memory between nodes of one host, ROS 2 visibility auto. A module that
+        # tests another mode says so with ``pytest.mark.env(...)`` and why (tests/conftest.py applies it)
         "CYCLONEDDS_URI": CYCLONEDDS_CONFIG.as_uri(),
         "FASTRTPS_DEFAULT_PROFILES_FILE": str(FASTDDS_PROFILE),
         "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
     }
+
+
+#: The mode of a module that tests the DDS plane between micros_rt nodes (QoS on the wire, lossless DDS, discovery,
+#: robustness): shared memory off, so two nodes of this host talk DDS as two hosts do, and every topic on DDS from
+#: its start (visibility on), as between hosts, where a subscriber's DDS reader must exist before data flows.
+DDS_BETWEEN_NODES = {"MICROS_RT_DISABLE_SHM": "1", "MICROS_RT_ROS2": "on",
+                     "why": "the DDS plane between hosts, with two nodes of this host standing in for two hosts "
+                            "(shared memory off; DDS readers and writers from each topic's start)"}
 
 
 def delete_netns(names: Sequence[str]) -> None:

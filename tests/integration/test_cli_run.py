@@ -57,7 +57,7 @@ def links_of(master: harness.RosMaster, node: str, topic: str) -> Dict[str, str]
     return {str(c[1]): str(c[3]) for c in bus_info(master, node) if c[4] == topic}
 
 
-def test_two_plain_scripts_talk_dds_and_tcpros_with_stock_nodes(ros_master: harness.RosMaster,
+def test_two_plain_scripts_talk_shm_and_tcpros_with_stock_nodes(ros_master: harness.RosMaster,
                                                                 spawn: harness.Spawner) -> None:
     topic = "/run_chatter"
     listener = spawn(run(PLAIN_LISTENER, "--topic", topic, "__name:=run_listener"), name="run_listener")
@@ -74,11 +74,12 @@ def test_two_plain_scripts_talk_dds_and_tcpros_with_stock_nodes(ros_master: harn
                        "--wait-subscribers", "2", "__name:=run_talker"), name="run_talker")
     assert talker.wait_for("ready", 60)["is_rospy_publisher"] is True
 
-    # 1,000 messages, in order, over DDS between the two micros-rt run scripts; TCPROS to the stock one
+    # 1,000 messages, in order, over shared memory between the two micros-rt run scripts (one host); TCPROS to the
+    # stock one
     listener.wait_for_count("recv", 1000, timeout=60)
     stock_listener.wait_for_count("recv", 1000, timeout=60)
     assert received(listener)[:1000] == [f"hello {i}" for i in range(1000)]
-    assert set(transports(listener)) == {"DDS"}
+    assert set(transports(listener)) == {"SHM"}
     assert received(stock_listener)[:1000] == [f"hello {i}" for i in range(1000)]
     assert set(transports(stock_listener)) == {"TCPROS"}
     # the connection header names the publishing node on both transports, as rospy's does
@@ -95,9 +96,9 @@ def test_two_plain_scripts_talk_dds_and_tcpros_with_stock_nodes(ros_master: harn
     # what the ROS graph says: getBusInfo and rosnode info
     talker_links = links_of(ros_master, "/run_talker", topic)
     print("getBusInfo /run_talker:", talker_links)
-    assert talker_links == {"/run_listener": "DDS", "/stock_plain_listener": "TCPROS"}
+    assert talker_links == {"/run_listener": "SHM", "/stock_plain_listener": "TCPROS"}
     info = harness.rosnode(ros_master, "info", "/run_listener", timeout=30).stdout
-    assert "/run_talker" in info and "DDS" in info, info
+    assert "/run_talker" in info and "SHM" in info, info
 
     # rostopic echo (stock, TCPROS) hears the micros-rt run talker
     echo = harness.rostopic(ros_master, "echo", "-n", "3", topic, timeout=30).stdout
@@ -131,7 +132,7 @@ def test_profile_gives_an_unmodified_subscriber_a_time_filter(ros_master: harnes
     n_filtered, n_all = len(received(filtered)), len(received(unfiltered))
     print(f"time filter 1.0 s from the profile: {n_filtered} of {n_all} messages (200 sent at 50 Hz, ~4 s)")
     assert n_all == 200
-    assert set(transports(filtered)) == {"DDS"}
+    assert set(transports(filtered)) == {"SHM"}
     assert 2 <= n_filtered <= 7, n_filtered  # ~4 s of data at one message per second
     # --hints tcp: that script's subscription never uses DDS, even from a micros_rt publisher
     tcp_only.wait_for_count("recv", 200, timeout=30)
@@ -155,7 +156,7 @@ def test_services_params_timers_and_wait_for_message_under_run(ros_master: harne
     assert events["timer"]["ticks"] >= 3
     assert abs(events["time"]["get_time"] - events["time"]["wall"]) < 5.0
     assert events["wait_for_message"]["data"].startswith("hello ")
-    assert events["wait_for_message"]["transport"] == "DDS"
+    assert events["wait_for_message"]["transport"] == "SHM"
     assert events["wait_timeout"]["raised"] is True
     assert events["shutdown"] == {**events["shutdown"], "is_shutdown": True, "hooks": ["called"]}
     assert "plain_probe says hello on /rosout" in "\n".join(e.get("line", "") for e in probe.events("_raw"))
@@ -339,11 +340,11 @@ def test_subscriber_listener_and_headers_under_run(ros_master: harness.RosMaster
     welcome_tcp = tcp_listener.wait_for("recv", 30)
     print("subscriber_listener:", welcome_dds["data"], welcome_dds["transport"], "/", welcome_tcp["data"],
           welcome_tcp["connection_header"])
-    assert welcome_dds["data"].startswith("welcome ") and welcome_dds["transport"] == "DDS"
+    assert welcome_dds["data"].startswith("welcome ") and welcome_dds["transport"] == "SHM"
     assert welcome_tcp["data"].startswith("welcome ")
     assert welcome_tcp["connection_header"]["robot"] == "r2"  # Publisher(headers=...) on the TCPROS link
     links = links_of(ros_master, "/run_announcer", "/run_announce")
-    assert links == {"/run_welcomed": "DDS", "/stock_welcomed": "TCPROS"}, links
+    assert links == {"/run_welcomed": "SHM", "/stock_welcomed": "TCPROS"}, links
     # the DDS subscriber leaves: rospy's remove_connection tells the listener
     dds_listener.stop()
     announcer.wait_for("peer_unsubscribe", 30)
@@ -364,4 +365,4 @@ def test_second_subscriber_of_a_latched_topic_gets_the_latched_message(ros_maste
     assert probe.wait(60) == 0, probe.stderr_tail()
     got = {e["topic"]: (e["data"], e["transport"]) for e in probe.events("latched")}
     print("wait_for_message on subscribed latched topics:", got)
-    assert got == {"/run_latched_dds": ("hello 0", "DDS"), "/run_latched_tcp": ("hello 0", "TCPROS")}
+    assert got == {"/run_latched_dds": ("hello 0", "SHM"), "/run_latched_tcp": ("hello 0", "TCPROS")}

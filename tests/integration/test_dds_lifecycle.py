@@ -10,6 +10,8 @@ import subprocess
 import time
 from typing import Any, Dict
 
+import pytest
+
 import harness
 from helpers import mrt
 
@@ -19,6 +21,8 @@ import micros_rt
 from cyclonedds.core import Entity
 from cyclonedds.topic import Topic
 from std_msgs.msg import String
+
+pytestmark = pytest.mark.env(**harness.DDS_BETWEEN_NODES)
 
 def topics():
     return sum(isinstance(e, Topic) for e in list(Entity._entities.values()))

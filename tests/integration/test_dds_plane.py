@@ -10,6 +10,8 @@ import pytest
 import harness
 from helpers import bus_info, data_links_between, mrt, received, stock_talker, transports
 
+pytestmark = pytest.mark.env(**harness.DDS_BETWEEN_NODES)
+
 
 def test_micros_rt_pair_uses_dds_not_tcp(ros_master: harness.RosMaster, spawn: harness.Spawner) -> None:
     listener = spawn(mrt("listen", "--topic", "/dds_pair", "--duration", "30", "--node-name", "dds_listener"))

@@ -6,8 +6,12 @@ import json
 import subprocess
 from pathlib import Path
 
+import pytest
+
 import harness
 from helpers import logs, mrt, received, stock_talker, transports
+
+pytestmark = pytest.mark.env(**harness.DDS_BETWEEN_NODES)
 
 BROKEN_CYCLONE = (
     '<CycloneDDS><Domain id="any"><General><Interfaces>'

@@ -10,6 +10,8 @@ import pytest
 
 import harness
 
+pytestmark = pytest.mark.env(**harness.DDS_BETWEEN_NODES)
+
 SEQ_PEER = str(harness.PEERS_DIR / "mrt_seq.py")
 
 

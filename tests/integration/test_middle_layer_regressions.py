@@ -7,6 +7,8 @@ import json
 import subprocess
 from typing import Any, Dict
 
+import pytest
+
 import harness
 from helpers import mrt
 
@@ -17,6 +19,8 @@ from micros_rt.core.runtime import _node
 from cyclonedds.core import Entity, GuardCondition, WaitSet
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
+
+pytestmark = pytest.mark.env(**harness.DDS_BETWEEN_NODES)
 
 def state():
     live = list(Entity._entities.values())

@@ -5,8 +5,12 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 import harness
 from helpers import mrt, stock_listener
+
+pytestmark = pytest.mark.env(**harness.DDS_BETWEEN_NODES)
 
 # float32-exact values (k/4), so the three subscribers' figures compare exactly
 RANGES = [k * 0.25 for k in range(-40, 1041)]

@@ -19,6 +19,8 @@ from helpers import logs, mrt, received, stock_talker, tcp_links_between, transp
 import micros_rt
 from micros_rt.exceptions import UnsupportedQoSError
 
+pytestmark = pytest.mark.env(**harness.DDS_BETWEEN_NODES)
+
 
 def _recv_times(peer: harness.Peer) -> List[float]:
     return [float(e["t"]) for e in peer.events("recv")]

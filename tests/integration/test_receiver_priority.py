@@ -12,7 +12,11 @@ from __future__ import annotations
 import os
 from typing import Any, Dict, List
 
+import pytest
+
 import harness
+
+pytestmark = pytest.mark.env(**harness.DDS_BETWEEN_NODES)
 
 LINK = str(harness.PEERS_DIR / "mrt_link.py")
 

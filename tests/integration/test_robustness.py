@@ -15,9 +15,13 @@ import time
 import uuid
 from typing import Any, Callable, Dict, List
 
+import pytest
+
 import harness
 import micros_rt.negotiation
 from helpers import logs, mrt
+
+pytestmark = pytest.mark.env(**harness.DDS_BETWEEN_NODES)
 
 PROBE = str(harness.PEERS_DIR / "mrt_probe.py")
 STRING_MD5 = "992ce8a1687cec8c8bd883ec73ca41d1"

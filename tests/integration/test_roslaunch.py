@@ -15,9 +15,13 @@ import signal
 from pathlib import Path
 from typing import Any, Dict, List, Tuple
 
+import pytest
+
 import harness
 from helpers import bus_info, stock_listener, tcp_links_between
 from test_relay import robots  # noqa: F401  (the two-master fixture)
+
+pytestmark = pytest.mark.env(**harness.DDS_BETWEEN_NODES)
 
 VENV_BIN = harness.REPO_ROOT / ".venv" / "bin"
 ROSLAUNCH = "/usr/bin/roslaunch"

@@ -327,8 +327,12 @@ class ShmLink:
 
     def __init__(self, topic: str, channel: str, data_class: Type[genpy.Message], *, header: Dict[str, str],
                  qos: Any, put: Callable[[Any, int, Any], None], on_drop: Callable[[int], None],
-                 on_gone: Callable[["ShmLink"], None], peer_pid: int = 0) -> None:
+                 on_gone: Callable[["ShmLink"], None], peer_pid: int = 0,
+                 on_latched: Optional[Callable[[Any], None]] = None) -> None:
         self.topic = topic
+        #: a latched publisher's link: each message is also kept there (rospy keeps it on the connection for
+        #: callbacks added later), whichever thread drains the link
+        self._on_latched = on_latched
         self.peer_pid = peer_pid      # the publisher's process (0: unknown)
         self.channel = channel
         self.qos = qos                # the publisher's QoS (lifespan, latency budget), from its answer
@@ -378,6 +382,8 @@ class ShmLink:
                 self._on_drop(seq - last - 1)  # overwritten in a KEEP_LAST channel: counted, never silent
             self._last = seq
             msg._connection_header = header
+            if self._on_latched is not None:
+                self._on_latched(msg)
             put(msg, source_ns, self)
         return n
 

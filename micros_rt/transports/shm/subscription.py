@@ -72,21 +72,17 @@ class ShmSubscription(SubscriptionSide):
                                     f"{node}", peer_guid=answer.channel, on_close=self._connection_closed,
                                     transport=SHM, callerid_pub=node)
         put: Callable[[Any, int, Any], None] = self.inlet.put
-        if answer.latch:
-            queue_put = self.inlet.put
 
-            def put_latched(msg: Any, source_ns: int, link: Any) -> None:
-                conn.latch = msg  # for callbacks added later (replay_latched), as rospy keeps it per connection
-                queue_put(msg, source_ns, link)
-
-            put = put_latched
+        def keep_latched(msg: Any) -> None:
+            conn.latch = msg  # for callbacks added later (replay_latched), as rospy keeps it per connection
 
         def dropped(n: int) -> None:
             self.inlet.dropped += n
 
         try:
             link = ShmLink(host.topic, answer.channel, host.data_class, header=header, qos=answer.qos, put=put,
-                           on_drop=dropped, on_gone=lambda _link: self._link_gone(conn), peer_pid=answer.pid)
+                           on_drop=dropped, on_gone=lambda _link: self._link_gone(conn), peer_pid=answer.pid,
+                           on_latched=keep_latched if answer.latch else None)
         except MicrosRtError as exc:
             _log.warning("micros_rt: %s; the publisher %s is asked again", exc, pub_uri)
             return 0, str(exc), 0
