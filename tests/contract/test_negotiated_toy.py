@@ -79,8 +79,11 @@ micros_rt.shutdown()
 
 def _lines(proc: "subprocess.Popen[str]") -> Dict[str, Any]:
     assert proc.stdout is not None
-    line = proc.stdout.readline()
-    assert line, (proc.stderr.read() if proc.stderr else "")[-3000:]
+    while True:
+        line = proc.stdout.readline()
+        assert line, (proc.stderr.read() if proc.stderr else "")[-3000:]
+        if line.startswith("{"):   # rospy prints the node's INFO log lines on stdout too
+            break
     event: Dict[str, Any] = json.loads(line)
     return event
 

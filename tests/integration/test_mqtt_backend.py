@@ -75,7 +75,7 @@ def test_profile_rules_mirror_publishers_and_feed_subscribers(
         got_a = same_graph.wait_for_count("recv", N, timeout=60)
         harness.wait_until(lambda: len(other_graph.events("recv")) >= N, 5)   # let late copies show up
         assert [e["data"] for e in same_graph.events("recv")] == [f"hello {i}" for i in range(N)]
-        assert {e["transport"] for e in got_a} == {"DDS"}        # its own graph's copy over MQTT is dropped
+        assert {e["transport"] for e in got_a} == {"SHM"}        # its own graph's copy over MQTT is dropped
 
         filtered_n = len(filtered.wait_for_count("recv", 2, timeout=30))
         assert 2 <= filtered_n <= N // 3, filtered_n              # 2 s of 20 Hz through a 0.5 s time filter

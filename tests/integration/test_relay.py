@@ -411,6 +411,9 @@ def test_micros_rt_subscribers_read_the_exporting_relay_straight_without_a_hop_t
     cannot serve (reliable, A sends best effort: served by relay B's own writer) stall. Relay A restarted:
     the subscriber takes the new exporter's writer with nothing done. Exactly once throughout."""
     a, b = robots
+    # B's micros_rt subscribers offer no shared memory: two graphs of this host stand in for two robots, whose
+    # subscribers cannot reach the exporting relay's host over shared memory (by default one would, through B's relay)
+    b_dds = {**b.env, "MICROS_RT_DISABLE_SHM": "1"}
     (tmp_path / "a.yaml").write_text("graph: robot_a\nexport:\n  /chatter: {transport_priority: HIGH}\n"
                                      "  /fast: {using_best_effort_protocol: true}\n  /other: {}\n")
     (tmp_path / "b.yaml").write_text("graph: robot_b\nimport:\n  /robot_a/chatter: {}\n  /robot_a/fast: {}\n"
@@ -426,12 +429,12 @@ def test_micros_rt_subscribers_read_the_exporting_relay_straight_without_a_hop_t
     for topic in ("/robot_a/chatter", "/robot_a/fast", "/robot_a/other"):
         _stats_with(relay_b, "imports", topic)
     direct = spawn(mrt("listen", "--topic", "/robot_a/chatter", "--node-name", "direct",
-                       "--duration", 140), env=b.env, name="direct")
+                       "--duration", 140), env=b_dds, name="direct")
     # an import renamed with as: another DDS topic than the export's; the subscriber opens a reader there
     renamed = spawn(mrt("listen", "--topic", "/other_here", "--node-name", "renamed", "--duration", 140),
-                    env=b.env, name="renamed")
+                    env=b_dds, name="renamed")
     through = spawn(mrt("listen", "--topic", "/robot_a/fast", "--node-name", "through",
-                        "--duration", 140), env=b.env, name="through")
+                        "--duration", 140), env=b_dds, name="through")
     stock = spawn(stock_listener("--topic", "/robot_a/chatter", "--duration", 140), env=b.env)
     for peer in (direct, renamed, through, stock):
         peer.wait_for_count("recv", 5, timeout=60)
