@@ -153,13 +153,14 @@ class _Ros2Mqtt:
         self.subscriber = self.bridge.nh.subscribe(self.p.ros_topic, data_class, self.on_ros, self.p.queue_size)
         _log.info("micros_rt mqtt: ROS topic '%s' (%s) subscribed", self.p.ros_topic, data_class._type)
 
-    def attach_raw(self, type_name: str) -> None:
-        """A type whose package is not installed: take the serialized bytes (stock rospy's AnyMsg over
-        TCPROS, as mqtt_client's ShapeShifter) and the type from the connection header."""
+    def attach_raw(self, type_name: str, *, installed: bool) -> None:
+        """Take the serialized bytes (stock rospy's AnyMsg over TCPROS, as mqtt_client's ShapeShifter) and the
+        type from the connection header: every framed topic, and any topic whose type is not installed."""
         self.raw_subscriber = rospy.Subscriber(self.p.ros_topic, rospy.AnyMsg, self.on_raw,
                                                queue_size=self.p.queue_size)
-        _log.info("micros_rt mqtt: ROS topic '%s' (%s, not installed here: bridged as bytes) subscribed",
-                  self.p.ros_topic, type_name)
+        _log.info("micros_rt mqtt: ROS topic '%s' (%s, %s) subscribed", self.p.ros_topic, type_name,
+                  "bridged as its serialized bytes, as mqtt_client's ShapeShifter" if installed else
+                  "not installed here: bridged as its serialized bytes")
 
     def on_raw(self, raw: Any) -> None:
         header = getattr(raw, "_connection_header", None) or {}
@@ -345,6 +346,7 @@ class _Mqtt2Ros:
         self.pending: Deque[bytes] = collections.deque()
         self.latency_pub: Optional[micros_rt.Publisher] = None
         self.delivered = 0
+        self.retyped = 0                     # primitive texts of another kind re-advertised the ROS topic
         self.worker = _TopicWorker(p.mqtt_topic, lambda n: bridge.problems.report(
             p.mqtt_topic, "backlog", f"MQTT topic '{p.mqtt_topic}': more than {WORKER_BACKLOG} messages waited for "
                                      f"the ROS side; dropped the oldest ({n} in all)"))
@@ -464,9 +466,18 @@ class _Mqtt2Ros:
                 if p.json:
                     assert self.data_class is not None
                     msg = codec.json_to_msg(text, self.data_class)
-                elif self.data_class is None:
+                elif not p.ros_type:
+                    # as mqtt_client: each text is probed, and a text of another kind than the last one
+                    # re-advertises the ROS topic with its type (42, abc, 1.5, True: Int32, String, Float32, Bool)
                     msg = codec.probe_primitive(text)
-                    self._advertise(type(msg))
+                    if type(msg) is not self.data_class:
+                        if self.data_class is not None:
+                            self.retyped += 1
+                            _log.info("MQTT topic '%s': primitive text %s is a %s, the last was a %s: ROS topic '%s' "
+                                      "re-advertised as %s (as mqtt_client does; ros_type fixes one type)",
+                                      topic, _short_text(text), msg._type, self.data_class._type, p.ros_topic,
+                                      msg._type)
+                        self._advertise(type(msg))
                 else:
                     msg = codec.text_to_msg(text, self.data_class)
         except codec.CodecError as exc:
@@ -474,6 +485,10 @@ class _Mqtt2Ros:
                                         f"{exc}")
             return
         self._publish(msg)
+
+
+def _short_text(text: str) -> str:
+    return repr(text if len(text) <= 40 else text[:40] + "...")
 
 
 def _check_length(msg: genpy.Message, body: bytes) -> None:
@@ -629,7 +644,7 @@ class MqttBridge:
                     continue
                 cls = roslib.message.get_message_class(type_name)
                 if cls is None or r.framed:   # framed: bytes over TCPROS, as mqtt_client's ShapeShifter
-                    r.attach_raw(type_name)
+                    r.attach_raw(type_name, installed=cls is not None)
                 else:
                     r.attach(cls)
 
@@ -637,6 +652,7 @@ class MqttBridge:
         """Counts: messages sent and delivered, each kind of bad input, the connection's counters."""
         out: Dict[str, Any] = {"sent": {r.p.ros_topic: r.sent for r in self.ros2mqtt},
                                "delivered": {m.p.ros_topic: m.delivered for m in self.mqtt2ros},
+                               "retyped": {m.p.ros_topic: m.retyped for m in self.mqtt2ros if m.retyped},
                                "bad_input": dict(self.problems.counts)}
         out.update(vars(self.connection.counters()))
         return out
