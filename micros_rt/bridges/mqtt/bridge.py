@@ -418,6 +418,7 @@ class _Mqtt2Ros:
                           (", stamped" if announced.stamped else ", not stamped"))
             self.announced, self.stamped = True, announced.stamped
             pending, self.pending = list(self.pending), collections.deque()
+        self.bridge.note_read_generation(self.p.mqtt_topic, announced.wire)
         for data in pending:
             self.on_data(self.p.mqtt_topic, data)
 
@@ -479,6 +480,7 @@ class _Mqtt2Ros:
                                       msg._type)
                         self._advertise(type(msg))
                 else:
+                    assert self.data_class is not None   # ros_type: advertised at start
                     msg = codec.text_to_msg(text, self.data_class)
         except codec.CodecError as exc:
             self.bridge.problems.report(topic, "unfit_text", f"MQTT topic '{topic}' -> ROS topic '{p.ros_topic}': "
@@ -573,8 +575,9 @@ class MqttBridge:
         else:
             _log.info("micros_rt mqtt: writing mqtt_client %s payloads and type announcements "
                       "(bridge/mqtt_client_version: %d); reading 1.x and 2.x", params.wire.label, int(params.wire))
-        package = installed_is_connected_package(params.wire) or IS_CONNECTED_PACKAGE[params.wire]
-        self._service_class = is_connected_service_class(params.wire, package=package)
+        self._service_lock = threading.Lock()
+        self._read_generations: Dict[str, codec.WireGeneration] = {}   # mqtt2ros topic -> its peer's generation
+        self._service_class = is_connected_service_class(params.wire, package=self._is_connected_package())
         self._service = rospy.Service("~is_connected", self._service_class, self._is_connected)
         self._resolver = threading.Thread(target=self._resolve_loop, name="micros_rt mqtt types", daemon=True)
 
@@ -582,6 +585,46 @@ class MqttBridge:
         """Connect to the broker (in the background) and start subscribing ROS topics as they appear."""
         self.connection.start()
         self._resolver.start()
+
+    def _is_connected_package(self) -> str:
+        """The package of ``~is_connected``'s type: an installed one (what rosservice here can load), the peers'
+        generation's first when both are; none installed, the peers' generation's (``mqtt_client`` for 1.x,
+        ``mqtt_client_interfaces`` for 2.x), so that a caller with their mqtt_client can load it. The
+        generation: the setting, else the one every peer on the broker announces, else 2.x."""
+        wire = self.params.wire
+        if not self.params.wire_set:
+            seen = set(self.generations.peers().values()) | set(self._read_generations.values())
+            if len(seen) == 1:
+                wire = seen.pop()
+        return installed_is_connected_package(wire) or IS_CONNECTED_PACKAGE[wire]
+
+    def note_read_generation(self, topic: str, wire: codec.WireGeneration) -> None:
+        """A peer announced ``topic``, read here, in ``wire``: it may change ``~is_connected``'s type."""
+        if self._read_generations.get(topic) is not wire:
+            self._read_generations[topic] = wire
+            self._retype_is_connected()
+
+    def _retype_is_connected(self) -> None:
+        """Advertise ``~is_connected`` anew when the peers' generation changes its package (on a thread of its
+        own: registering with the master must not hold paho's thread or a topic's worker)."""
+        if self.params.wire_set or self._closed.is_set():
+            return
+        package = self._is_connected_package()
+        if self._service_class._type == f"{package}/IsConnected":
+            return
+
+        def retype() -> None:
+            with self._service_lock:
+                if self._closed.is_set() or self._service_class._type == f"{package}/IsConnected":
+                    return
+                before = self._service_class._type
+                self._service.shutdown()
+                self._service_class = is_connected_service_class(package=package)
+                self._service = rospy.Service("~is_connected", self._service_class, self._is_connected)
+                _log.info("micros_rt mqtt: ~is_connected is now a %s (was %s): the peers on the broker speak "
+                          "mqtt_client %s", self._service_class._type, before,
+                          "1.x" if package == IS_CONNECTED_PACKAGE[codec.WireGeneration.V1] else "2.x")
+        threading.Thread(target=retype, name="micros_rt mqtt is_connected", daemon=True).start()
 
     def _is_connected(self, request: Any) -> Any:
         return self._service_class._response_class(connected=self.connection.is_connected)
@@ -626,6 +669,7 @@ class MqttBridge:
             for r in self.ros2mqtt:
                 if r.framed:
                     r.redecide()
+            self._retype_is_connected()
 
     def _resolve_loop(self) -> None:
         while not self._closed.wait(RESOLVE_INTERVAL):
@@ -663,7 +707,8 @@ class MqttBridge:
             return
         self._closed.set()
         self.connection.close()
-        self._service.shutdown()
+        with self._service_lock:
+            self._service.shutdown()
         for r in self.ros2mqtt:
             for sub in (r.subscriber, r.raw_subscriber):
                 if sub is not None:
