@@ -358,8 +358,22 @@ class _TopicWorker:
         self._idle = False
         self._thread: Optional[threading.Thread] = None
         self._closed = False
+        self._running = False    # the worker is handling an item
         self._on_overflow = on_overflow
         self.dropped = 0
+        self.inline = 0          # items handled on the caller's thread (nothing queued or under way)
+
+    def run_inline(self, fn: Callable[..., None], *args: Any) -> bool:
+        """From paho's thread (the only one that puts): handle ``fn(*args)`` here when nothing is queued or under
+        way, so order is kept and a message costs no thread hand-over; False (nothing done) otherwise."""
+        with self._lock:
+            if self._closed:
+                return True
+            if self._items or self._running:
+                return False
+        fn(*args)
+        self.inline += 1
+        return True
 
     def put(self, fn: Callable[..., None], *args: Any, droppable: bool = True) -> None:
         """From paho's thread: never waits. Beyond WORKER_BACKLOG the oldest droppable item goes, counted."""
@@ -384,6 +398,7 @@ class _TopicWorker:
     def _run(self) -> None:
         while True:
             with self._lock:
+                self._running = False
                 if self._closed:
                     return
                 if not self._items:
@@ -391,6 +406,7 @@ class _TopicWorker:
                     item = None
                 else:
                     item = self._items.popleft()
+                    self._running = True
             if item is None:
                 self._wake.get()
                 continue
@@ -469,7 +485,16 @@ class _Mqtt2Ros:
         self.worker.put(self.on_type, topic, payload, droppable=False)
 
     def feed_data(self, topic: str, payload: bytes, properties: Any = None) -> None:
+        # a payload that only decodes and publishes (type known, no publisher to advertise, a ROS queue that
+        # never blocks) is handled on paho's thread when the worker is idle: no hand-over per message
+        if self.fast and self.worker.run_inline(self.on_data, topic, payload):
+            return
         self.worker.put(self.on_data, topic, payload)
+
+    @property
+    def fast(self) -> bool:
+        return (self.announced and self.publisher is not None and self.p.queue_size is not None
+                and not (self.p.primitive or self.p.json) and (self.stamped is False or self.latency_pub is not None))
 
     def on_type(self, topic: str, payload: bytes, properties: Any = None) -> None:
         problems = self.bridge.problems
