@@ -192,7 +192,7 @@ def test_backend_writer_announces_after_a_dropped_first_try() -> None:
 
 def fake_bridge(conn: FlakyConnection, generations: PeerGenerations) -> Any:
     return types.SimpleNamespace(connection=conn, generations=generations, problems=bridge_module._Problems(),
-                                 params=types.SimpleNamespace(wire=V2), await_peer_scan=lambda: None)
+                                 params=types.SimpleNamespace(wire=V2), end_watch=lambda: None)
 
 
 def test_bridge_topic_announces_after_a_dropped_first_try_and_on_a_new_generation() -> None:

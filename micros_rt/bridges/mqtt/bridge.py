@@ -273,6 +273,7 @@ class _Ros2Mqtt:
         self.announce()
         for serialized, stamp in held:
             self._publish(codec.encode_ros_payload(serialized, wire=self.wire, stamp=stamp))
+        self.bridge.end_watch()
 
     def check_hold(self, now: float, live_since: Optional[float]) -> None:
         """Release the held messages PEER_HOLD seconds after the first connect (the scan thread)."""
@@ -801,6 +802,16 @@ class MqttBridge:
             self._scanned.set()
             if self.follows_peers:
                 self._announce_all()
+
+    def end_watch(self) -> None:
+        """No topic holds its messages any more: stop receiving every announcement (unless a scan is under way,
+        which ends it)."""
+        with self._scan_lock:
+            unsubscribe = self._watching and not self._scan_started and not self._holding()
+            if unsubscribe:
+                self._watching = False
+        if unsubscribe:
+            self.connection.unsubscribe(ANNOUNCEMENTS)
 
     def request_scan(self) -> None:
         """Look at the broker's announcements now (a payload that did not decode: its type may have changed)."""
