@@ -191,11 +191,11 @@ def test_primitive_texts_of_changing_kinds_retype_the_ros_topic_and_installed_ty
     bridge = spawn(bridge_argv(params, name="mq4_bridge"), name="bridge")
     wait_connected(bridge)
     talker = spawn([harness.STOCK_PYTHON, str(harness.PEERS_DIR / "stock_talker.py"), "--topic", "/mq4/chatter",
-                    "--count", 1000, "--rate", 10, "--node-name", "mq4_talker"], name="talker")
+                    "--count", "1000", "--rate", "10", "--node-name", "mq4_talker"], name="talker")
     talker.wait_for("ready", 30)
 
     def topic_type() -> str:
-        return dict(harness.master_call(ros_master, "getTopicTypes")).get("/mq4/kinds", "")
+        return str(dict(harness.master_call(ros_master, "getTopicTypes")).get("/mq4/kinds", ""))
 
     seen = []
     for text, kind in (("42", "std_msgs/Int32"), ("abc", "std_msgs/String"), ("1.5", "std_msgs/Float32"),

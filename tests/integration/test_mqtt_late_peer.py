@@ -20,7 +20,7 @@ from std_msgs.msg import String
 import harness
 from helpers import stock_talker
 from mqtt_broker import MosquittoBroker, bridge_argv, last_counters, write_params
-from test_mqtt_announcements import REAL_110, captured, publish_raw
+from test_mqtt_announcements import REAL_110, captured, counter, publish_raw
 
 from micros_rt.transports.mqtt import codec
 
@@ -48,8 +48,8 @@ def test_a_1x_peer_joining_a_default_bridge_later_reads_nothing_corrupted(
                        name="late_talker")
         # the bridge has taken messages (held: no peer has announced a generation)
         harness.wait_until(lambda: talker.count("sent") >= 20, 60, message="the talker to send 20")
-        harness.wait_until(lambda: (last_counters(bridge).get("held") or {}).get("late/chatter", 0) >= 10
-                           or sent(bridge) >= 10, 30, message="the bridge to take 10 messages")
+        harness.wait_until(lambda: counter(bridge, "held", "late/chatter") >= 10 or sent(bridge) >= 10, 30,
+                           message="the bridge to take 10 messages")
         # the 1.1.0 joins: it reads the bridge's topic (no announcement: a reader says nothing) ...
         got: List[bytes] = []
         lock = threading.Lock()
@@ -90,7 +90,7 @@ def test_a_1x_peer_joining_a_default_bridge_later_reads_nothing_corrupted(
 
 
 def sent(bridge: harness.Peer) -> int:
-    return int((last_counters(bridge).get("sent") or {}).get("/late/chatter", 0))  # type: ignore[union-attr]
+    return counter(bridge, "sent", "/late/chatter")
 
 
 def test_a_peers_repeated_announcements_do_not_reach_the_bridge(
@@ -107,7 +107,7 @@ def test_a_peers_repeated_announcements_do_not_reach_the_bridge(
             "ros2mqtt": [{"ros_topic": "/rep/nobody", "mqtt_topic": "rep/quiet"}],
             "mqtt2ros": [{"mqtt_topic": "rep/in", "ros_topic": "/rep/in"}]}})
         bridge = spawn(bridge_argv(params, name="rep_bridge", counters=0.2), name="rep_bridge")
-        harness.wait_until(lambda: int(last_counters(bridge).get("connects", 0)) >= 1, 60,  # type: ignore[arg-type]
+        harness.wait_until(lambda: int(str(last_counters(bridge).get("connects", 0))) >= 1, 60,
                            message="the bridge to connect")
         announcement = codec.encode_msg_type(codec.RosMsgType.of(Int32, stamped=False))
         busy = codec.encode_msg_type(codec.RosMsgType.of(String, stamped=False))
