@@ -181,7 +181,7 @@ def test_first_message_bad_input_and_is_connected(
 def test_primitive_texts_of_changing_kinds_retype_the_ros_topic_and_installed_types_are_logged_as_such(
         ros_master: harness.RosMaster, spawn: harness.Spawner, broker: MosquittoBroker, tmp_path: Path) -> None:
     """Issue 44: texts 42, abc, 1.5, True, 7 on one primitive MQTT topic: mqtt_client re-advertises the ROS
-    topic as Int32, String, Float32, Bool, Int32 (it lower-cases before probing a bool); so does the bridge,
+    topic as Int32, String, Float32, Bool, Int32 (True included); so does the bridge,
     counted in ``retyped``. A framed topic of an installed type is not logged as 'not installed here'."""
     params = write_params(tmp_path / "params.yaml", {
         "broker": {"host": broker.host, "port": broker.port},
