@@ -46,6 +46,11 @@ CASES: Dict[str, Dict[str, Any]] = {
     "string_in": {"type": "std_msgs/String", "rate": 100.0, "direction": "in"},
     "image_out": {"type": "sensor_msgs/Image", "rate": 10.0, "direction": "out"},
     "image_in": {"type": "sensor_msgs/Image", "rate": 10.0, "direction": "in"},
+    "string_out_1k": {"type": "std_msgs/String", "rate": 1000.0, "direction": "out"},
+    "string_in_1k": {"type": "std_msgs/String", "rate": 1000.0, "direction": "in"},
+    # the bridge has nothing to bridge (a ROS topic nobody publishes, an MQTT topic nobody writes) while an
+    # mqtt_client peer streams String at 1,000 msg/s, with its type announcement before each, on another topic
+    "idle_busy_peer": {"type": "std_msgs/String", "rate": 1000.0, "direction": "idle"},
 }
 
 #: The stock rospy publisher (ROS -> MQTT cases): the message is built once, sent at the rate until killed.
@@ -161,7 +166,10 @@ def run_case(name: str, stack: str, args: argparse.Namespace, work: Path) -> Dic
         wait_port(bport)
         entry = ({"ros2mqtt": [{"ros_topic": "/bench/ros_in", "mqtt_topic": "bench/mqtt_out"}]}
                  if case["direction"] == "out" else
-                 {"mqtt2ros": [{"mqtt_topic": "bench/mqtt_in", "ros_topic": "/bench/ros_out"}]})
+                 {"mqtt2ros": [{"mqtt_topic": "bench/mqtt_in", "ros_topic": "/bench/ros_out"}]}
+                 if case["direction"] == "in" else
+                 {"ros2mqtt": [{"ros_topic": "/bench/nobody", "mqtt_topic": "bench/quiet_out"}],
+                  "mqtt2ros": [{"mqtt_topic": "bench/quiet_in", "ros_topic": "/bench/quiet_in"}]})
         params = work / f"params_{name}_{stack}.yaml"
         import yaml
 
@@ -192,11 +200,15 @@ def run_case(name: str, stack: str, args: argparse.Namespace, work: Path) -> Dic
             def count() -> int:
                 return received[0]
         else:
+            idle = case["direction"] == "idle"
+            data_topic = "bench/busy" if idle else "bench/mqtt_in"
             sub = subprocess.Popen([STOCK_PYTHON, "-c", SUBSCRIBER, case["type"]], env=env, stdin=subprocess.PIPE,
                                    stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
             procs.append(sub)
             assert sub.stdout is not None and sub.stdin is not None
             assert sub.stdout.readline().strip() == "ready"
+            if idle:
+                client.subscribe(data_topic, 0)
             msg = cls()
             if case["type"] == "sensor_msgs/Image":
                 payload = image_payload()
@@ -204,7 +216,7 @@ def run_case(name: str, stack: str, args: argparse.Namespace, work: Path) -> Dic
                 msg.data = "micros_rt bench " + "x" * 40
                 payload = serialized(msg)
             announcement = codec.encode_msg_type(codec.RosMsgType.of(cls, stamped=False))
-            client.publish("mqtt_client/ros_msg_type/bench/mqtt_in", announcement, 1, True)
+            client.publish("mqtt_client/ros_msg_type/" + data_topic, announcement, 1, True)
             stop_pub = threading.Event()
 
             def publish_loop() -> None:   # mqtt_client's own sender: the announcement before every payload
@@ -213,13 +225,15 @@ def run_case(name: str, stack: str, args: argparse.Namespace, work: Path) -> Dic
                     t += period
                     time.sleep(max(0.0, t - time.monotonic()))
                     if args.announce_each:
-                        client.publish("mqtt_client/ros_msg_type/bench/mqtt_in", announcement, 0, True)
-                    client.publish("bench/mqtt_in", payload, 0, False)
+                        client.publish("mqtt_client/ros_msg_type/" + data_topic, announcement, 0, True)
+                    client.publish(data_topic, payload, 0, False)
 
             threading.Thread(target=publish_loop, daemon=True).start()
             result["_stop"] = stop_pub
 
             def count() -> int:
+                if idle:                  # the peer's messages, as this process received them
+                    return received[0]
                 assert sub.stdin is not None and sub.stdout is not None
                 sub.stdin.write("?\n")
                 sub.stdin.flush()

@@ -129,7 +129,9 @@ def test_services_both_ways_with_rosservice_and_the_c_board(
     ports = Ports.pick()
     server = spawn([harness.STOCK_PYTHON, str(mcu_harness.ROS_SERVICE_PEER), "--service", "/mcu_c/set_mode"])
     server.wait_for("ready", 60)
-    bridge = start_bridge(spawn, tmp_path, ports, "stats_period: 0.5\n"
+    # the stand-in's --array-form streams mid-2015's [name, f1, ...] while its server reads only the final
+    # form's [name, args] (CVRA's C service_call.c): no CVRA era mixes them, so this board needs wire_form
+    bridge = start_bridge(spawn, tmp_path, ports, "stats_period: 0.5\nwire_form: final\n"
                           "from_microcontroller:\n  - {topic: /mcu_c/imu, type: sensor_msgs/Imu, name: imu,"
                           " qos: {time_filter_duration: 0.1}}\n"
                           "services_on_microcontroller:\n"

@@ -116,3 +116,60 @@ def test_a_cvra_board_of_each_era_through_the_bridge(ros_master: harness.RosMast
     assert board.events("recv")[0]["decoded"] == [["cmd_vel", [[0.25, 0.0, 0.0], [0.0, 0.0, -0.5]]]]
     assert after["services_for_microcontroller"]["set_mode"] == {"calls": 2, "ok": 2, "failed": 0}
     assert after["bad_input"]["total"] == 0 and bridge.alive()
+
+
+def test_boards_of_older_eras_are_called_in_their_own_form_without_wire_form(
+        ros_master: harness.RosMaster, spawn: harness.Spawner, tmp_path: Path) -> None:
+    """Issue 44: no wire_form. A mid-2015 board that streams its Pose2D as [name, x, y, theta] and a seed-README
+    board whose call is "set_mode" then {"data": true} are then called in their own form: the mid-2015 handler
+    gets [] for reset and ["ros", "warn"] for set_logger_level (CVRA's final form gave it [None] and
+    [["ros", "warn"]]); the README board's server unpacks name and params (the final form's one object made it
+    raise ValueError and close, a ServiceException at the ROS caller)."""
+    services = ("services_on_microcontroller:\n"
+                "  - {service: /%(ns)s/reset, type: std_srvs/Trigger, name: reset}\n"
+                "  - {service: /%(ns)s/enable, type: std_srvs/SetBool, name: enable}\n"
+                "  - {service: /%(ns)s/lvl, type: roscpp/SetLoggerLevel, name: set_logger_level}\n")
+    answers = ["--answer", "reset=c3", "--answer", "enable=c3", "--answer", "set_logger_level=c0"]
+    server = spawn([harness.STOCK_PYTHON, str(mcu_harness.ROS_SERVICE_PEER), "--service", "/mcu_r/set_mode"])
+    mid_ports, readme_ports = Ports.pick(), Ports.pick()
+    mid_bridge = spawn(bridge_argv(write_config(tmp_path, mid_ports, (
+        "stats_period: 0.3\n"
+        "from_microcontroller:\n  - {topic: /mcu_m/odometry, type: geometry_msgs/Pose2D, name: odometry_raw}\n"
+        + services % {"ns": "mcu_m"}), "mid.yaml"), "mcu_bridge_m"), name="mcu_bridge_m")
+    readme_bridge = spawn(bridge_argv(write_config(tmp_path, readme_ports, (
+        "stats_period: 0.3\n" + services % {"ns": "mcu_r"}
+        + "services_for_microcontroller:\n  - {service: /mcu_r/set_mode, type: std_srvs/SetBool, name: set_mode}\n"),
+        "readme.yaml"), "mcu_bridge_r"), name="mcu_bridge_r")
+    server.wait_for("ready", 60)
+    mid_bridge.wait_for("ready", 60)
+    readme_bridge.wait_for("ready", 60)
+    mid_board = spawn([harness.MICROS_RT_PYTHON, str(CVRA_BOARD), *mid_ports.standin_args(), "--era", "mid2015",
+                       "--stream", fixture_hex("mid2015_feb95469", "topic_odometry_raw"), "--rate", "20",
+                       "--count", "5", *answers, "--duration", "90"], name="mid2015 board")
+    readme_board = spawn([harness.MICROS_RT_PYTHON, str(CVRA_BOARD), *readme_ports.standin_args(), "--era", "readme",
+                          "--call", fixture_hex("readme_0670b782", "call_set_mode_map"), "--call-after", "0.3",
+                          *answers, "--duration", "90"], name="readme board")
+    # what the board sent names its era (until then the bridge writes the final form)
+    wait_stats(mid_bridge, lambda s: s["from_microcontroller"]["odometry_raw"]["published"] >= 5, 30)
+    assert readme_board.wait_for("call_result", 30)["decoded"] == [[True, "mode on"]]
+    calls = {(ns, name): mcu_harness.rosservice(ros_master, "call", f"/{ns}/{name}", *extra)
+             for ns in ("mcu_m", "mcu_r")
+             for name, extra in (("reset", ()), ("enable", ("true",)), ("lvl", ("rosout", "warn")))}
+    mid_served = {e["name"]: e["args"] for e in mid_board.wait_for_count("served", 3, 30)}
+    readme_served = {e["name"]: e["args"] for e in readme_board.wait_for_count("served", 3, 30)}
+    mid_stats, readme_stats = mcu_harness.latest_stats(mid_bridge), mcu_harness.latest_stats(readme_bridge)
+    print(f"\nno wire_form: mid2015 board learned ({mid_stats.get('link')}), its handlers got {mid_served}; "
+          f"readme board learned ({readme_stats.get('link')}), its handlers got {readme_served}")
+    for key, cp in calls.items():
+        print(f"  rosservice call /{key[0]}/{key[1]}: rc {cp.returncode} {(cp.stdout + cp.stderr).strip()[-160:]!r}")
+    assert mid_served == {"reset": [], "enable": [True], "set_logger_level": ["rosout", "warn"]}
+    assert readme_served == {"reset": {}, "enable": {"data": True},
+                             "set_logger_level": {"logger": "rosout", "level": "warn"}}
+    assert all(e["handled"] for e in mid_board.events("served") + readme_board.events("served"))
+    for (ns, name), cp in calls.items():
+        assert cp.returncode == 0, (ns, name, cp.stdout + cp.stderr)
+        if name != "lvl":
+            assert "success: True" in cp.stdout
+    assert mid_stats["link"] == {"wire_form": "mid2015", "wire_form_changes": 1}
+    assert readme_stats["link"] == {"wire_form": "readme", "wire_form_changes": 1}
+    assert mid_bridge.alive() and readme_bridge.alive()

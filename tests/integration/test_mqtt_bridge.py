@@ -176,3 +176,39 @@ def test_first_message_bad_input_and_is_connected(
     assert any("over client/max_packet_size (400 bytes)" in line for line in bridge.stderr_tail(200).splitlines())
     print(f"1000 malformed payloads: counted {counters['bad_input']}, one warning: {warnings[0]}\n"
           f"is_connected: {call.stdout.strip()}")
+
+
+def test_primitive_texts_of_changing_kinds_retype_the_ros_topic_and_installed_types_are_logged_as_such(
+        ros_master: harness.RosMaster, spawn: harness.Spawner, broker: MosquittoBroker, tmp_path: Path) -> None:
+    """Issue 44: texts 42, abc, 1.5, True, 7 on one primitive MQTT topic: mqtt_client re-advertises the ROS
+    topic as Int32, String, Float32, Bool, Int32 (True included); so does the bridge,
+    counted in ``retyped``. A framed topic of an installed type is not logged as 'not installed here'."""
+    params = write_params(tmp_path / "params.yaml", {
+        "broker": {"host": broker.host, "port": broker.port},
+        "bridge": {"mqtt2ros": [{"mqtt_topic": "mq4/kinds", "ros_topic": "/mq4/kinds", "primitive": True}],
+                   "ros2mqtt": [{"ros_topic": "/mq4/chatter", "mqtt_topic": "mq4/chatter"}]},
+    })
+    bridge = spawn(bridge_argv(params, name="mq4_bridge"), name="bridge")
+    wait_connected(bridge)
+    talker = spawn([harness.STOCK_PYTHON, str(harness.PEERS_DIR / "stock_talker.py"), "--topic", "/mq4/chatter",
+                    "--count", "1000", "--rate", "10", "--node-name", "mq4_talker"], name="talker")
+    talker.wait_for("ready", 30)
+
+    def topic_type() -> str:
+        return str(dict(harness.master_call(ros_master, "getTopicTypes")).get("/mq4/kinds", ""))
+
+    seen = []
+    for text, kind in (("42", "std_msgs/Int32"), ("abc", "std_msgs/String"), ("1.5", "std_msgs/Float32"),
+                       ("True", "std_msgs/Bool"), ("7", "std_msgs/Int32")):
+        broker.pub("mq4/kinds", text)
+        harness.wait_until(lambda: topic_type() == kind, 20, interval=0.1,
+                           message=f"/mq4/kinds to be advertised as {kind} after the text {text!r}")
+        seen.append(topic_type())
+    counters = bridge.wait_for(lambda e: e.get("event") == "counters"
+                               and e.get("delivered", {}).get("/mq4/kinds", 0) >= 5, 20)
+    line = harness.wait_until(lambda: next((x for x in raw_lines(bridge) + bridge.stderr_tail(400).splitlines()
+                                            if "'/mq4/chatter' (std_msgs/String" in x), ""), 20,
+                              message="the bridge to log its subscription of /mq4/chatter")
+    print(f"\nprimitive texts 42, abc, 1.5, True, 7 -> {seen}; counters {counters}\n{line}")
+    assert counters["retyped"] == {"/mq4/kinds": 4} and counters["bad_input"] == {}
+    assert "not installed" not in line and "bridged as its serialized bytes" in line

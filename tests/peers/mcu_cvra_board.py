@@ -10,7 +10,11 @@ No CVRA code and no micros_rt: it replays the captured bytes and reports what re
   second object; one array: its tail);
 - ``--call HEX`` (repeatable): after ``--call-after`` s, framed requests sent to the bridge's service port one
   connection each; ``{"event": "call_result", "request": HEX, "answer": HEX, "decoded": ...}``;
-- datagrams that reach its topic port are printed ``{"event": "recv", "hex", "decoded"}``.
+- datagrams that reach its topic port are printed ``{"event": "recv", "hex", "decoded"}``;
+- ``--era final|mid2015|readme``: its service port reads a request as that era's ``cvra_rpc`` server does
+  (``handle_connection``; the fixtures in tests/fixtures/cvra/ show each): ``args`` in the ``served`` event is
+  what the era's handler is given, and a request that era's code cannot unpack is closed unanswered, as the
+  server's exception does (0670b782's ``name, params = decode_call(...)`` raises ValueError on one object).
 
 Run with the project's venv python (msgpack). Ports and addresses as the C stand-in's options.
 """
@@ -57,6 +61,25 @@ def name_and_rest(payload: bytes) -> Tuple[Optional[str], Any]:
     return None, objs
 
 
+def era_args(era: str, payload: bytes) -> Tuple[Optional[str], Any]:
+    """(name, what the era's handler gets) of a request, or (None, why) when that era's code raises."""
+    try:
+        objs = objects(payload)
+    except Exception as exc:
+        return None, f"not MessagePack: {exc}"
+    if era == "readme":                       # 0670b782: name, params = the unpacker's objects
+        if len(objs) != 2:
+            return None, f"ValueError: not enough values to unpack (expected 2, got {len(objs)})"
+        return objs[0], objs[1]
+    if len(objs) != 1 or not isinstance(objs[0], list) or not objs[0]:
+        return None, "not an array [name, ...]"
+    if era == "mid2015":                      # feb95469: the handler gets the array's tail
+        return objs[0][0], objs[0][1:]
+    if len(objs[0]) != 2:                     # babf2cfa: name, args = the array
+        return None, f"ValueError: too many values to unpack (expected 2, got {len(objs[0])})"
+    return objs[0][0], objs[0][1]
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--address", default="127.0.0.2")
@@ -72,6 +95,7 @@ def main() -> int:
     ap.add_argument("--call", action="append", default=[])
     ap.add_argument("--call-after", type=float, default=0.5)
     ap.add_argument("--duration", type=float, default=60.0)
+    ap.add_argument("--era", choices=("final", "mid2015", "readme"), default=None)
     args = ap.parse_args()
 
     answers: Dict[str, Optional[bytes]] = {}
@@ -113,12 +137,12 @@ def main() -> int:
                 decoded = f"not MessagePack: {exc}"
             emit("recv", hex=data.hex(), decoded=decoded)
         if tcp in ready:
-            serve(tcp, answers)
+            serve(tcp, answers, args.era)
     emit("done", sent=sent)
     return 0
 
 
-def serve(tcp: socket.socket, answers: Dict[str, Optional[bytes]]) -> None:
+def serve(tcp: socket.socket, answers: Dict[str, Optional[bytes]], era: Optional[str]) -> None:
     conn, _ = tcp.accept()
     with conn:
         conn.settimeout(5.0)
@@ -132,7 +156,14 @@ def serve(tcp: socket.socket, answers: Dict[str, Optional[bytes]]) -> None:
         except socket.timeout:
             pass
         name, rest = name_and_rest(unframe(data[:-1]))
-        emit("served", name=name, rest=rest, hex=data.hex())
+        if era is None:
+            emit("served", name=name, rest=rest, hex=data.hex())
+        else:
+            handled, handler_args = era_args(era, unframe(data[:-1]))
+            emit("served", name=name, rest=rest, hex=data.hex(), era=era, handled=handled is not None,
+                 args=handler_args)
+            if handled is None:
+                return                        # the era's server raised: the connection closes unanswered
         answer = answers.get(name or "")
         if answer is not None:
             conn.sendall(answer)

@@ -46,7 +46,7 @@ def test_defaults() -> None:
     assert cfg.microcontroller.topic_port == 20000 and cfg.microcontroller.service_port == 20001
     assert cfg.bind.address == "0.0.0.0" and cfg.bind.topic_port == 20000 and cfg.mtu == 1472
     assert cfg.to_microcontroller == () and cfg.stats_period == 1.0
-    assert cfg.wire_form is WireForm.FINAL  # CVRA's final [name, args] unless the board speaks an older era
+    assert cfg.wire_form is None  # learned from the board (CVRA's final form until it has sent anything)
 
 
 def test_wire_form_per_board() -> None:

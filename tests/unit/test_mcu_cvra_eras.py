@@ -262,8 +262,9 @@ def test_wire_form_names_an_era(value: str, form: str) -> None:
         wire.WireForm, form)
 
 
-def test_wire_form_default_is_final_and_a_bad_value_lists_the_eras() -> None:
-    assert parse_config("microcontroller: {address: 10.0.0.7}").wire_form is wire.WireForm.FINAL
+def test_wire_form_default_is_learned_and_a_bad_value_lists_the_eras() -> None:
+    assert parse_config("microcontroller: {address: 10.0.0.7}").wire_form is None   # the board's era
+    assert wire.DEFAULT_WIRE_FORM is wire.WireForm.FINAL                             # until it sends any
     with pytest.raises(McuConfigError) as info:
         parse_config("microcontroller: {address: 10.0.0.7}\nwire_form: 2016\n", source="mcu.yaml")
     text = str(info.value)
@@ -399,6 +400,60 @@ def test_a_board_calling_in_each_eras_form_is_served(link_to: Any) -> None:
     assert answers == [bytes.fromhex("92 c3 a7 6d6f6465206f6e")] * 4       # [True, "mode on"], as CVRA answers
     assert link.stats.get("services_for_microcontroller", "ok", entry="set_mode") == 4
 
+
+
+# --------------------------------------------------------------------------- issue 44: the board's era, learned
+
+@pytest.mark.parametrize("fixture, key, request_of, form", [
+    (FINAL, "topic_odometry_raw", Pose2D, "FINAL"), (FINAL, "topic_no_args", Empty, "FINAL"),
+    (FINAL, "call_ping_nil", TriggerRequest, "FINAL"), (FINAL, "call_lvl_list", LVL._request_class, "FINAL"),
+    (FINAL, "topic_speed_bare", Float32, None), (FINAL, "call_set_mode_bare", SetBoolRequest, None),
+    (MID, "topic_odometry_raw", Pose2D, "MID2015"), (MID, "topic_no_args", Empty, "MID2015"),
+    (MID, "call_ping_no_params", TriggerRequest, "MID2015"), (MID, "call_set_mode", SetBoolRequest, None),
+    (README, "call_set_mode_map", SetBoolRequest, "README"), (README, "call_reset_no_params", TriggerRequest, "README"),
+])
+def test_each_eras_own_bytes_name_its_era(fixture: Dict[str, Any], key: str, request_of: Any,
+                                          form: Optional[str]) -> None:
+    data = raw(fixture, key)
+    payload = wire.decode_request_payload(data[:-1]) if key.startswith("call") else wire.split_payload(data)
+    want = None if form is None else getattr(wire.WireForm, form)
+    # a one-field type's [name, value] is the final and the mid-2015 form alike: it names no era
+    assert payload.form(wire.codec_for(request_of).field_count) is want
+
+
+def test_a_link_without_wire_form_writes_the_era_the_board_showed(link_to: Any) -> None:
+    """A mid-2015 board streams its Pose2D as [name, x, y, theta]: the link then calls it in that form
+    ([name] for no arguments, [name, f1, f2] for two), where CVRA's final form would hand its handler [None]
+    and [['ros', 'debug']]; before the board has sent anything, the final form is written."""
+    board = Board([b"\xc0", b"\xc0", b"\xc0"])
+    topic_port = harness.free_tcp_port()
+    cfg = parse_config(
+        f"microcontroller: {{address: {BOARD}, service_port: {board.port}}}\n"
+        f"bind: {{address: 127.0.0.1, topic_port: {topic_port}, service_port: {harness.free_tcp_port()}}}\n"
+        "from_microcontroller:\n  - {topic: /odometry, type: geometry_msgs/Pose2D, name: odometry_raw}\n"
+        "services_on_microcontroller:\n"
+        "  - {service: /lvl, type: roscpp/SetLoggerLevel, name: lvl, timeout: 5}\n"
+        "  - {service: /reset, type: std_srvs/Trigger, name: reset, timeout: 5}\n", source="t.yaml")
+    link = McuLink(cfg)
+    try:
+        reader = link.open_reader(cfg.from_microcontroller[0])
+        assert link.wire_form is wire.WireForm.FINAL and link.stats.snapshot()["link"]["wire_form"] == "final"
+        link.call(services(link)["reset"], {})                               # nothing heard yet: the default
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as udp:
+            udp.bind((BOARD, 0))
+            udp.sendto(raw(MID, "topic_odometry_raw"), ("127.0.0.1", topic_port))
+            harness.wait_until(lambda: link.wire_form is wire.WireForm.MID2015, 10,
+                               message="the link to learn the mid-2015 form")
+        assert reader.take(10)[0][0].theta == 0.5
+        link.call(services(link)["reset"], {})
+        link.call(services(link)["lvl"], {"logger": "ros", "level": "debug"})
+    finally:
+        link.close()
+        board.close()
+    assert [wire.decode_request(r[:-1]) for r in board.requests] == [
+        ("reset", [None]), ("reset", []), ("lvl", ["ros", "debug"])]
+    assert board.requests[1] == raw(MID, "decode_call_micros_rt_empty")       # byte for byte mid-2015's
+    assert link.stats.snapshot()["link"] == {"wire_form": "mid2015", "wire_form_changes": 1}
 
 
 def test_any_object_after_a_name_or_as_an_answer_only_ever_raises_wire_error() -> None:

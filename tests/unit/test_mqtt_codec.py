@@ -101,7 +101,8 @@ def test_non_primitive_is_sent_as_its_yaml_text() -> None:
 @pytest.mark.parametrize("text, cls, value", [
     ("true", Bool, True), ("false", Bool, False), ("69", Int32, 69), ("-3", Int32, -3),
     ("2147483648", Float32, 2147483648.0), ("3.5", Float32, 3.5), ("1e3", Float32, 1000.0),
-    ("hello", String, "hello"), ("", String, ""), ("True", String, "True"), ("1.5.2", String, "1.5.2"),
+    ("hello", String, "hello"), ("", String, ""), ("True", Bool, True), ("FALSE", Bool, False),
+    ("1.5.2", String, "1.5.2"),
 ])
 def test_probe_order_bool_int_float_string(text: str, cls: type, value: object) -> None:
     msg = codec.probe_primitive(text)

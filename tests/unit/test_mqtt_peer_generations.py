@@ -192,7 +192,7 @@ def test_backend_writer_announces_after_a_dropped_first_try() -> None:
 
 def fake_bridge(conn: FlakyConnection, generations: PeerGenerations) -> Any:
     return types.SimpleNamespace(connection=conn, generations=generations, problems=bridge_module._Problems(),
-                                 params=types.SimpleNamespace(wire=V2), await_peer_scan=lambda: None)
+                                 params=types.SimpleNamespace(wire=V2), end_watch=lambda: None)
 
 
 def test_bridge_topic_announces_after_a_dropped_first_try_and_on_a_new_generation() -> None:
@@ -200,19 +200,45 @@ def test_bridge_topic_announces_after_a_dropped_first_try_and_on_a_new_generatio
     generations = PeerGenerations(written=["out"])
     topic = bridge_module._Ros2Mqtt(fake_bridge(conn, generations), Ros2MqttParams(ros_topic="/out",
                                                                                    mqtt_topic="out"))
-    topic.on_ros(String(data="early"))                      # dropped: not marked
+    topic.on_ros(String(data="early"))                      # not live: dropped, neither marked nor held
     conn.live = True
     topic.on_ros(String(data="a"))
-    topic.on_ros(String(data="b"))                          # announced once per connection
+    topic.on_ros(String(data="b"))                          # announced once; held: no peer's generation known
     assert conn.published == [("mqtt_client/ros_msg_type/out", codec.encode_msg_type(
-        codec.RosMsgType.of(String, stamped=False)), True), ("out", serialized(String(data="a")), False),
-        ("out", serialized(String(data="b")), False)]
-    # a 1.1.0 peer shows up: re-announced at once in 1.x, then 1.x payloads
+        codec.RosMsgType.of(String, stamped=False)), True)]
+    assert topic.holding and topic.held == 2
+    # a 1.1.0 peer shows up: re-announced at once in 1.x, the held messages and the next in 1.x, in order
     generations.observe("mqtt_client/ros_msg_type/peer/odom", announce(V1))
     topic.redecide()
     topic.on_ros(String(data="c"))
-    assert conn.published[3:] == [("mqtt_client/ros_msg_type/out", codec.encode_msg_type(codec.RosMsgType.of(String)),
-                                   True), ("out", b"\x00" + serialized(String(data="c")), False)]
+    assert conn.published[1:] == [
+        ("mqtt_client/ros_msg_type/out", codec.encode_msg_type(codec.RosMsgType.of(String)), True),
+        ("out", b"\x00" + serialized(String(data="a")), False), ("out", b"\x00" + serialized(String(data="b")), False),
+        ("out", b"\x00" + serialized(String(data="c")), False)]
+    assert not topic.holding
+
+
+def test_bridge_topic_writes_the_default_when_no_peer_announces_within_the_hold() -> None:
+    conn = FlakyConnection()
+    conn.live = True
+    topic = bridge_module._Ros2Mqtt(fake_bridge(conn, PeerGenerations(written=["out"])),
+                                    Ros2MqttParams(ros_topic="/out", mqtt_topic="out"))
+    topic.on_ros(String(data="a"))
+    topic.check_hold(100.0, 100.0 - bridge_module.PEER_HOLD / 2)     # within the hold: still held
+    assert [t for t, _, _ in conn.published] == ["mqtt_client/ros_msg_type/out"]
+    topic.check_hold(100.0, 100.0 - bridge_module.PEER_HOLD)         # expired: 2.x, the default
+    topic.on_ros(String(data="b"))
+    assert conn.published[1:] == [("out", serialized(String(data="a")), False),
+                                  ("out", serialized(String(data="b")), False)]
+
+
+def test_bridge_topic_with_a_setting_never_holds() -> None:
+    conn = FlakyConnection()
+    conn.live = True
+    topic = bridge_module._Ros2Mqtt(fake_bridge(conn, PeerGenerations(fixed=V2, written=["out"])),
+                                    Ros2MqttParams(ros_topic="/out", mqtt_topic="out"))
+    topic.on_ros(String(data="a"))
+    assert not topic.holding and conn.published[1:] == [("out", serialized(String(data="a")), False)]
 
 
 # ------------------------------------------------------------------ ~is_connected's type

@@ -262,7 +262,9 @@ def bridge_topic(monkeypatch: pytest.MonkeyPatch, **entry: Any) -> Tuple[Any, Fa
 
     monkeypatch.setattr(bridge_module, "_await_subscribers", lambda pub: None)   # no ROS master here
     nh = FakeNodeHandle()
-    fake_bridge = types.SimpleNamespace(nh=nh, problems=bridge_module._Problems())
+    fake_bridge = types.SimpleNamespace(nh=nh, problems=bridge_module._Problems(),
+                                        note_read_generation=lambda topic, wire: None, request_scan=lambda: None,
+                                        connection=types.SimpleNamespace(unsubscribe=lambda topic: None))
     topic = bridge_module._Mqtt2Ros(cast(Any, fake_bridge), Mqtt2RosParams(mqtt_topic="t", ros_topic="/t", **entry))
     return topic, nh
 

@@ -5,8 +5,9 @@
     microcontroller: {address: 127.0.0.2, topic_port: 20000, service_port: 20001}   # the board
     bind: {address: 127.0.0.1, topic_port: 20000, service_port: 20001}              # the bridge
     mtu: 1472                                    # payload bytes per datagram
-    wire_form: final                             # what is written (every form is read): final (CVRA's last
-                                                 # cvra_rpc, the default; also "cvra"), mid2015, readme, map
+    wire_form: mid2015                           # optional: what is written (every form is read): final
+                                                 # (CVRA's last cvra_rpc; also "cvra"), mid2015, readme, map;
+                                                 # unset: the era the board's own datagrams and requests show
     stats_period: 1.0                            # seconds between ~stats messages
     to_microcontroller:                          # ROS topics sent to the board
       - {topic: /cmd_vel, type: geometry_msgs/Twist, qos: {time_filter_duration: 0.05}}
@@ -147,11 +148,13 @@ class _Parser:
             return form
         raise self.error(node, path, f"{value!r} is invalid: expected the form the board's firmware speaks -- "
                                      f"final (CVRA's last cvra_rpc, cvra/robot-software babf2cfa: [name, args] with "
-                                     f"args nil, one bare value or a list in field order; the default, also "
+                                     f"args nil, one bare value or a list in field order; also "
                                      f"'cvra' or 'babf2cfa'), mid2015 (CVRA's feb95469: [name, field1, ...]; also "
                                      f"'feb95469'), readme (the seed README, 0670b782: the name then a map of "
                                      f"fields, two objects; also '0670b782') or map ([name, {{fields}}], what "
-                                     f"micros_rt wrote as 'cvra' before). Every form is read whatever this says")
+                                     f"micros_rt wrote as 'cvra' before). Every form is read whatever this says; "
+                                     f"without wire_form the bridge writes the era the board's own datagrams and "
+                                     f"requests show (final until it has sent any)")
 
     def address(self, node: yaml.Node, path: str, *, required_address: bool) -> Address:
         expect_mapping(node, self.source, path, "a mapping with address, topic_port, service_port")

@@ -60,9 +60,17 @@ PENDING_LIMIT = 100
 RESOLVE_INTERVAL = 0.3
 #: How long a new ROS publisher waits for the subscribers the master knows (seconds).
 SUBSCRIBER_WAIT = 3.0
-#: How long a topic's first message after a connect waits for the broker's retained type announcements
-#: (which say the peers' generation), seconds.
-PEER_SCAN_WAIT = 2.0
+#: How long (seconds after the first connect) a topic written in the peers' generation holds its messages
+#: while no mqtt_client peer has announced a type on the broker; then it writes the default (2.x).
+PEER_HOLD = 10.0
+#: Messages a topic holds meanwhile (the oldest are dropped beyond, counted ``held_dropped``).
+HOLD_LIMIT = 1000
+#: Seconds between two looks at the broker's retained type announcements (a scan: the bridge subscribes
+#: ``mqtt_client/ros_msg_type/#`` until the broker has shown them, then unsubscribes), so that a peer's
+#: repetition of its announcement with every message costs nothing in between.
+SCAN_INTERVAL = 2.0
+#: A scan whose end marker did not come back within this many seconds is started again.
+SCAN_TIMEOUT = 5.0
 
 
 #: The package of mqtt_client's ``IsConnected`` service in each generation (2.x moved it).
@@ -142,6 +150,14 @@ class _Ros2Mqtt:
         self.announced: Optional[bytes] = None   # the announcement the current connection took (None: none yet)
         self._built: Dict[str, Type[genpy.Message]] = {}
         self.sent = 0
+        # following the peers and none known yet: messages wait (HOLD_LIMIT) for a peer's generation, so that
+        # nothing is written that one generation would misread (a 1.x mqtt_client reads a 2.x payload's first
+        # byte as its flag); PEER_HOLD after the first connect the default is written
+        self.holding = self.framed and not bridge.generations.knows(p.mqtt_topic)
+        self._held: Deque[Tuple[bytes, Optional[genpy.Time]]] = collections.deque()
+        self._send_lock = threading.RLock()
+        self.held = 0            # messages that waited for a peer's generation
+        self.held_dropped = 0    # ... and were dropped beyond HOLD_LIMIT
 
     @property
     def announced_md5(self) -> str:
@@ -153,13 +169,14 @@ class _Ros2Mqtt:
         self.subscriber = self.bridge.nh.subscribe(self.p.ros_topic, data_class, self.on_ros, self.p.queue_size)
         _log.info("micros_rt mqtt: ROS topic '%s' (%s) subscribed", self.p.ros_topic, data_class._type)
 
-    def attach_raw(self, type_name: str) -> None:
-        """A type whose package is not installed: take the serialized bytes (stock rospy's AnyMsg over
-        TCPROS, as mqtt_client's ShapeShifter) and the type from the connection header."""
+    def attach_raw(self, type_name: str, *, installed: bool) -> None:
+        """Take the serialized bytes (stock rospy's AnyMsg over TCPROS, as mqtt_client's ShapeShifter) and the
+        type from the connection header: every framed topic, and any topic whose type is not installed."""
         self.raw_subscriber = rospy.Subscriber(self.p.ros_topic, rospy.AnyMsg, self.on_raw,
                                                queue_size=self.p.queue_size)
-        _log.info("micros_rt mqtt: ROS topic '%s' (%s, not installed here: bridged as bytes) subscribed",
-                  self.p.ros_topic, type_name)
+        _log.info("micros_rt mqtt: ROS topic '%s' (%s, %s) subscribed", self.p.ros_topic, type_name,
+                  "bridged as its serialized bytes, as mqtt_client's ShapeShifter" if installed else
+                  "not installed here: bridged as its serialized bytes")
 
     def on_raw(self, raw: Any) -> None:
         header = getattr(raw, "_connection_header", None) or {}
@@ -216,7 +233,12 @@ class _Ros2Mqtt:
                 self.announced = None   # not sent (not connected yet, buffer full): the next message retries
 
     def redecide(self) -> None:
-        """Follow the peers on the broker: a new generation is logged and announced at once."""
+        """Follow the peers on the broker: a new generation is logged and announced at once (and a topic that
+        held its messages for a peer's generation sends them)."""
+        if self.holding:
+            if self.bridge.generations.knows(self.p.mqtt_topic):
+                self.release()
+            return
         wire, why = self.bridge.generations.decide(self.p.mqtt_topic)
         with self._lock:
             changed = wire is not self.wire
@@ -226,26 +248,87 @@ class _Ros2Mqtt:
                       wire.label, why)
             self.announce()
 
+    def release(self, expired: bool = False) -> None:
+        """Stop holding: decide the generation, announce it and send the held messages in it, oldest first."""
+        with self._send_lock:
+            self._release(expired)
+
+    def _release(self, expired: bool) -> None:
+        with self._lock:
+            if not self.holding:
+                return
+            self.holding = False
+            held, self._held = list(self._held), collections.deque()
+        wire, why = self.bridge.generations.decide(self.p.mqtt_topic)
+        with self._lock:
+            self.wire, self.why = wire, why
+        if expired:
+            _log.warning("micros_rt mqtt: MQTT topic '%s': no mqtt_client peer announced a type on the broker within "
+                         "%g s: writing mqtt_client %s (the default). A 1.x mqtt_client that only reads this topic "
+                         "announces nothing and would misread it: give it bridge/mqtt_client_version: 1 (or "
+                         "mqtt_client_version: 1 on this topic)", self.p.mqtt_topic, PEER_HOLD, wire.label)
+        else:
+            _log.info("micros_rt mqtt: MQTT topic '%s': writing mqtt_client %s (%s)%s", self.p.mqtt_topic,
+                      wire.label, why, f"; the {len(held)} messages held until now follow" if held else "")
+        self.announce()
+        for serialized, stamp in held:
+            self._publish(codec.encode_ros_payload(serialized, wire=self.wire, stamp=stamp))
+        self.bridge.end_watch()
+
+    def check_hold(self, now: float, live_since: Optional[float]) -> None:
+        """Release the held messages PEER_HOLD seconds after the first connect (the scan thread)."""
+        if self.holding and live_since is not None and now - live_since >= PEER_HOLD:
+            self.release(expired=True)
+
+    def _hold(self, serialized: bytes, stamp: Optional[genpy.Time]) -> bool:
+        """Hold one message while the peers' generation is unknown; False when no longer holding."""
+        with self._lock:
+            if not self.holding:
+                return False
+            self._held.append((serialized, stamp))
+            self.held += 1
+            if len(self._held) > HOLD_LIMIT:
+                self._held.popleft()
+                self.held_dropped += 1
+                dropped = self.held_dropped
+            else:
+                return True
+        self.bridge.problems.report(self.p.mqtt_topic, "held_dropped",
+                                    f"MQTT topic '{self.p.mqtt_topic}': no peer's mqtt_client generation known yet; "
+                                    f"holding the newest {HOLD_LIMIT} messages, dropped older ones ({dropped} in "
+                                    f"all; bridge/mqtt_client_version fixes the generation)")
+        return True
+
     def _send(self, t: codec.RosMsgType, serialized: Optional[bytes], msg: Optional[genpy.Message]) -> None:
         p = self.p
-        conn = self.bridge.connection
         if p.primitive and msg is not None:
             payload = codec.msg_to_text(msg).encode("utf-8")
         elif p.json and msg is not None:
             payload = codec.msg_to_json(msg).encode("utf-8")
         else:
-            if self.announced is None or t is not self._type:
-                self.bridge.await_peer_scan()       # the generation may still be learned from the broker
-                with self._lock:
-                    self._type = t
-                self.announce()
             if serialized is None:
                 assert msg is not None
                 buf = io.BytesIO()
                 msg.serialize(buf)
                 serialized = buf.getvalue()
             stamp = genpy.Time.from_sec(time.time()) if p.inject_timestamp else None
-            payload = codec.encode_ros_payload(serialized, wire=self.wire, stamp=stamp)
+            with self._send_lock:     # after the held ones, never between them
+                if self.announced is None or t is not self._type:
+                    with self._lock:
+                        self._type = t
+                    # announced even while holding: no data follows it yet, and a micros_rt bridge on the other
+                    # side, holding too, learns a peer's generation from it
+                    self.announce()
+                # held only when it could be sent now: while disconnected (no disk buffer) it is dropped, counted
+                if self.holding and self.bridge.connection.can_send and self._hold(serialized, stamp):
+                    return
+                self._publish(codec.encode_ros_payload(serialized, wire=self.wire, stamp=stamp))
+            return
+        self._publish(payload)
+
+    def _publish(self, payload: bytes) -> None:
+        p = self.p
+        conn = self.bridge.connection
         try:
             if conn.publish(p.mqtt_topic, payload, qos=p.qos, retain=p.retained):
                 self.sent += 1
@@ -276,8 +359,22 @@ class _TopicWorker:
         self._idle = False
         self._thread: Optional[threading.Thread] = None
         self._closed = False
+        self._running = False    # the worker is handling an item
         self._on_overflow = on_overflow
         self.dropped = 0
+        self.inline = 0          # items handled on the caller's thread (nothing queued or under way)
+
+    def run_inline(self, fn: Callable[..., None], *args: Any) -> bool:
+        """From paho's thread (the only one that puts): handle ``fn(*args)`` here when nothing is queued or under
+        way, so order is kept and a message costs no thread hand-over; False (nothing done) otherwise."""
+        with self._lock:
+            if self._closed:
+                return True
+            if self._items or self._running:
+                return False
+        fn(*args)
+        self.inline += 1
+        return True
 
     def put(self, fn: Callable[..., None], *args: Any, droppable: bool = True) -> None:
         """From paho's thread: never waits. Beyond WORKER_BACKLOG the oldest droppable item goes, counted."""
@@ -302,6 +399,7 @@ class _TopicWorker:
     def _run(self) -> None:
         while True:
             with self._lock:
+                self._running = False
                 if self._closed:
                     return
                 if not self._items:
@@ -309,6 +407,7 @@ class _TopicWorker:
                     item = None
                 else:
                     item = self._items.popleft()
+                    self._running = True
             if item is None:
                 self._wake.get()
                 continue
@@ -345,6 +444,7 @@ class _Mqtt2Ros:
         self.pending: Deque[bytes] = collections.deque()
         self.latency_pub: Optional[micros_rt.Publisher] = None
         self.delivered = 0
+        self.retyped = 0                     # primitive texts of another kind re-advertised the ROS topic
         self.worker = _TopicWorker(p.mqtt_topic, lambda n: bridge.problems.report(
             p.mqtt_topic, "backlog", f"MQTT topic '{p.mqtt_topic}': more than {WORKER_BACKLOG} messages waited for "
                                      f"the ROS side; dropped the oldest ({n} in all)"))
@@ -386,7 +486,16 @@ class _Mqtt2Ros:
         self.worker.put(self.on_type, topic, payload, droppable=False)
 
     def feed_data(self, topic: str, payload: bytes, properties: Any = None) -> None:
+        # a payload that only decodes and publishes (type known, no publisher to advertise, a ROS queue that
+        # never blocks) is handled on paho's thread when the worker is idle: no hand-over per message
+        if self.fast and self.worker.run_inline(self.on_data, topic, payload):
+            return
         self.worker.put(self.on_data, topic, payload)
+
+    @property
+    def fast(self) -> bool:
+        return (self.announced and self.publisher is not None and self.p.queue_size is not None
+                and not (self.p.primitive or self.p.json) and (self.stamped is False or self.latency_pub is not None))
 
     def on_type(self, topic: str, payload: bytes, properties: Any = None) -> None:
         problems = self.bridge.problems
@@ -416,6 +525,8 @@ class _Mqtt2Ros:
                           (", stamped" if announced.stamped else ", not stamped"))
             self.announced, self.stamped = True, announced.stamped
             pending, self.pending = list(self.pending), collections.deque()
+        self.bridge.note_read_generation(self.p.mqtt_topic, announced.wire)
+        self.bridge.connection.unsubscribe(codec.ROS_MSG_TYPE_PREFIX + self.p.mqtt_topic)  # scans show changes
         for data in pending:
             self.on_data(self.p.mqtt_topic, data)
 
@@ -442,6 +553,7 @@ class _Mqtt2Ros:
             msg.deserialize(raw)
             _check_length(msg, raw)
         except Exception as exc:  # genpy raises struct.error, DeserializationError, UnicodeDecodeError...
+            self.bridge.request_scan()    # the peer may have announced another type since the last scan
             self.bridge.problems.report(topic, "malformed",
                                         f"MQTT topic '{topic}': a {len(payload)}-byte payload does not decode as "
                                         f"mqtt_client {'1.x' if stamped is None else '2.x'}'s {cls._type}: "
@@ -464,16 +576,30 @@ class _Mqtt2Ros:
                 if p.json:
                     assert self.data_class is not None
                     msg = codec.json_to_msg(text, self.data_class)
-                elif self.data_class is None:
+                elif not p.ros_type:
+                    # as mqtt_client: each text is probed, and a text of another kind than the last one
+                    # re-advertises the ROS topic with its type (42, abc, 1.5, True: Int32, String, Float32, Bool)
                     msg = codec.probe_primitive(text)
-                    self._advertise(type(msg))
+                    if type(msg) is not self.data_class:
+                        if self.data_class is not None:
+                            self.retyped += 1
+                            _log.info("MQTT topic '%s': primitive text %s is a %s, the last was a %s: ROS topic '%s' "
+                                      "re-advertised as %s (as mqtt_client does; ros_type fixes one type)",
+                                      topic, _short_text(text), msg._type, self.data_class._type, p.ros_topic,
+                                      msg._type)
+                        self._advertise(type(msg))
                 else:
+                    assert self.data_class is not None   # ros_type: advertised at start
                     msg = codec.text_to_msg(text, self.data_class)
         except codec.CodecError as exc:
             self.bridge.problems.report(topic, "unfit_text", f"MQTT topic '{topic}' -> ROS topic '{p.ros_topic}': "
                                         f"{exc}")
             return
         self._publish(msg)
+
+
+def _short_text(text: str) -> str:
+    return repr(text if len(text) <= 40 else text[:40] + "...")
 
 
 def _check_length(msg: genpy.Message, body: bytes) -> None:
@@ -535,8 +661,12 @@ class MqttBridge:
         self._type_readers: Dict[str, _Mqtt2Ros] = {}
         self._scan_topic = f"micros_rt/scan/{uuid.uuid4().hex}"
         self._scanned = threading.Event()     # the broker's retained announcements have arrived (this connection)
-        if not self.follows_peers:
-            self._scanned.set()
+        self._scan_lock = threading.Lock()
+        self._scan_started = 0.0              # monotonic time of the scan under way (0: none)
+        self._watching = False                # mqtt_client/ros_msg_type/# subscribed (a scan, or a topic holding)
+        self._scan_now = threading.Event()
+        self._live_since: Optional[float] = None
+        self.scans = 0
         for r in self.ros2mqtt:
             kind = "primitive " if r.p.primitive else "JSON " if r.p.json else ""
             _log.info("Bridging %sROS topic '%s' to MQTT topic '%s'", kind, r.p.ros_topic, r.p.mqtt_topic)
@@ -545,61 +675,164 @@ class MqttBridge:
             _log.info("Bridging MQTT topic '%s' to %sROS topic '%s'", m.p.mqtt_topic, kind, m.p.ros_topic)
             self.connection.subscribe(m.p.mqtt_topic, m.p.qos, m.feed_data)
             if not (m.p.primitive or m.p.json):
+                # its type topic until a type is taken: then scans show a change (a peer repeats its
+                # announcement with every message; subscribed, each would cost paho's decoding of a message)
                 self._type_readers[codec.ROS_MSG_TYPE_PREFIX + m.p.mqtt_topic] = m
-                if not self.follows_peers:
-                    self.connection.subscribe(codec.ROS_MSG_TYPE_PREFIX + m.p.mqtt_topic, m.p.qos, m.feed_type)
-        if self.follows_peers:
-            qos = max([m.p.qos for m in self._type_readers.values()], default=0)
-            self.connection.subscribe(ANNOUNCEMENTS, qos, self._on_announcement)
+                self.connection.subscribe(codec.ROS_MSG_TYPE_PREFIX + m.p.mqtt_topic, m.p.qos, self._on_announcement)
+        self._announcement_qos = max([m.p.qos for m in self._type_readers.values()], default=0)
+        self.scanning = self.follows_peers or bool(self._type_readers)
+        if self.scanning:
             self.connection.subscribe(self._scan_topic, 0, self._on_scan)
+        if self.follows_peers:
+            held = [r.p.mqtt_topic for r in self.ros2mqtt if r.holding]
             _log.info("micros_rt mqtt: writing each MQTT topic in the mqtt_client generation its peers announce "
-                      "on the broker (%s until one does; bridge/mqtt_client_version fixes it); reading 1.x and 2.x",
-                      params.wire.label)
+                      "on the broker (bridge/mqtt_client_version fixes it); reading 1.x and 2.x. Until a peer has "
+                      "announced a type, a topic's messages wait, for %g s at most, then %s is written. A 1.x "
+                      "mqtt_client that only reads (%s) announces nothing: give this bridge mqtt_client_version: 1 "
+                      "(bridge-wide or on the topic), else it misreads %s payloads", PEER_HOLD, params.wire.label,
+                      ", ".join(f"'{t}'" for t in held) or "no topic here", params.wire.label)
         else:
             _log.info("micros_rt mqtt: writing mqtt_client %s payloads and type announcements "
                       "(bridge/mqtt_client_version: %d); reading 1.x and 2.x", params.wire.label, int(params.wire))
-        package = installed_is_connected_package(params.wire) or IS_CONNECTED_PACKAGE[params.wire]
-        self._service_class = is_connected_service_class(params.wire, package=package)
+        self._service_lock = threading.Lock()
+        self._read_generations: Dict[str, codec.WireGeneration] = {}   # mqtt2ros topic -> its peer's generation
+        self._service_class = is_connected_service_class(params.wire, package=self._is_connected_package())
         self._service = rospy.Service("~is_connected", self._service_class, self._is_connected)
         self._resolver = threading.Thread(target=self._resolve_loop, name="micros_rt mqtt types", daemon=True)
+        self._scanner = threading.Thread(target=self._scan_loop, name="micros_rt mqtt scans", daemon=True)
 
     def start(self) -> None:
         """Connect to the broker (in the background) and start subscribing ROS topics as they appear."""
         self.connection.start()
         self._resolver.start()
+        if self.scanning:
+            self._scanner.start()
+
+    def _is_connected_package(self) -> str:
+        """The package of ``~is_connected``'s type: an installed one (what rosservice here can load), the peers'
+        generation's first when both are; none installed, the peers' generation's (``mqtt_client`` for 1.x,
+        ``mqtt_client_interfaces`` for 2.x), so that a caller with their mqtt_client can load it. The
+        generation: the setting, else the one every peer on the broker announces, else 2.x."""
+        wire = self.params.wire
+        if not self.params.wire_set:
+            seen = set(self.generations.peers().values()) | set(self._read_generations.values())
+            if len(seen) == 1:
+                wire = seen.pop()
+        return installed_is_connected_package(wire) or IS_CONNECTED_PACKAGE[wire]
+
+    def note_read_generation(self, topic: str, wire: codec.WireGeneration) -> None:
+        """A peer announced ``topic``, read here, in ``wire``: it may change ``~is_connected``'s type."""
+        if self._read_generations.get(topic) is not wire:
+            self._read_generations[topic] = wire
+            self._retype_is_connected()
+
+    def _retype_is_connected(self) -> None:
+        """Advertise ``~is_connected`` anew when the peers' generation changes its package (on a thread of its
+        own: registering with the master must not hold paho's thread or a topic's worker)."""
+        if self.params.wire_set or self._closed.is_set():
+            return
+        package = self._is_connected_package()
+        if self._service_class._type == f"{package}/IsConnected":
+            return
+
+        def retype() -> None:
+            with self._service_lock:
+                if self._closed.is_set() or self._service_class._type == f"{package}/IsConnected":
+                    return
+                before = self._service_class._type
+                self._service.shutdown()
+                self._service_class = is_connected_service_class(package=package)
+                self._service = rospy.Service("~is_connected", self._service_class, self._is_connected)
+                _log.info("micros_rt mqtt: ~is_connected is now a %s (was %s): the peers on the broker speak "
+                          "mqtt_client %s", self._service_class._type, before,
+                          "1.x" if package == IS_CONNECTED_PACKAGE[codec.WireGeneration.V1] else "2.x")
+        threading.Thread(target=retype, name="micros_rt mqtt is_connected", daemon=True).start()
 
     def _is_connected(self, request: Any) -> Any:
         return self._service_class._response_class(connected=self.connection.is_connected)
 
     def _connection_changed(self, connected: bool) -> None:
         if connected:
-            if self.follows_peers:
-                self._scanned.clear()
+            self._scanned.clear()
+            with self._scan_lock:
+                self._scan_started = 0.0
             for r in self.ros2mqtt:
                 r.announced = None     # the retained announcement may be gone with a restarted broker
 
     def _on_live(self) -> None:
-        """Sending is enabled (after each connect): ask the broker to show its announcements first (they
-        arrive before the scan message, sent after the subscriptions), else announce now."""
-        if self.follows_peers:
-            self.connection.publish(self._scan_topic, b"", qos=0)
-        else:
+        """Sending is enabled (after each connect): look at the broker's announcements (a scan), then announce;
+        with no peers to follow, announce now."""
+        if self._live_since is None:
+            self._live_since = time.monotonic()
+        if self.scanning:
+            self._start_scan()
+        if not self.follows_peers:
             self._announce_all()
 
+    # -- the broker's type announcements: scans, and a watch while a topic holds its messages
+
+    def _holding(self) -> bool:
+        return self.follows_peers and any(r.holding for r in self.ros2mqtt)
+
+    def _start_scan(self) -> None:
+        """Subscribe ``mqtt_client/ros_msg_type/#`` (the broker sends its retained announcements), then publish a
+        marker to this bridge's scan topic: when it comes back, they have all arrived (:meth:`_on_scan`)."""
+        now = time.monotonic()
+        with self._scan_lock:
+            if self._scan_started and now - self._scan_started < SCAN_TIMEOUT:
+                return
+            self._scan_started = now
+            subscribe, self._watching = not self._watching, True
+        if subscribe:
+            self.connection.subscribe(ANNOUNCEMENTS, self._announcement_qos, self._on_announcement)
+        self.connection.publish(self._scan_topic, b"", qos=0)
+
     def _on_scan(self, topic: str, payload: bytes, properties: Any = None) -> None:
-        self._scanned.set()
-        self._announce_all()
+        """The end of a scan: unsubscribe the announcements again, unless a topic still holds its messages
+        for a peer's generation (then every announcement counts at once)."""
+        with self._scan_lock:
+            self._scan_started = 0.0
+            unsubscribe = self._watching and not self._holding()
+            if unsubscribe:
+                self._watching = False
+        if unsubscribe:
+            self.connection.unsubscribe(ANNOUNCEMENTS)
+        self.scans += 1
+        if not self._scanned.is_set():
+            self._scanned.set()
+            if self.follows_peers:
+                self._announce_all()
+
+    def end_watch(self) -> None:
+        """No topic holds its messages any more: stop receiving every announcement (unless a scan is under way,
+        which ends it)."""
+        with self._scan_lock:
+            unsubscribe = self._watching and not self._scan_started and not self._holding()
+            if unsubscribe:
+                self._watching = False
+        if unsubscribe:
+            self.connection.unsubscribe(ANNOUNCEMENTS)
+
+    def request_scan(self) -> None:
+        """Look at the broker's announcements now (a payload that did not decode: its type may have changed)."""
+        self._scan_now.set()
+
+    def _scan_loop(self) -> None:
+        while not self._closed.is_set():
+            self._scan_now.wait(SCAN_INTERVAL)
+            self._scan_now.clear()
+            if self._closed.is_set():
+                return
+            now = time.monotonic()
+            for r in self.ros2mqtt:
+                r.check_hold(now, self._live_since)
+            if self.connection.is_live:
+                self._start_scan()
 
     def _announce_all(self) -> None:
         for r in self.ros2mqtt:
             r.redecide()
             r.announce(force=True)
-
-    def await_peer_scan(self) -> None:
-        """Before a topic's first message on a connection: wait (bounded) for the broker's retained
-        announcements, so that the first payload is already in the peers' generation."""
-        if not self._scanned.is_set() and self.connection.is_live:
-            self._scanned.wait(PEER_SCAN_WAIT)
 
     def _on_announcement(self, topic: str, payload: bytes, properties: Any = None) -> None:
         """Every ``mqtt_client/ros_msg_type/...`` message (paho's thread): a peer's generation, and the
@@ -611,6 +844,7 @@ class MqttBridge:
             for r in self.ros2mqtt:
                 if r.framed:
                     r.redecide()
+            self._retype_is_connected()
 
     def _resolve_loop(self) -> None:
         while not self._closed.wait(RESOLVE_INTERVAL):
@@ -629,7 +863,7 @@ class MqttBridge:
                     continue
                 cls = roslib.message.get_message_class(type_name)
                 if cls is None or r.framed:   # framed: bytes over TCPROS, as mqtt_client's ShapeShifter
-                    r.attach_raw(type_name)
+                    r.attach_raw(type_name, installed=cls is not None)
                 else:
                     r.attach(cls)
 
@@ -637,6 +871,9 @@ class MqttBridge:
         """Counts: messages sent and delivered, each kind of bad input, the connection's counters."""
         out: Dict[str, Any] = {"sent": {r.p.ros_topic: r.sent for r in self.ros2mqtt},
                                "delivered": {m.p.ros_topic: m.delivered for m in self.mqtt2ros},
+                               "retyped": {m.p.ros_topic: m.retyped for m in self.mqtt2ros if m.retyped},
+                               "held": {r.p.mqtt_topic: r.held for r in self.ros2mqtt if r.held},
+                               "scans": self.scans,
                                "bad_input": dict(self.problems.counts)}
         out.update(vars(self.connection.counters()))
         return out
@@ -647,7 +884,8 @@ class MqttBridge:
             return
         self._closed.set()
         self.connection.close()
-        self._service.shutdown()
+        with self._service_lock:
+            self._service.shutdown()
         for r in self.ros2mqtt:
             for sub in (r.subscriber, r.raw_subscriber):
                 if sub is not None:

@@ -80,6 +80,11 @@ class LinkStats:
                 counts = counts.setdefault(entry, {})
             counts[key] = counts.get(key, 0) + n
 
+    def set(self, section: str, key: str, value: Any) -> None:
+        """A value that is not a count (e.g. ``link.wire_form``, the form written to the board)."""
+        with self._lock:
+            self._counts.setdefault(section, {})[key] = value
+
     def get(self, section: str, key: str, *, entry: Optional[str] = None) -> int:
         with self._lock:
             counts = self._counts.get(section, {})
@@ -128,7 +133,7 @@ class UdpWriter:
         """The datagram for ``msg``; :class:`DatagramTooLargeError` when it exceeds the mtu (counted
         ``oversized``), ``genpy.SerializationError`` on a bad field value (counted ``send_failed``)."""
         try:
-            data = wire.encode_datagram(self.entry.name, self.codec.to_wire(msg), form=self._link.config.wire_form)
+            data = wire.encode_datagram(self.entry.name, self.codec.to_wire(msg), form=self._link.wire_form)
         except genpy.SerializationError:
             self._link.stats.add("to_microcontroller", "send_failed", entry=self.entry.name)
             raise
@@ -174,21 +179,34 @@ class UdpReader(PushReader):
 
     def decode_datagram(self, payload: bytes) -> Any:
         """The ROS message of one datagram; :class:`WireError` (a ``ValueError``) when malformed."""
-        name, rest = wire.split_datagram(payload)
+        return self._decode(wire.split_payload(payload))
+
+    def _decode(self, payload: wire.Payload) -> Any:
         try:
-            return self.codec.from_args(rest)
+            return self.codec.from_args(payload.rest)
         except WireError as exc:
-            raise WireError(exc.kind, f"stream {name!r} ({self.entry.type}): {exc}") from exc
+            raise WireError(exc.kind, f"stream {payload.name!r} ({self.entry.type}): {exc}") from exc
 
     def put_datagram(self, datagram: bytes, source: str) -> None:
         """From the receive thread: decode one datagram and queue its message (never waits: the oldest is
         dropped when the queue is full, counted in :attr:`dropped`)."""
         try:
-            msg = self.decode_datagram(datagram)
+            payload = wire.split_payload(datagram)
+        except WireError as exc:
+            self._link.bad_input(source, exc, "a datagram")
+            return
+        self.put_payload(payload, source)
+
+    def put_payload(self, payload: wire.Payload, source: str) -> None:
+        """:meth:`put_datagram` of a datagram already split; a well-formed one also tells the link the
+        board's era (:meth:`McuLink.heard_form`)."""
+        try:
+            msg = self._decode(payload)
         except WireError as exc:
             self._link.bad_input(source, exc, "a datagram")
             return
         self._last_source = source
+        self._link.heard_form(payload.form(self.codec.field_count), f"a datagram of {payload.name!r}")
         self.put(msg, 0, source)
 
 
@@ -212,6 +230,9 @@ class McuLink:
         self._services: Dict[str, ServiceEntry] = {e.name: e for e in config.services_for_microcontroller}
         self._slots = threading.Semaphore(MAX_CONCURRENT_CALLS)
         self._tcp: Optional[socket.socket] = None
+        self._form_lock = threading.Lock()
+        self._learned: Optional[wire.WireForm] = None   # the era the board's own bytes showed (wire_form unset)
+        self.stats.set("link", "wire_form", self.wire_form.value)
         self._udp = self._bind(socket.SOCK_DGRAM, config.bind.topic_port, "topic")
         self._udp.settimeout(0.2)
         self._start(self._receive_loop, "mcu-link udp")
@@ -255,6 +276,38 @@ class McuLink:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    # -- the board's era
+    @property
+    def wire_form(self) -> wire.WireForm:
+        """The form written to the board now: ``wire_form`` when the configuration sets it, else the era the
+        board's own datagrams and requests showed last (:meth:`heard_form`), else
+        :data:`~micros_rt.transports.mcu.wire.DEFAULT_WIRE_FORM` (CVRA's final form) until it has sent any."""
+        return self.config.wire_form or self._learned or wire.DEFAULT_WIRE_FORM
+
+    def heard_form(self, form: Optional[wire.WireForm], what: str) -> None:
+        """The board sent ``what`` laid out in ``form`` (None: a layout several eras share, which tells
+        nothing): from now on the link writes that form, unless the configuration sets ``wire_form``.
+        Each change is one log line and counted (``link.wire_form_changes``); ``link.wire_form`` names the
+        form in use."""
+        if form is None or form is self._learned:
+            return
+        with self._form_lock:
+            before, self._learned = self._learned, form
+        if before is form:
+            return
+        self.stats.add("link", "wire_form_changes")
+        self.stats.set("link", "wire_form", self.wire_form.value)
+        if self.config.wire_form is not None:
+            if before is None and form is not self.config.wire_form:
+                _log.warning("microcontroller link: the board at %s sends CVRA's %s form (%s) but wire_form is "
+                             "%s: the bridge writes %s as configured (remove wire_form to follow the board)",
+                             self._board_ip, form.value, what, self.config.wire_form.value,
+                             self.config.wire_form.value)
+            return
+        _log.info("microcontroller link: the board at %s speaks CVRA's %s form (%s)%s; the bridge now writes that "
+                  "form to it (wire_form in the configuration would fix one)", self._board_ip, form.value, what,
+                  "" if before is None else f", no longer {before.value}")
 
     # -- logging
     def warn(self, key: Any, message: str, *, group: Any = None) -> None:
@@ -325,15 +378,16 @@ class McuLink:
                                                              f"may send datagrams to the bridge"), "a datagram")
             return
         try:
-            name, _ = wire.split_datagram(data)
+            payload = wire.split_payload(data)
         except WireError as exc:
             self.bad_input(peer, exc, "a datagram")
             return
-        reader = self._readers.get(name)
+        reader = self._readers.get(payload.name)
         if reader is None:
-            self.bad_input(peer, _unknown("unknown_stream", "from_microcontroller", name, self._readers), "a datagram")
+            self.bad_input(peer, _unknown("unknown_stream", "from_microcontroller", payload.name, self._readers),
+                           "a datagram")
             return
-        reader.put_datagram(data, peer)
+        reader.put_payload(payload, peer)
 
     # -- services: calls from the board
     def serve_calls(self, handler: ServiceHandler) -> None:
@@ -369,19 +423,21 @@ class McuLink:
             with conn:
                 try:
                     body = _read_frame(conn, time.monotonic() + FRAME_TIMEOUT)
-                    name, params = wire.decode_request(body)
+                    request = wire.decode_request_payload(body)
                 except WireError as exc:
                     self.bad_input(peer, exc, "a service frame")
                     return
-                entry = self._services.get(name)
+                entry = self._services.get(request.name)
                 if entry is None:
-                    self.bad_input(peer, _unknown("unknown_service", "services_for_microcontroller", name,
+                    self.bad_input(peer, _unknown("unknown_service", "services_for_microcontroller", request.name,
                                                   self._services), "a service call")
                     return
                 assert self._handler is not None
                 self.stats.add("services_for_microcontroller", "calls", entry=entry.name)
+                fields = wire.codec_for(entry.service_class._request_class).field_count
+                self.heard_form(request.form(fields), f"a call of {entry.name!r}")
                 try:
-                    answer = self._handler(entry, params)
+                    answer = self._handler(entry, request.rest)
                 except WireError as exc:
                     self.stats.add("services_for_microcontroller", "failed", entry=entry.name)
                     self.bad_input(peer, exc, f"a call of {entry.name!r}")
@@ -393,7 +449,7 @@ class McuLink:
                               f"no answer (the connection is closed)", group="call_failed")
                     return
                 _set_tos(conn, entry.advertise.transport_priority, self._family)
-                conn.sendall(wire.encode_response(answer, form=self.config.wire_form))
+                conn.sendall(wire.encode_response(answer, form=self.wire_form))
                 self.stats.add("services_for_microcontroller", "ok", entry=entry.name)
         except OSError as exc:
             self.warn((peer.rsplit(":", 1)[0], "socket"), f"microcontroller link: service connection from {peer}: "
@@ -423,7 +479,7 @@ class McuLink:
                 _set_tos(sock, entry.advertise.transport_priority, self._family)
                 sock.settimeout(max(deadline - time.monotonic(), 0.001))
                 sock.connect(board.service())
-                sock.sendall(wire.encode_request(entry.name, params, form=self.config.wire_form))
+                sock.sendall(wire.encode_request(entry.name, params, form=self.wire_form))
                 chunks: List[bytes] = []
                 size = 0
                 while True:

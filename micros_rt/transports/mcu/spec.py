@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import ipaddress
 from dataclasses import dataclass, field
-from typing import Any, Tuple, Type
+from typing import Any, Optional, Tuple, Type
 
 import genpy
 
@@ -78,7 +78,8 @@ class ServiceEntry:
 
 @dataclass(frozen=True)
 class McuConfig:
-    """The whole link: the board, this end's address, the mtu, the wire form written, the streams each way and
+    """The whole link: the board, this end's address, the mtu, the wire form written (None, the default: the era
+    the board's own datagrams and requests show, CVRA's final form until it has sent any), the streams each way and
     the services each way (``stats_period`` and ``source`` are the bridge's: how often it reports, which file
     it came from)."""
 
@@ -86,7 +87,7 @@ class McuConfig:
     bind: Address = Address("0.0.0.0")
     mtu: int = DEFAULT_MTU
     stats_period: float = 1.0
-    wire_form: WireForm = WireForm.FINAL
+    wire_form: Optional[WireForm] = None   # None: the board's era, learned from what it sends
     to_microcontroller: Tuple[TopicEntry, ...] = ()
     from_microcontroller: Tuple[TopicEntry, ...] = ()
     services_on_microcontroller: Tuple[ServiceEntry, ...] = ()

@@ -37,7 +37,7 @@ import enum
 import struct
 import threading
 import zlib
-from typing import Any, Callable, Dict, List, Optional, Tuple, Type
+from typing import Any, Callable, Dict, List, NamedTuple, Optional, Tuple, Type
 
 import genpy
 import msgpack
@@ -50,7 +50,7 @@ from .errors import WireError
 __all__ = [
     "WireForm", "WIRE_FORM_NAMES", "Float32", "pack", "Answer", "to_args", "END", "ESC", "ESC_END", "ESC_ESC", "MessageCodec", "codec_for", "encode_datagram", "split_datagram",
     "frame", "unframe", "FrameReader", "encode_request", "decode_request", "encode_response",
-    "decode_response",
+    "decode_response", "Payload", "split_payload", "decode_request_payload", "DEFAULT_WIRE_FORM",
 ]
 
 END = 0xC0
@@ -82,6 +82,9 @@ class WireForm(enum.Enum):
     #: ``[name, {fields}]``: what micros_rt wrote as ``cvra`` before issue 37 (answers as a map of fields).
     MAP = "map"
 
+
+#: What the link writes to a board that has sent nothing yet (no ``wire_form`` set): CVRA's final form.
+DEFAULT_WIRE_FORM = WireForm.FINAL
 
 #: ``wire_form`` values a configuration may use, with what each means (the error message lists them).
 WIRE_FORM_NAMES: Dict[str, WireForm] = {
@@ -595,12 +598,43 @@ def _unpack_all(data: bytes, at_most: int) -> List[Any]:
     return objects
 
 
-def _split(objects: List[Any], what: str) -> Tuple[str, List[Any]]:
+class Payload(NamedTuple):
+    """A datagram or request split into its name and what follows it (undecoded), and how it was laid out:
+    ``separate`` when the name and the arguments were two MessagePack objects (the README's form)."""
+
+    name: str
+    rest: List[Any]
+    separate: bool
+
+    def form(self, field_count: int) -> Optional[WireForm]:
+        """The CVRA era only one of whose forms lays out these arguments for a type of ``field_count``
+        fields, or None when several eras write the same bytes (a one-field type's ``[name, value]`` is the
+        final and the mid-2015 form alike).
+
+        >>> split_payload(bytes.fromhex("91a3666f6f")).form(0).value        # mid-2015 encode("foo")
+        'mid2015'
+        >>> split_payload(bytes.fromhex("92a3666f6fc0")).form(0).value      # final encode("foo")
+        'final'
+        >>> split_payload(bytes.fromhex("92a57370656564ca3fc00000")).form(1) is None   # [speed, 1.5]
+        True
+        """
+        if self.separate:
+            return WireForm.README
+        if len(self.rest) != 1:
+            return WireForm.MID2015   # [name] (no arguments) or [name, f1, f2, ...]: only mid-2015 writes these
+        if self.rest[0] is None:
+            return WireForm.FINAL     # [name, nil]: the final form's "no arguments" (mid-2015 writes [name])
+        if field_count != 1:
+            return WireForm.FINAL     # [name, [f1, ...]] or [name, {..}]: one argument object for several fields
+        return None
+
+
+def _split(objects: List[Any], what: str) -> Payload:
     first = objects[0]
     if len(objects) == 2 and isinstance(first, str):
-        return first, [objects[1]]              # the README's name then {fields} (or any one object)
+        return Payload(first, [objects[1]], True)   # the README's name then {fields} (or any one object)
     if len(objects) == 1 and isinstance(first, list) and first and isinstance(first[0], str):
-        return first[0], first[1:]              # [name, args] (final), [name, *fields] (mid-2015), [name, {..}]
+        return Payload(first[0], first[1:], False)  # [name, args] (final), [name, *fields] (mid-2015), [name, {..}]
     raise WireError("bad_shape", f"{what} must be an array [name, args...] or a name (string) followed by its "
                                  f"arguments; got {' + '.join(_shown(o) for o in objects)}")
 
@@ -615,6 +649,12 @@ def split_datagram(data: bytes) -> Tuple[str, List[Any]]:
     >>> split_datagram(bytes.fromhex("93a3696d750102"))
     ('imu', [1, 2])
     """
+    name, rest, _ = split_payload(data)
+    return name, rest
+
+
+def split_payload(data: bytes) -> Payload:
+    """A topic datagram's name, what follows it (undecoded) and its layout (:meth:`Payload.form`)."""
     return _split(_unpack_all(data, 2), "a topic datagram")
 
 
@@ -708,6 +748,12 @@ def encode_request(name: str, fields: Dict[str, Any], *, form: WireForm = WireFo
 def decode_request(body: bytes) -> Tuple[str, List[Any]]:
     """``(name, rest)`` from a received frame body (before END): ``rest`` is what follows the name, undecoded,
     in any era's form (:meth:`MessageCodec.from_args` reads it)."""
+    name, rest, _ = decode_request_payload(body)
+    return name, rest
+
+
+def decode_request_payload(body: bytes) -> Payload:
+    """A received request (frame body before END): its name, what follows (undecoded) and its layout."""
     return _split(_unpack_all(unframe(body), 2), "a service request")
 
 

@@ -239,12 +239,14 @@ def msg_to_text(msg: genpy.Message) -> str:
 
 
 def probe_primitive(text: str) -> genpy.Message:
-    """mqtt_client's probing of incoming text: bool, then int (Int32), then float (Float32), then String."""
+    """mqtt_client's probing of incoming text: bool (``true``/``false`` in any case: the real client takes
+    ``True`` as a Bool), then int (Int32), then float (Float32), then String."""
     from std_msgs.msg import Bool, Float32, Int32, String
 
     stripped = text.strip()
-    if stripped in ("true", "false"):
-        return Bool(data=stripped == "true")
+    lowered = stripped.lower()
+    if lowered in ("true", "false"):
+        return Bool(data=lowered == "true")
     try:
         as_int = int(stripped, 10)
     except ValueError:

@@ -69,6 +69,14 @@ class PeerGenerations:
         """True when some topic's generation is read from the broker (no setting fixes every topic)."""
         return self.fixed is None
 
+    def knows(self, topic: str) -> bool:
+        """True when ``topic``'s generation is set or a peer on the broker has announced one (else the bridge
+        does not know whom it writes for)."""
+        if topic in self.fixed_topics or self.fixed is not None:
+            return True
+        with self._lock:
+            return bool(self._peers)
+
     def add_written(self, topic: str) -> None:
         with self._lock:
             self._written.add(topic)
