@@ -542,6 +542,20 @@ def role_graph(a, tr, msgs):
 
     pub = tr.pub(f"{a.topic}_{i}")
     subs = [tr.sub(f"{a.topic}_{j}", mk(j)) for j in others]
+    service = None
+    if a.service and i == 0:  # one node of the graph offers a std_srvs/Trigger (micros_rt: to ROS 2 as well)
+        from std_srvs.srv import Trigger, TriggerResponse
+
+        answer = lambda _req: TriggerResponse(success=True, message="ok")  # noqa: E731
+        if a.impl.startswith("mrt"):
+            import micros_rt
+
+            service = micros_rt.NodeHandle().advertise_service(f"{a.topic}_trigger", Trigger, answer)
+        else:
+            import rospy
+
+            service = rospy.Service(f"{a.topic}_trigger", Trigger, answer)
+        emit("service", ros2_error=getattr(service, "ros2_error", None))
     deadline = time.monotonic() + a.timeout
     seq, nxt, told = 0, time.monotonic(), False
     while not STOP.is_set() and time.monotonic() < deadline:
@@ -556,7 +570,7 @@ def role_graph(a, tr, msgs):
         tr.spin_once(max(0.0, min(0.05, nxt - time.monotonic())))
     if not told:
         emit("not_connected", heard=sorted(heard), want=others)
-    del subs
+    del subs, service
 
 
 def main():
@@ -574,6 +588,7 @@ def main():
     ap.add_argument("--drain", type=float, default=2.0)
     ap.add_argument("--nodes", type=int, default=2)
     ap.add_argument("--index", type=int, default=0)
+    ap.add_argument("--service", action="store_true", help="graph: node 0 also offers a std_srvs/Trigger")
     ap.add_argument("--timeout", type=float, default=60.0)
     a = ap.parse_args()
     for sig in (signal.SIGINT, signal.SIGTERM):

@@ -47,6 +47,8 @@ RESULTS = HERE / "results"
 PY = {
     "micros_rt_shm": str(REPO / ".venv/bin/python"),
     "micros_rt_shm_ros2": str(REPO / ".venv/bin/python"),
+    "micros_rt_shm_service": str(REPO / ".venv/bin/python"),
+    "rospy_tcpros_service": "/usr/bin/python3",
     "micros_rt_shm_local": str(REPO / ".venv/bin/python"),
     "micros_rt_dds": str(REPO / ".venv/bin/python"),
     "micros_rt_dds_budget": str(REPO / ".venv/bin/python"),
@@ -55,7 +57,8 @@ PY = {
     "cyclonedds_python": str(REPO / ".venv/bin/python"),
     "rclpy_fastdds": str(REPO / ".venv-ros2/bin/python"),
 }
-IMPL = {"micros_rt_shm": "mrt_shm", "micros_rt_shm_ros2": "mrt_shm", "micros_rt_shm_local": "mrt_shm", "micros_rt_dds": "mrt_dds", "micros_rt_dds_budget": "mrt_budget", "micros_rt_tcpros": "mrt_tcpros", "rospy_tcpros": "rospy",
+IMPL = {"micros_rt_shm": "mrt_shm", "micros_rt_shm_ros2": "mrt_shm", "micros_rt_shm_service": "mrt_shm",
+        "rospy_tcpros_service": "rospy", "micros_rt_shm_local": "mrt_shm", "micros_rt_dds": "mrt_dds", "micros_rt_dds_budget": "mrt_budget", "micros_rt_tcpros": "mrt_tcpros", "rospy_tcpros": "rospy",
         "cyclonedds_python": "cyclone", "rclpy_fastdds": "rclpy"}
 TRANSPORTS = tuple(PY)
 BASE = "rospy_tcpros"
@@ -68,6 +71,9 @@ CONFIG = {
                      "host watcher's)",
     "micros_rt_shm_ros2": "as micros_rt_shm, with MICROS_RT_ROS2=on: every node a DDS participant with a writer and "
                           "reader per topic from its start (what auto becomes once a ROS 2 node is on the domain)",
+    "micros_rt_shm_service": "as micros_rt_shm (the defaults), and node 0 of the scale graph offers a std_srvs/Trigger "
+                             "(advertise_service: served to ROS 1 and, through the ROS 2 helper, to ROS 2)",
+    "rospy_tcpros_service": "as rospy_tcpros, and node 0 of the scale graph offers a std_srvs/Trigger (rospy.Service)",
     "micros_rt_shm_local": "as micros_rt_shm, with MICROS_RT_ROS2=off: no DDS participant until a peer on another "
                            "host needs one; the delivery thread waits on the shared-memory links itself",
     "micros_rt_dds": "advertise(queue_size=None) / subscribe(queue_size=None), default QoS (reliable); "
@@ -315,6 +321,18 @@ def cpu_ticks(pid):
         return 0
 
 
+def with_children(pids):
+    """``pids`` and their child processes (a micros_rt node's ROS 2 services helper is one): what they cost too."""
+    out = list(pids)
+    for pid in pids:
+        try:
+            for task in Path(f"/proc/{pid}/task").iterdir():
+                out += [int(c) for c in (task / "children").read_text().split()]
+        except OSError:
+            continue
+    return out
+
+
 def rss_mb(pid):
     try:
         for line in Path(f"/proc/{pid}/status").read_text().splitlines():
@@ -460,12 +478,14 @@ class Bench:
         try:
             for i in range(n):
                 procs.append(self.spawn(t, "graph", ["--topic", topic, "--nodes", n, "--index", i,
-                                                     "--kind", "bytes", "--size", 64, "--timeout", 180], f"n{n}"))
+                                                     "--kind", "bytes", "--size", 64, "--timeout", 180,
+                                                     *(["--service"] if t.endswith("_service") else [])], f"n{n}"))
             last = 0.0
             for p in procs:
                 last = max(last, p.wait_ev("connected", max(5.0, 30 + 2 * n - (time.time() - t0)))["t"])
             connect_s = last - t0
-            pids = [p.p.pid for p in procs] + ([self.master.pid] if t.startswith(("micros", "rospy")) else [])
+            pids = with_children([p.p.pid for p in procs]) + (
+                [self.master.pid] if t.startswith(("micros", "rospy")) else [])
             time.sleep(1.0)
             c0, w0 = sum(cpu_ticks(x) for x in pids), time.monotonic()
             time.sleep(self.P["scale_steady"])
