@@ -82,7 +82,7 @@ def run_checks(env: Mapping[str, str]) -> List[Check]:
             check_cyclone(env) if not domain.failed else
             Check("Cyclone DDS", SKIP, "not started: ROS_DOMAIN_ID is invalid"),
             check_clocks(env) if not master.failed else Check("clocks", SKIP, "not checked: no ROS master"),
-            check_shared_memory(env), check_ros2_visibility(env), check_profile(env)]
+            check_shared_memory(env), check_ros2_visibility(env), check_ros2_helper(env), check_profile(env)]
 
 
 # --------------------------------------------------------------------------- checks
@@ -352,6 +352,33 @@ def check_ros2_visibility(env: Mapping[str, str]) -> Check:
            else "no ROS 2 node seen, so nodes make no DDS participant of their own (one node, the watcher, has one)")
     return Check("ROS 2 visibility", OK, f"auto: {now}; DDS domain {domain} {watching} (MICROS_RT_ROS2=on/off or "
                                          f"ros2: true/false in a profile fix it)")
+
+
+def check_ros2_helper(env: Mapping[str, str]) -> Check:
+    """The Python that micros_rt's ROS 2 helper runs (services and actions toward ROS 2): found, and rclpy imports."""
+    from ..services.gateway import ros2_python
+
+    name = "ROS 2 helper"
+    if env.get("MICROS_RT_DISABLE_ROS2_SERVICES", "") not in ("", "0"):
+        return Check(name, SKIP, "MICROS_RT_DISABLE_ROS2_SERVICES is set: services and actions stay ROS 1 only")
+    given = env.get("MICROS_RT_ROS2_PYTHON", "").strip()
+    python = ros2_python(dict(env))
+    if python is None:
+        return Check(name, SKIP, "no ROS 2 Python found (MICROS_RT_ROS2_PYTHON unset, no .venv-ros2): services and "
+                                 "actions are served to ROS 1 only; topics reach ROS 2 without it")
+    try:
+        cp = subprocess.run([python, "-c", "import rclpy, rclpy.action"], capture_output=True, text=True, timeout=60,
+                            stdin=subprocess.DEVNULL)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        return Check(name, FAIL, f"{python} cannot run ({exc}): services and actions are served to ROS 1 only",
+                     "point MICROS_RT_ROS2_PYTHON at the python of an installation with rclpy (e.g. "
+                     ".venv-ros2/bin/python), or unset it" if given else "reinstall .venv-ros2 (scripts/setup.sh)")
+    if cp.returncode != 0:
+        why = (cp.stderr.strip().splitlines() or ["no output"])[-1]
+        return Check(name, FAIL, f"{python} cannot import rclpy ({why}): services and actions are served to ROS 1 only",
+                     "install rclpy there (pip install 'ros-jazzy-rclpy[fastrtps]'; scripts/setup.sh does it), or "
+                     "point MICROS_RT_ROS2_PYTHON at another ROS 2 Python")
+    return Check(name, OK, f"{python}: rclpy imports; services and actions reach ROS 2 through it")
 
 
 def check_clocks(env: Mapping[str, str]) -> Check:

@@ -20,6 +20,9 @@ import pytest
 import harness
 from helpers import mrt, stock_listener
 
+# topic info and the graph name DDS links and the declined-DDS reason between two local micros_rt nodes
+pytestmark = pytest.mark.env(**harness.DDS_BETWEEN_NODES)
+
 CLI = str(harness.REPO_ROOT / ".venv" / "bin" / "micros-rt")
 TOPIC = "/cli_mixed"
 TALKER, BEST_EFFORT, LISTENER, STOCK = "/cli_mrt_talker", "/cli_mrt_best_effort", "/cli_mrt_listener", "/cli_stock"
@@ -155,7 +158,8 @@ def test_graph_png_and_dot(graph: Dict[str, str], tmp_path: Path) -> None:
 def test_doctor_passes_on_a_healthy_loopback_setup(graph: Dict[str, str]) -> None:
     cp = cli(graph, "doctor")
     assert cp.returncode == 0, cp.stdout
-    assert "all 9 checks passed" in cp.stdout
+    assert "all 10 checks passed" in cp.stdout
+    assert "[ OK ] ROS 2 helper" in cp.stdout and "rclpy imports" in cp.stdout
     assert "[SKIP] shared memory        turned off by MICROS_RT_DISABLE_SHM" in cp.stdout  # the suite keeps it off
     assert "[ OK ] ROS master" in cp.stdout and "multicast off" in cp.stdout
     assert "micros_rt node(s); largest offset" in cp.stdout  # the graph's micros_rt nodes answered
@@ -172,7 +176,16 @@ def test_doctor_fails_with_its_fix_when_the_master_is_down(graph: Dict[str, str]
     at = next(i for i, line in enumerate(lines) if line.startswith("[FAIL] ROS master"))
     assert "cannot reach the ROS master" in lines[at]
     assert "fix: start roscore" in lines[at + 1]
-    assert "1 of 9 checks failed" in cp.stdout
+    assert "1 of 10 checks failed" in cp.stdout
+
+
+def test_doctor_flags_a_ros2_helper_python_that_is_not_there(graph: Dict[str, str]) -> None:
+    cp = cli(dict(graph, MICROS_RT_ROS2_PYTHON="/nonexistent/python"), "doctor")
+    assert cp.returncode == 1, cp.stdout
+    lines = cp.stdout.splitlines()
+    at = next(i for i, line in enumerate(lines) if line.startswith("[FAIL] ROS 2 helper"))
+    assert "/nonexistent/python cannot run" in lines[at] and "served to ROS 1 only" in lines[at]
+    assert "fix: point MICROS_RT_ROS2_PYTHON at the python of an installation with rclpy" in lines[at + 1]
 
 
 def test_doctor_fails_with_its_fix_for_domain_999(graph: Dict[str, str]) -> None:
