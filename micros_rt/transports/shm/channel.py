@@ -112,6 +112,7 @@ class ShmChannel:
         self._lock = threading.Lock()
         self.name = _channel_name()
         self.closed = False
+        self._deleted = False       # the ports were let go (by close() or by the lock's holder after it)
         self.seen = False           # the subscriber's port attached at least once
         self.created = time.monotonic()
         self._service, events = _services(self.name, create=True, lossless=lossless, latch=latch, depth=depth)
@@ -136,7 +137,10 @@ class ShmChannel:
         """Put one message into the channel, stamped now (or ``source_ns``); False when it was not taken (a
         lossless channel full, or no subscriber attached: then a latched channel keeps it as history)."""
         n = len(body)
-        with self._lock:
+        if self.closed:
+            return False
+        self._lock.acquire()  # held by another sender at most (close() never waits for it)
+        try:
             if self.closed:
                 return False
             sample = self._publisher.loan_slice_uninit(n + 16)
@@ -149,28 +153,45 @@ class ShmChannel:
             self._seq = seq
             self._notifier.notify()
             return True
+        finally:
+            self._lock.release()
+            if self.closed:
+                self._delete_ports()  # close() came while we held the lock (a signal handler): it is ours to do
 
     def update_connections(self) -> None:
         """Hand a newly attached subscriber the history (a latched topic's last message)."""
         with self._lock:
             if not self.closed:
                 self._publisher.update_connections()
+        if self.closed:
+            self._delete_ports()
 
     def subscriber_dead(self) -> bool:
         """The subscriber's process is gone (SIGKILLed: its port stays in the service until cleaned up)."""
         return not process_alive(self.peer_pid)
 
     def close(self) -> None:
-        with self._lock:
-            if self.closed:
+        """Stop the channel; never waits: a signal handler (rospy's shutdown hooks) may run it in the very thread
+        that holds the lock inside :meth:`try_send`, so whoever holds the lock deletes the ports on letting go of
+        it (iceoryx2 aborts the process on a deleted port's use). Harmless twice."""
+        self.closed = True
+        self._delete_ports()
+
+    def _delete_ports(self) -> None:
+        if self._deleted or not self._lock.acquire(blocking=False):
+            return  # the holder deletes them when it lets go (it sees ``closed`` after its release)
+        try:
+            if self._deleted:
                 return
-            self.closed = True
+            self._deleted = True
             for port in (self._notifier, self._publisher):
                 try:
                     port.delete()
                 except Exception:
                     pass
-        self._service = self._events = None
+            self._service = self._events = None
+        finally:
+            self._lock.release()
 
 
 class ShmWriter:

@@ -1,0 +1,87 @@
+"""micros_rt nodes for the shared-memory fault tests (issue 46): one JSON event per stdout line.
+
+    mrt_shm_faults.py flood --topic /f [--size 64] [--stop-with signal_shutdown]
+        publish std_msgs/String as fast as it can (queue_size=None, lossless) until shut down; prints
+        {"event": "flooding"} once 2,000 were sent to a subscriber, {"event": "stopped", ...} on the way out
+    mrt_shm_faults.py count --topic /f [--duration 60]
+        subscribe and count (no line per message); prints {"event": "ready"}, then {"event": "count", ...}
+        every 0.2 s with the messages, their sequence gaps and the subscription's connections
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import threading
+import time
+from typing import Any, List
+
+import micros_rt
+from std_msgs.msg import String
+
+
+def emit(event: str, **fields: Any) -> None:
+    fields["event"] = event
+    sys.stdout.write(json.dumps(fields, default=str) + "\n")
+    sys.stdout.flush()
+
+
+def flood(a: argparse.Namespace) -> int:
+    micros_rt.init_node(a.node_name or "shm_flood", anonymous=a.node_name is None)
+    pub = micros_rt.NodeHandle().advertise(a.topic, String, None)
+    deadline = time.monotonic() + 60
+    while pub.get_num_connections() < 1 and time.monotonic() < deadline and not micros_rt.is_shutdown():
+        time.sleep(0.01)
+    msg = String(data="x" * a.size)
+    sent = 0
+    errors = 0
+    if a.stop_with == "signal_shutdown":
+        threading.Timer(a.after, lambda: micros_rt.shutdown("the test's shutdown")).start()
+    while not micros_rt.is_shutdown():
+        try:
+            pub.publish(msg)
+        except Exception as exc:  # publish() on a closing node: what it says is not the point here
+            errors += 1
+            if errors == 1:
+                emit("publish_error", error=f"{type(exc).__name__}: {exc}")
+            continue
+        sent += 1
+        if sent == 2000:
+            emit("flooding", connections=pub.get_num_connections())
+    emit("stopped", sent=sent, errors=errors)
+    return 0
+
+
+def count(a: argparse.Namespace) -> int:
+    micros_rt.init_node(a.node_name or "shm_count", anonymous=a.node_name is None)
+    seen: List[int] = [0]
+
+    def on_msg(msg: Any) -> None:
+        seen[0] += 1
+
+    sub = micros_rt.NodeHandle().subscribe(a.topic, String, on_msg, None)
+    emit("ready")
+    end = time.monotonic() + a.duration
+    while time.monotonic() < end and not micros_rt.is_shutdown():
+        emit("count", received=seen[0], connections=sub.get_num_connections(),
+             transports=sorted(sub.connection_transports().values()))
+        time.sleep(0.2)
+    return 0
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("mode", choices=["flood", "count"])
+    ap.add_argument("--topic", default="/flood")
+    ap.add_argument("--node-name", default=None)
+    ap.add_argument("--size", type=int, default=64)
+    ap.add_argument("--duration", type=float, default=60.0)
+    ap.add_argument("--stop-with", choices=["signal", "signal_shutdown"], default="signal")
+    ap.add_argument("--after", type=float, default=3.0, help="flood --stop-with signal_shutdown: seconds")
+    a = ap.parse_args()
+    return flood(a) if a.mode == "flood" else count(a)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
