@@ -66,18 +66,44 @@ class MalformedFrameError(MicrosRtError, ValueError):
     """A shared-memory sample that is not a micros_rt frame of the expected message type."""
 
 
-def decode_frame(data_class: Type[genpy.Message], frame: bytes) -> Tuple[int, int, Any]:
-    """(sequence number, source time ns, message) of one channel sample; MalformedFrameError in words."""
+class _Bounded(bytes):
+    """A frame's message bytes that refuse a read past their end: genpy cuts a string or array that a frame's
+    length fields say is longer than the frame short, silently (issue 46: a fake publisher's truncated frames
+    reached the callback with the wrong data length). Measured: +0.3 us per std_msgs/String decode."""
+
+    __slots__ = ()
+
+    def __getitem__(self, key: Any) -> Any:
+        if key.__class__ is slice and key.stop is not None and key.stop > len(self):
+            raise ValueError(f"the message's length fields need {key.stop} bytes, the frame holds {len(self)}")
+        return bytes.__getitem__(self, key)
+
+
+#: Most messages a channel may have overwritten between two samples its subscriber takes (a KEEP_LAST channel
+#: of a fast publisher and a stalled subscriber); a larger gap is not believed (issue 46: a frame numbered
+#: 2**64-1 made the statistics count 1.8e19 drops).
+MAX_SEQ_GAP = 1 << 32
+
+
+def decode_frame(data_class: Type[genpy.Message], frame: bytes, last: int = 0) -> Tuple[int, int, Any]:
+    """(sequence number, source time ns, message) of one channel sample whose predecessor was numbered
+    ``last``; MalformedFrameError in words for a frame that is short, whose message does not fit it exactly,
+    or whose number is not after ``last`` (within :data:`MAX_SEQ_GAP`)."""
     if len(frame) < 16:
         raise MalformedFrameError(f"a shared-memory sample of {len(frame)} bytes is shorter than micros_rt's "
                                   f"16-byte frame header")
     seq, source_ns = _HEAD.unpack_from(frame, 0)
+    if not last < seq <= last + MAX_SEQ_GAP:
+        raise MalformedFrameError(f"a shared-memory sample numbered {seq} follows number {last} on its channel "
+                                  f"(numbers grow by 1 per message; at most {MAX_SEQ_GAP} may be overwritten)")
     msg = data_class()
+    body = _Bounded(memoryview(frame)[16:])  # one copy
     try:
-        msg.deserialize(frame[16:])
+        msg.deserialize(body)
     except (genpy.DeserializationError, struct.error, ValueError, TypeError, UnicodeError, IndexError) as exc:
-        raise MalformedFrameError(f"a shared-memory sample does not decode as {data_class._type} ({exc}); "
-                                  f"is the publisher's type really {data_class._type}?") from exc
+        raise MalformedFrameError(f"a shared-memory sample of {len(frame)} bytes does not decode as "
+                                  f"{data_class._type} ({exc}); is the publisher's type really "
+                                  f"{data_class._type}?") from exc
     return seq, source_ns, msg
 
 
@@ -211,6 +237,7 @@ class ShmWriter:
         self.failed: Optional[str] = None
         self.dropped = 0
         self.not_taken = 0  # of them: an attached subscriber's channel did not take the sample (KEEP_LAST)
+        self.never_attached = 0  # channels closed because no subscriber attached within ATTACH_TIMEOUT
         self._lock = threading.Lock()
         self._channels: Dict[str, ShmChannel] = {}
         self._active: Tuple[ShmChannel, ...] = ()
@@ -258,6 +285,10 @@ class ShmWriter:
     def channels(self) -> Tuple[ShmChannel, ...]:
         return self._active
 
+    def pending_count(self) -> int:
+        """Channels whose subscriber's port never attached (yet)."""
+        return sum(1 for ch in self._active if not ch.seen and not ch.attached())
+
     def attached_count(self) -> int:
         return sum(1 for ch in self._active if ch.seen or ch.attached())
 
@@ -275,6 +306,11 @@ class ShmWriter:
                     ch.update_connections()
                 continue
             if dead or ch.seen or now - ch.created > ATTACH_TIMEOUT:
+                if not dead and not ch.seen:
+                    self.never_attached += 1  # an offer nobody followed (a forged one, or a subscriber that died)
+                    _log.warning("micros_rt: topic %s: nothing attached to the shared-memory channel made for %s "
+                                 "within %.0f s; closed it (%d such so far)", self.topic, ch.subscriber[:80],
+                                 ATTACH_TIMEOUT, self.never_attached)
                 gone(ch)
                 self.close_channel(ch)
 
@@ -390,7 +426,7 @@ class ShmLink:
             frame = ctypes.string_at(sample.payload_ptr, _slice_len(sample))  # one copy out of shared memory
             sample.delete()
             try:
-                seq, source_ns, msg = decode_frame(data_class, frame)
+                seq, source_ns, msg = decode_frame(data_class, frame, self._last)
             except MalformedFrameError as exc:
                 self._malformed(exc)
                 continue
