@@ -58,3 +58,38 @@ def test_a_node_publishing_in_a_tight_loop_over_shm_stops_within_2_s(ros_master:
         if stop != "signal_shutdown":
             assert took < 2.0, (took, talker.stderr_tail())
         assert talker.count("stopped") == 1
+
+
+def forged_offer(pid: int = 0) -> List[Any]:
+    """A well-formed SHM protocol entry, as a subscriber of this host and user sends it, naming ``pid``."""
+    from micros_rt.negotiation import ShmOffer
+    from micros_rt.qos import SubscribeQoSOptions
+    from micros_rt.transports.shm.host import host_identity
+    from std_msgs.msg import String
+
+    return ShmOffer(host=host_identity(), md5=String._md5sum, type_name=String._type, qos=SubscribeQoSOptions(),
+                    pid=pid).to_xmlrpc()
+
+
+def test_one_forged_offer_naming_a_real_subscriber_leaves_its_link_alone(ros_master: harness.RosMaster,
+                                                                         spawn: harness.Spawner) -> None:
+    # the publisher replaced the named subscriber's channel with the forged one: that subscriber stopped, its
+    # connection count went to 0 and never came back, and nothing was said
+    env = shm_env(ros_master)
+    topic = "/shm_faults/victim"
+    listener = spawn(faults("count", "--topic", topic, "--node-name", "shm_victim"), env, name="victim")
+    listener.wait_for("ready", T)
+    talker = spawn(faults("flood", "--topic", topic, "--node-name", "shm_forged_at", "--rate", 100,
+                          "--flooding-after", 50), env, name="forged_at")
+    talker.wait_for("flooding", T)
+    linked = listener.wait_for(lambda e: e.get("event") == "count" and e["transports"] == ["SHM"], T)
+    pub_uri = harness.lookup_node(ros_master, "/shm_forged_at")
+    answer = harness.node_call_raw(pub_uri, "requestTopic", topic, [forged_offer(pid=0)], caller_id="/shm_victim")
+    print(f"the forged requestTopic got {answer}")
+    assert answer[0] != 1 or answer[2][0] != "SHM", answer
+    start = listener.count("count")
+    # it goes on receiving over its own link: 1 s of messages (100) after the forged call, still one SHM link
+    after = listener.wait_for(lambda e: e.get("event") == "count" and e["received"] >= linked["received"] + 200, T,
+                              start=start)
+    assert after["connections"] == 1 and after["transports"] == ["SHM"], after
+    assert all(e["connections"] == 1 for e in listener.events("count")[start:]), listener.events("count")[start:]

@@ -3,6 +3,7 @@
     mrt_shm_faults.py flood --topic /f [--size 64] [--stop-with signal_shutdown]
         publish std_msgs/String as fast as it can (queue_size=None, lossless) until shut down; prints
         {"event": "flooding"} once 2,000 were sent to a subscriber, {"event": "stopped", ...} on the way out
+        (with the longest publish() it saw)
     mrt_shm_faults.py count --topic /f [--duration 60]
         subscribe and count (no line per message); prints {"event": "ready"}, then {"event": "count", ...}
         every 0.2 s with the messages, their sequence gaps and the subscription's connections
@@ -30,26 +31,38 @@ def emit(event: str, **fields: Any) -> None:
 def flood(a: argparse.Namespace) -> int:
     micros_rt.init_node(a.node_name or "shm_flood", anonymous=a.node_name is None)
     pub = micros_rt.NodeHandle().advertise(a.topic, String, None)
+    emit("advertised")
     deadline = time.monotonic() + 60
-    while pub.get_num_connections() < 1 and time.monotonic() < deadline and not micros_rt.is_shutdown():
+    while (a.wait and pub.get_num_connections() < 1 and time.monotonic() < deadline
+           and not micros_rt.is_shutdown()):
         time.sleep(0.01)
     msg = String(data="x" * a.size)
     sent = 0
     errors = 0
+    longest = 0.0  # the longest publish() (a forged channel must not hold it)
+    period = 1.0 / a.rate if a.rate > 0 else 0.0
+    next_at = time.monotonic()
     if a.stop_with == "signal_shutdown":
         threading.Timer(a.after, lambda: micros_rt.shutdown("the test's shutdown")).start()
     while not micros_rt.is_shutdown():
+        if period:
+            next_at += period
+            time.sleep(max(0.0, next_at - time.monotonic()))
+        t0 = time.monotonic()
         try:
             pub.publish(msg)
+            longest = max(longest, time.monotonic() - t0)
         except Exception as exc:  # publish() on a closing node: what it says is not the point here
             errors += 1
             if errors == 1:
                 emit("publish_error", error=f"{type(exc).__name__}: {exc}")
             continue
         sent += 1
-        if sent == 2000:
+        if sent == a.flooding_after:
             emit("flooding", connections=pub.get_num_connections())
-    emit("stopped", sent=sent, errors=errors)
+        if a.report and sent % a.report == 0:
+            emit("progress", sent=sent, longest_publish=longest, connections=pub.get_num_connections())
+    emit("stopped", sent=sent, errors=errors, longest_publish=longest)
     return 0
 
 
@@ -79,6 +92,10 @@ def main() -> int:
     ap.add_argument("--duration", type=float, default=60.0)
     ap.add_argument("--stop-with", choices=["signal", "signal_shutdown"], default="signal")
     ap.add_argument("--after", type=float, default=3.0, help="flood --stop-with signal_shutdown: seconds")
+    ap.add_argument("--rate", type=float, default=0.0, help="flood: messages per second (0: as fast as it can)")
+    ap.add_argument("--no-wait", dest="wait", action="store_false", help="flood: start before a subscriber")
+    ap.add_argument("--flooding-after", type=int, default=2000)
+    ap.add_argument("--report", type=int, default=0, help="flood: a progress line every N messages")
     a = ap.parse_args()
     return flood(a) if a.mode == "flood" else count(a)
 
