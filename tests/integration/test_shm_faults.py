@@ -5,6 +5,8 @@ forged XML-RPC calls from this process, and a /dev/shm of its own in a private m
 
 from __future__ import annotations
 
+import concurrent.futures
+import os
 import signal
 import subprocess
 import time
@@ -93,3 +95,54 @@ def test_one_forged_offer_naming_a_real_subscriber_leaves_its_link_alone(ros_mas
                               start=start)
     assert after["connections"] == 1 and after["transports"] == ["SHM"], after
     assert all(e["connections"] == 1 for e in listener.events("count")[start:]), listener.events("count")[start:]
+
+
+def rss_mb(pid: int) -> float:
+    with open(f"/proc/{pid}/status") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith("VmRSS:")) / 1024
+
+
+def shm_files() -> int:
+    return len(os.listdir("/dev/shm"))
+
+
+def test_a_thousand_forged_offers_cost_the_publisher_nothing(ros_master: harness.RosMaster,
+                                                            spawn: harness.Spawner) -> None:
+    # each forged offer got a channel: /dev/shm files 10 -> 4,010, RSS +510 MB, the lossless publish() blocked
+    # 61 s, and SIGINT afterwards left the node running 40 s
+    env = shm_env(ros_master)
+    topic = "/shm_faults/forged"
+    talker = spawn(faults("flood", "--topic", topic, "--node-name", "shm_forged_pub", "--rate", 100, "--no-wait",
+                          "--report", 100), env, name="forged_pub")
+    talker.wait_for("advertised", T)
+    pub_uri = harness.lookup_node(ros_master, "/shm_forged_pub")
+    rss0, files0 = rss_mb(talker.pid), shm_files()
+    offer = forged_offer(pid=os.getpid())  # a pid that is not the named callers' (they are not nodes at all)
+
+    def forge(i: int) -> Any:
+        return harness.node_call_raw(pub_uri, "requestTopic", topic, [offer], caller_id=f"/forged_{i}", timeout=30)
+
+    t0 = time.monotonic()
+    with concurrent.futures.ThreadPoolExecutor(4) as pool:
+        answers = list(pool.map(forge, range(1000)))
+    print(f"1,000 forged offers answered in {time.monotonic() - t0:.1f} s")
+    assert all(a[0] != 1 for a in answers), [a for a in answers if a[0] == 1][:3]
+    grew, more_files = rss_mb(talker.pid) - rss0, shm_files() - files0
+    print(f"publisher RSS +{grew:.1f} MB, /dev/shm files +{more_files}")
+    assert more_files <= 4 and grew < 20, (more_files, grew)
+    assert "is not a node registered with the ROS master" in talker.stderr_tail(200)
+    # a real subscriber then gets its link, and the publisher's publish() was never held
+    listener = spawn(faults("count", "--topic", topic), env, name="forged_real_sub")
+    listener.wait_for(lambda e: e.get("event") == "count" and e["transports"] == ["SHM"] and e["received"] > 50, T)
+    start = talker.count("progress")
+    talker.wait_for("progress", T, start=start)
+    t0 = time.monotonic()
+    talker.proc.send_signal(signal.SIGINT)
+    try:
+        talker.proc.wait(10.0)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"the publisher still ran 10 s after SIGINT: {talker.stderr_tail()}")
+    took = time.monotonic() - t0
+    stopped = talker.events("stopped")[-1]
+    print(f"stopped {took:.2f} s after SIGINT; longest publish() {stopped['longest_publish']:.3f} s")
+    assert took < 2.0 and stopped["longest_publish"] < 1.0, (took, stopped)
