@@ -146,3 +146,60 @@ def test_a_thousand_forged_offers_cost_the_publisher_nothing(ros_master: harness
     stopped = talker.events("stopped")[-1]
     print(f"stopped {took:.2f} s after SIGINT; longest publish() {stopped['longest_publish']:.3f} s")
     assert took < 2.0 and stopped["longest_publish"] < 1.0, (took, stopped)
+
+
+SEQ_PEER = str(harness.PEERS_DIR / "mrt_seq.py")
+
+
+class PrivateDevShm:
+    """A private mount namespace whose /dev/shm is a tmpfs of ``size_mb`` (and iceoryx2's root a tmpfs of its
+    own), held by a sleeping process; ``argv(...)`` runs a command inside it (``nsenter`` execs it in place, so
+    signals reach the program itself)."""
+
+    def __init__(self, size_mb: int) -> None:
+        os.makedirs("/tmp/iceoryx2", exist_ok=True)
+        script = (f"mount -t tmpfs -o size={size_mb}m tmpfs /dev/shm && mount -t tmpfs -o size=16m tmpfs "
+                  f"/tmp/iceoryx2 && echo up && exec sleep 600")
+        self.holder = subprocess.Popen(["unshare", "-m", "--propagation", "private", "sh", "-c", script],
+                                       stdout=subprocess.PIPE, text=True)
+        assert self.holder.stdout is not None and self.holder.stdout.readline().strip() == "up"
+
+    def argv(self, *args: Any) -> List[str]:
+        return ["nsenter", "-t", str(self.holder.pid), "-m", "--", *[str(a) for a in args]]
+
+    def close(self) -> None:
+        self.holder.kill()
+        self.holder.wait(10)
+
+
+@pytest.mark.parametrize("size_mb", [80, 160])
+def test_a_dev_shm_filled_mid_stream_loses_no_lossless_message(ros_master: harness.RosMaster,
+                                                              spawn: harness.Spawner, size_mb: int) -> None:
+    # iceoryx2's data segments were sparse: when dd filled /dev/shm, the publisher's first touch of a slot not
+    # yet backed killed it with SIGBUS (exit 135), or a failed send lost lossless messages
+    env = shm_env(ros_master)
+    ns = PrivateDevShm(size_mb)
+    try:
+        topic = f"/shm_faults/full_{size_mb}"
+        n = 80
+        listener = spawn(ns.argv(harness.MICROS_RT_PYTHON, SEQ_PEER, "recv", "--topic", topic, "--count", n,
+                                 "--slow", 0.07, "--idle", 20, "--timeout", T), env, name=f"full_recv_{size_mb}")
+        listener.wait_for("ready", T)
+        talker = spawn(ns.argv(harness.MICROS_RT_PYTHON, SEQ_PEER, "send", "--topic", topic, "--count", n,
+                               "--size", 1 << 20, "--rate", 20, "--progress", 5, "--linger", 2), env,
+                       name=f"full_send_{size_mb}")
+        talker.wait_for(lambda e: e.get("event") == "progress" and e["i"] >= 15, T)
+        assert listener.wait_for("connected", T)["transports"] == ["SHM"]
+        fill = subprocess.run(ns.argv("dd", "if=/dev/zero", "of=/dev/shm/fill", "bs=1M"), capture_output=True,
+                              text=True, timeout=T)
+        print(f"dd: {fill.stderr.strip().splitlines()[-1]}")
+        assert "No space left on device" in fill.stderr, fill.stderr
+        summary = listener.wait_for("summary", 2 * T)
+        code = talker.wait(T)
+        print(f"/dev/shm {size_mb} MiB filled mid-stream: talker exit {code}, received {summary['received']} of {n}, "
+              f"missing {summary['missing']}")
+        assert code == 0, talker.stderr_tail()
+        assert summary["distinct"] == n and not summary["missing"], summary
+        assert "/dev/shm is full" in talker.stderr_tail(100), talker.stderr_tail()
+    finally:
+        ns.close()

@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import os
 import threading
-from typing import Any, Mapping, Optional
+from typing import Any, Mapping, Optional, Set
 
-__all__ = ["MIN_FREE_BYTES", "cleanup_dead_nodes", "close_node", "process_alive", "host_identity", "iceoryx2", "shm_node", "unavailable_reason", "wait_set"]
+__all__ = ["MIN_FREE_BYTES", "cleanup_dead_nodes", "close_node", "commit_segments", "process_alive", "host_identity",
+           "iceoryx2", "shm_free_bytes", "shm_node", "unavailable_reason", "wait_set", "warn_if_full"]
 
 #: ``/dev/shm`` with less room than this is not used (a full tmpfs makes iceoryx2 fail mid-stream).
 MIN_FREE_BYTES = 64 << 20
@@ -23,6 +24,9 @@ _identity: Optional[str] = None
 _reason: Optional[str] = ""     # "" until checked
 _module: Any = None
 _node: Any = None
+#: iceoryx2 data segments of this process already committed (their paths in /dev/shm)
+_committed: Set[str] = set()
+_commit_lock = threading.Lock()
 
 
 def _read(path: str) -> str:
@@ -167,3 +171,66 @@ def close_node() -> None:
         import gc
 
         gc.collect()  # service factories and ports still referenced by cycles hold the node
+
+
+def shm_free_bytes() -> int:
+    """Bytes /dev/shm can still give (0 when it cannot be read)."""
+    try:
+        st = os.statvfs("/dev/shm")
+    except OSError:
+        return 0
+    return st.f_bavail * st.f_frsize
+
+
+_full_warned = 0.0
+
+
+def warn_if_full(now: float, log: Any) -> None:
+    """Say it (at most once a minute per process) when /dev/shm has less room than a channel may need to grow:
+    committed channels go on unharmed, new or growing ones fall back or go in pieces."""
+    global _full_warned
+    if now - _full_warned < 60.0 or _node is None:
+        return
+    free = shm_free_bytes()
+    if free >= 16 << 20:
+        return
+    _full_warned = now
+    log.warning("micros_rt: /dev/shm is full (%d MiB free): shared-memory channels keep the memory they committed; "
+                "new subscribers get DDS or TCPROS and lossless messages larger than a channel's slot go in "
+                "pieces (df -h /dev/shm; what else fills it?)", free >> 20)
+
+
+def commit_segments() -> None:
+    """Commit the memory of every iceoryx2 data segment this process maps and has not committed yet.
+
+    iceoryx2 sizes a segment with ``ftruncate``: on tmpfs that is a promise, kept page by page when a page is
+    first touched; when /dev/shm filled meanwhile the kernel kills the toucher with SIGBUS (issue 46: a
+    publisher died with exit 135 when ``dd`` filled /dev/shm mid-stream). ``posix_fallocate`` takes every page
+    now, so the kernel says no here, as ``OSError`` (ENOSPC) turned into a TransportError in words, and a
+    committed segment can never SIGBUS. Called after a publisher port is made and after a sample that may
+    have grown its data segment was loaned, before a byte is written. Raises TransportError."""
+    from ...exceptions import TransportError
+
+    try:
+        with open("/proc/self/maps") as f:
+            mapped = {line.split(None, 5)[-1].strip() for line in f if "/dev/shm/iox2_" in line}
+    except OSError:
+        return
+    segments = {path for path in mapped if path.endswith(".data") and not path.endswith("_mgmt.data")}
+    with _commit_lock:
+        _committed.intersection_update(mapped)  # forget what is no longer mapped
+        for path in sorted(segments - _committed):
+            try:
+                fd = os.open(path, os.O_RDWR)
+            except OSError:
+                continue  # another process's segment this process only reads (or gone meanwhile)
+            try:
+                size = os.fstat(fd).st_size
+                os.posix_fallocate(fd, 0, size)
+            except OSError as exc:
+                raise TransportError(
+                    f"/dev/shm has no room for a shared-memory segment of {size >> 20} MiB ({exc.strerror}; "
+                    f"{shm_free_bytes() >> 20} MiB free: df -h /dev/shm)") from exc
+            finally:
+                os.close(fd)
+            _committed.add(path)
