@@ -7,8 +7,11 @@ from __future__ import annotations
 
 import concurrent.futures
 import os
+import pwd
+import shutil
 import signal
 import subprocess
+import tempfile
 import time
 from typing import Any, Dict, List
 
@@ -95,6 +98,12 @@ def test_one_forged_offer_naming_a_real_subscriber_leaves_its_link_alone(ros_mas
                               start=start)
     assert after["connections"] == 1 and after["transports"] == ["SHM"], after
     assert all(e["connections"] == 1 for e in listener.events("count")[start:]), listener.events("count")[start:]
+    # and the tools say why the link is shared memory (they said "why TCPROS: ... prefer TCPROS")
+    info = subprocess.run([str(harness.REPO_ROOT / ".venv" / "bin" / "micros-rt"), "topic", "info", topic], env=env,
+                          capture_output=True, text=True, timeout=90)
+    assert "/shm_forged_at -> /shm_victim: SHM" in info.stdout, info.stdout
+    assert "why SHM: both nodes run on this host as the same Unix user" in info.stdout, info.stdout
+    assert "why TCPROS" not in info.stdout, info.stdout
 
 
 def rss_mb(pid: int) -> float:
@@ -157,9 +166,12 @@ class PrivateDevShm:
     signals reach the program itself)."""
 
     def __init__(self, size_mb: int) -> None:
-        os.makedirs("/tmp/iceoryx2", exist_ok=True)
-        script = (f"mount -t tmpfs -o size={size_mb}m tmpfs /dev/shm && mount -t tmpfs -o size=16m tmpfs "
-                  f"/tmp/iceoryx2 && echo up && exec sleep 600")
+        from micros_rt.transports.shm.host import iceoryx2_root
+
+        root = iceoryx2_root()
+        os.makedirs(root, mode=0o700, exist_ok=True)
+        script = (f"mount -t tmpfs -o size={size_mb}m tmpfs /dev/shm && mount -t tmpfs -o size=16m,mode=0700 tmpfs "
+                  f"{root} && echo up && exec sleep 600")
         self.holder = subprocess.Popen(["unshare", "-m", "--propagation", "private", "sh", "-c", script],
                                        stdout=subprocess.PIPE, text=True)
         assert self.holder.stdout is not None and self.holder.stdout.readline().strip() == "up"
@@ -203,3 +215,29 @@ def test_a_dev_shm_filled_mid_stream_loses_no_lossless_message(ros_master: harne
         assert "/dev/shm is full" in talker.stderr_tail(100), talker.stderr_tail()
     finally:
         ns.close()
+
+
+def test_two_nodes_of_another_user_share_memory_after_a_root_node_ran(ros_master: harness.RosMaster,
+                                                                      spawn: harness.Spawner,
+                                                                      request: pytest.FixtureRequest) -> None:
+    # iceoryx2's default directories, made by a root node with mode 0750, refused every other user: its nodes fell
+    # back to DDS, told "is /dev/shm full?"
+    if os.geteuid() != 0 or shutil.which("setpriv") is None:
+        pytest.fail("this test runs nodes as another user: it needs root and setpriv (util-linux)")
+    for d in ("/tmp/iceoryx2", "/tmp/iceoryx2/nodes", "/tmp/iceoryx2/services"):  # as a root node leaves them
+        os.makedirs(d, mode=0o750, exist_ok=True)
+    nobody = pwd.getpwnam("nobody")
+    home = tempfile.mkdtemp(prefix="micros_rt_nobody_")
+    os.chmod(home, 0o755)
+    os.chown(home, nobody.pw_uid, nobody.pw_gid)
+    request.addfinalizer(lambda: shutil.rmtree(home, ignore_errors=True))
+    env = {**shm_env(ros_master), "HOME": home, "ROS_HOME": home, "ROS_LOG_DIR": home}
+    as_nobody = ["setpriv", f"--reuid={nobody.pw_uid}", f"--regid={nobody.pw_gid}", "--clear-groups"]
+    topic = "/shm_faults/nobody"
+    listener = spawn([*as_nobody, *faults("count", "--topic", topic)], env, name="nobody_listener")
+    listener.wait_for("ready", T)
+    talker = spawn([*as_nobody, *faults("flood", "--topic", topic, "--rate", 100, "--flooding-after", 20)], env,
+                   name="nobody_talker")
+    talker.wait_for("flooding", T)
+    got = listener.wait_for(lambda e: e.get("event") == "count" and e["received"] >= 50 and e["transports"], T)
+    assert got["transports"] == ["SHM"], (got, talker.stderr_tail())

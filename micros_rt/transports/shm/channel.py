@@ -36,7 +36,8 @@ from ...exceptions import MicrosRtError, PublishTimeoutError, TransportError
 from ...log import nonblocking_logger
 from ...negotiation.protocol import SHM
 from ..base import send_with_backoff
-from .host import cleanup_dead_nodes, commit_segments, iceoryx2, process_alive, shm_free_bytes, shm_node, warn_if_full
+from .host import (cleanup_dead_nodes, commit_segments, iceoryx2, process_alive, shm_free_bytes, shm_node,
+                   warn_if_full, why_failed)
 
 __all__ = ["MalformedFrameError", "ShmChannel", "ShmLink", "ShmWriter", "TRANSIT_DEPTH", "PUBLISH_BLOCK_TIMEOUT",
            "decode_frame"]
@@ -341,9 +342,11 @@ class ShmWriter:
         try:
             channel = ShmChannel(subscriber, lossless=self.lossless, latch=self.latch, initial_len=self._largest,
                                  depth=self.depth, peer_pid=peer_pid)
+        except TransportError as exc:
+            raise TransportError(f"topic {self.topic}: cannot create a shared-memory channel: {exc}") from exc
         except Exception as exc:
-            raise TransportError(f"topic {self.topic}: cannot create a shared-memory channel ({exc}); is /dev/shm "
-                                 f"full, or iceoryx2's limits reached?") from exc
+            raise TransportError(f"topic {self.topic}: cannot create a shared-memory channel: {why_failed(exc)}") \
+                from exc
         last = self._last
         if last is not None:
             channel.try_send(last)  # kept as history until the subscriber attaches
@@ -443,8 +446,8 @@ class ShmWriter:
     def _fail(self, ch: ShmChannel, exc: Exception) -> None:
         """A channel that cannot be written: close it (its subscriber sees the link go and connects again,
         and this publication then declines SHM, so that subscriber gets DDS or TCPROS)."""
-        self.failed = (f"writing shared memory failed ({type(exc).__name__}: {exc}); /dev/shm may be full "
-                       f"(df -h /dev/shm)")
+        self.failed = f"writing shared memory failed: {exc}" if isinstance(exc, TransportError) else \
+            f"writing shared memory failed: {why_failed(exc)}"
         _log.warning("micros_rt: topic %s: %s; subscriber %s is moved off shared memory", self.topic, self.failed,
                      ch.subscriber)
         self.close_channel(ch)
@@ -529,7 +532,8 @@ class ShmLink:
             self._subscriber = self._service.subscriber_builder().create()
             self.listener = events.listener_builder().create()
         except Exception as exc:
-            raise TransportError(f"topic {topic}: cannot open shared-memory channel {channel} ({exc})") from exc
+            raise TransportError(f"topic {topic}: cannot open shared-memory channel {channel}: {why_failed(exc)}") \
+                from exc
         self._events = events
         self._thread: Optional[threading.Thread] = None
 

@@ -10,11 +10,12 @@ only: an aarch64 robot has none), uses DDS or TCPROS, and ``unavailable_reason()
 from __future__ import annotations
 
 import os
+import stat
 import threading
 from typing import Any, Mapping, Optional, Set
 
 __all__ = ["MIN_FREE_BYTES", "cleanup_dead_nodes", "close_node", "commit_segments", "process_alive", "host_identity",
-           "iceoryx2", "shm_free_bytes", "shm_node", "unavailable_reason", "wait_set", "warn_if_full"]
+           "iceoryx2", "iceoryx2_root", "permission_problem", "shm_free_bytes", "why_failed", "shm_node", "unavailable_reason", "wait_set", "warn_if_full"]
 
 #: ``/dev/shm`` with less room than this is not used (a full tmpfs makes iceoryx2 fail mid-stream).
 MIN_FREE_BYTES = 64 << 20
@@ -77,6 +78,45 @@ def unavailable_reason(env: Mapping[str, str] = os.environ) -> Optional[str]:
         return _reason
 
 
+def iceoryx2_root(uid: Optional[int] = None) -> str:
+    """iceoryx2's directory of micros_rt for Unix user ``uid`` (this process's): one per user. iceoryx2's default,
+    /tmp/iceoryx2, is made by its first user with mode 0750, and every other user then failed (issue 46: after a
+    root node ran, two nodes of another user fell back to DDS, told that /dev/shm might be full). Processes of two
+    users never share iceoryx2 memory anyway."""
+    return f"/tmp/micros_rt-iceoryx2-{os.getuid() if uid is None else uid}/"
+
+
+def permission_problem() -> Optional[str]:
+    """Why this user cannot use its iceoryx2 directory, in words, or None."""
+    root = iceoryx2_root()
+    uid = os.getuid()
+    for path in (root, root + "nodes", root + "services"):
+        try:
+            st = os.lstat(path)
+        except FileNotFoundError:
+            continue  # iceoryx2 makes it
+        except OSError as exc:
+            return f"iceoryx2's directory {path} cannot be read ({exc.strerror})"
+        if not stat.S_ISDIR(st.st_mode) or st.st_uid != uid or not os.access(path, os.W_OK | os.X_OK):
+            return (f"iceoryx2's directory {path} belongs to uid {st.st_uid} with mode {stat.S_IMODE(st.st_mode):04o}"
+                    f"{'' if stat.S_ISDIR(st.st_mode) else ' and is no directory'}: this user (uid {uid}) cannot "
+                    f"use it, a permission problem, not a full /dev/shm (remove {root}: micros_rt makes one per "
+                    f"user)")
+    return None
+
+
+def why_failed(exc: BaseException) -> str:
+    """The cause of an iceoryx2 failure in words: permissions, a full /dev/shm, or iceoryx2's own words."""
+    problem = permission_problem()
+    if problem is not None:
+        return problem
+    free = shm_free_bytes()
+    if free < MIN_FREE_BYTES:
+        return f"/dev/shm is full ({free >> 20} MiB free: df -h /dev/shm) ({type(exc).__name__}: {exc})"
+    return (f"iceoryx2 refused ({type(exc).__name__}: {exc}); /dev/shm has {free >> 20} MiB free and "
+            f"{iceoryx2_root()} is this user's: iceoryx2's limits (ports, nodes) may be reached")
+
+
 def _check() -> Optional[str]:
     global _module
     try:
@@ -97,8 +137,25 @@ def _check() -> Optional[str]:
     except Exception as exc:  # a wheel for another platform, a broken install
         return f"the iceoryx2 package does not load: {exc}"
     iox2.set_log_level(iox2.LogLevel.Error)
+    try:
+        os.mkdir(iceoryx2_root(), 0o700)
+    except FileExistsError:
+        pass
+    except OSError as exc:
+        return f"cannot make iceoryx2's directory {iceoryx2_root()} ({exc.strerror})"
+    problem = permission_problem()
+    if problem is not None:
+        return problem
     _module = iox2
     return None
+
+
+def _config() -> Any:
+    """iceoryx2's configuration with this user's directory (:func:`iceoryx2_root`)."""
+    iox2 = _module
+    cfg = iox2.config.default()
+    cfg.global_cfg.root_path = iox2.Path.new(iceoryx2_root())
+    return cfg
 
 
 def shm_node() -> Any:
@@ -113,7 +170,7 @@ def shm_node() -> Any:
     with _lock:
         if _node is None:
             iox2 = _module
-            _node = _without_signal_handling(iox2.NodeBuilder.new()).create(iox2.ServiceType.Ipc)
+            _node = _without_signal_handling(iox2.NodeBuilder.new().config(_config())).create(iox2.ServiceType.Ipc)
         return _node
 
 
