@@ -5,7 +5,8 @@
 
 Parts (real processes: a rosmaster of its own, micros_rt nodes from tests/peers on shared memory, this
 machine's loopback only):
-  sigint  a micros_rt talker publishing std_msgs/String as fast as it can (queue_size=None) to a micros_rt
+  sigint  (and sigint_tcp, sigint_dds: the listener's TransportHints choose that transport)
+          a micros_rt talker publishing std_msgs/String as fast as it can (queue_size=None) to a micros_rt
           listener over SHM, sent SIGINT 0.2-1.0 s into its loop, ``--runs`` times: how long each took to end
   forged  1,000 requestTopic calls with well-formed SHM offers from callers that are not nodes, to a lossless
           publisher at 100 Hz: its longest publish(), RSS and /dev/shm files before and after, then a real
@@ -101,8 +102,8 @@ def rss_mb(pid: int) -> float:
         return next(int(line.split()[1]) for line in f if line.startswith("VmRSS:")) / 1024
 
 
-def sigint(env: Dict[str, str], runs: int) -> Dict[str, Any]:
-    listener = Peer([PY, FAULTS, "count", "--topic", "/bench/tight"], env)
+def sigint(env: Dict[str, str], runs: int, hints: str = "") -> Dict[str, Any]:
+    listener = Peer([PY, FAULTS, "count", "--topic", "/bench/tight", "--hints", hints], env)
     listener.wait_for(event("ready"))
     took: List[float] = []
     codes: List[Optional[int]] = []
@@ -120,9 +121,10 @@ def sigint(env: Dict[str, str], runs: int) -> Dict[str, Any]:
             talker.proc.kill()
             talker.proc.wait()
         codes.append(talker.proc.returncode)
-        print(f"sigint run {run + 1}/{runs}: ended {took[-1]:.2f} s after SIGINT, exit {codes[-1]}", flush=True)
+        print(f"sigint ({hints or 'default'}) run {run + 1}/{runs}: ended {took[-1]:.2f} s after SIGINT, exit {codes[-1]}", flush=True)
     listener.stop()
-    return {"runs": runs, "still_running_after_2s": sum(t >= 2.0 for t in took), "median_s": statistics.median(took),
+    transports = [e["transports"] for e in listener.events if e.get("event") == "count" and e["transports"]]
+    return {"link": transports[-1] if transports else None, "runs": runs, "still_running_after_2s": sum(t >= 2.0 for t in took), "median_s": statistics.median(took),
             "max_s": max(took), "nonzero_exits": sum(c != 0 for c in codes)}
 
 
@@ -151,7 +153,8 @@ def forged(env: Dict[str, str], master: str) -> Dict[str, Any]:
     time.sleep(1.0)
     rss1, files1 = rss_mb(talker.proc.pid), len(os.listdir("/dev/shm"))
     listener = Peer([PY, FAULTS, "count", "--topic", "/bench/forged"], env)
-    linked = listener.wait_for(lambda e: e.get("event") == "count" and e["transports"] == ["SHM"] and e["received"] > 50)
+    linked = listener.wait_for(
+        lambda e: e.get("event") == "count" and e["transports"] == ["SHM"] and e["received"] > 50)
     n = len([e for e in talker.events if e.get("event") == "progress"])
     talker.wait_for(lambda e: e.get("event") == "progress" and talker.events.index(e) >= n)
     t0 = time.monotonic()
@@ -201,7 +204,8 @@ def fill(env: Dict[str, str], size_mb: int) -> Dict[str, Any]:
     os.makedirs(root, mode=0o700, exist_ok=True)
     holder = subprocess.Popen(["unshare", "-m", "--propagation", "private", "sh", "-c",
                                f"mount -t tmpfs -o size={size_mb}m tmpfs /dev/shm && mount -t tmpfs -o size=16m,"
-                               f"mode=0700 tmpfs {root} && echo up && exec sleep 600"], stdout=subprocess.PIPE, text=True)
+                               f"mode=0700 tmpfs {root} && echo up && exec sleep 600"],
+                              stdout=subprocess.PIPE, text=True)
     assert holder.stdout is not None and holder.stdout.readline().strip() == "up"
     ns = ["nsenter", "-t", str(holder.pid), "-m", "--"]
     try:
@@ -225,8 +229,9 @@ def fill(env: Dict[str, str], size_mb: int) -> Dict[str, Any]:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--parts", default="sigint,forged,victim,fill")
+    ap.add_argument("--parts", default="sigint,sigint_tcp,sigint_dds,forged,victim,fill")
     ap.add_argument("--runs", type=int, default=50)
+    ap.add_argument("--other-runs", type=int, default=10, help="sigint_tcp, sigint_dds: runs each")
     a = ap.parse_args()
     logdir = Path(tempfile.mkdtemp(prefix="micros_rt_shm_faults_"))
     master_proc, master = start_master(logdir)
@@ -237,6 +242,9 @@ def main() -> int:
         parts = a.parts.split(",")
         if "sigint" in parts:
             results["sigint"] = sigint(env, a.runs)
+        for hints in ("tcp", "dds"):  # the same stop on the other transports (--parts sigint_tcp,sigint_dds)
+            if f"sigint_{hints}" in parts:
+                results[f"sigint_{hints}"] = sigint(env, a.other_runs, hints)
         if "forged" in parts:
             results["forged"] = forged(env, master)
         if "victim" in parts:

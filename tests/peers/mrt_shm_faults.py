@@ -73,7 +73,10 @@ def count(a: argparse.Namespace) -> int:
     def on_msg(msg: Any) -> None:
         seen[0] += 1
 
-    sub = micros_rt.NodeHandle().subscribe(a.topic, String, on_msg, None)
+    hints = micros_rt.TransportHints()
+    for name in filter(None, a.hints.split(",")):
+        hints = getattr(hints, name)()  # shm, dds, tcp
+    sub = micros_rt.NodeHandle().subscribe(a.topic, String, on_msg, None, hints if a.hints else None)
     emit("ready")
     end = time.monotonic() + a.duration
     while time.monotonic() < end and not micros_rt.is_shutdown():
@@ -95,6 +98,7 @@ def main() -> int:
     ap.add_argument("--rate", type=float, default=0.0, help="flood: messages per second (0: as fast as it can)")
     ap.add_argument("--no-wait", dest="wait", action="store_false", help="flood: start before a subscriber")
     ap.add_argument("--flooding-after", type=int, default=2000)
+    ap.add_argument("--hints", default="", help="count: TransportHints, a comma list of shm, dds, tcp")
     ap.add_argument("--report", type=int, default=0, help="flood: a progress line every N messages")
     a = ap.parse_args()
     return flood(a) if a.mode == "flood" else count(a)

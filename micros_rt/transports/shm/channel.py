@@ -36,8 +36,8 @@ from ...exceptions import MicrosRtError, PublishTimeoutError, TransportError
 from ...log import nonblocking_logger
 from ...negotiation.protocol import SHM
 from ..base import send_with_backoff
-from .host import (cleanup_dead_nodes, commit_segments, iceoryx2, process_alive, shm_free_bytes, shm_node,
-                   warn_if_full, why_failed)
+from .host import (ATTACH_TIMEOUT, cleanup_dead_nodes, commit_segments, iceoryx2, process_alive, shm_free_bytes,
+                   shm_node, warn_if_full, why_failed)
 
 __all__ = ["MalformedFrameError", "ShmChannel", "ShmLink", "ShmWriter", "TRANSIT_DEPTH", "PUBLISH_BLOCK_TIMEOUT",
            "decode_frame"]
@@ -71,8 +71,6 @@ _POLL = 0.5
 #: A received sample's payload length in bytes (its ``Slice[c_uint8]``): iceoryx2's own ``payload()`` builds a
 #: Slice through ``typing.get_origin`` on every call: the delivery thread took 15 % more CPU per small message.
 _slice_len = operator.attrgetter("__slice_len")
-#: How long a channel waits for its subscriber's port (a 60-node graph starting on 2 cores took more than 10 s).
-ATTACH_TIMEOUT = 60.0
 
 _ids = itertools.count(1)
 

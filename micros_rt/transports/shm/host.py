@@ -14,9 +14,12 @@ import stat
 import threading
 from typing import Any, Mapping, Optional, Set
 
-__all__ = ["MIN_FREE_BYTES", "cleanup_dead_nodes", "close_node", "commit_segments", "process_alive", "host_identity",
-           "iceoryx2", "iceoryx2_root", "permission_problem", "shm_free_bytes", "why_failed", "shm_node", "unavailable_reason", "wait_set", "warn_if_full"]
+__all__ = ["ATTACH_TIMEOUT", "MIN_FREE_BYTES", "cleanup_dead_nodes", "close_node", "commit_segments", "host_identity",
+           "iceoryx2", "iceoryx2_root", "permission_problem", "process_alive", "shm_free_bytes", "shm_node",
+           "unavailable_reason", "wait_set", "warn_if_full", "why_failed"]
 
+#: How long a channel waits for its subscriber's port (a 60-node graph starting on 2 cores took more than 10 s).
+ATTACH_TIMEOUT = 60.0
 #: ``/dev/shm`` with less room than this is not used (a full tmpfs makes iceoryx2 fail mid-stream).
 MIN_FREE_BYTES = 64 << 20
 

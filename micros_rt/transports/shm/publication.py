@@ -16,7 +16,7 @@ from ...qos import is_lossless
 from ..negotiated import PublicationHost, PublicationSide
 from ..tcpros import patches
 from ..tcpros.patches import short
-from .host import host_identity, unavailable_reason
+from .host import ATTACH_TIMEOUT, host_identity, unavailable_reason
 from .vetting import vetting
 
 if TYPE_CHECKING:
@@ -30,8 +30,6 @@ _log = nonblocking_logger("rosout.micros_rt")
 #: attaches within a second or two (a 60-node graph starting on 2 cores: within ATTACH_TIMEOUT); more waiting
 #: means offers nobody reads (issue 46: 1,000 forged ones made 4,000 files in /dev/shm and 510 MB of RSS).
 MAX_PENDING_CHANNELS = 16
-#: as channel.ATTACH_TIMEOUT (not imported from there: that module imports iceoryx2)
-ATTACH_TIMEOUT = 60.0
 
 
 class ShmPublication(PublicationSide):
