@@ -103,7 +103,7 @@ def rss_mb(pid: int) -> float:
 
 
 def sigint(env: Dict[str, str], runs: int, hints: str = "") -> Dict[str, Any]:
-    listener = Peer([PY, FAULTS, "count", "--topic", "/bench/tight", "--hints", hints], env)
+    listener = Peer([PY, FAULTS, "count", "--topic", "/bench/tight", "--hints", hints, "--duration", "3600"], env)
     listener.wait_for(event("ready"))
     took: List[float] = []
     codes: List[Optional[int]] = []
@@ -152,7 +152,7 @@ def forged(env: Dict[str, str], master: str) -> Dict[str, Any]:
     forging = time.monotonic() - t0
     time.sleep(1.0)
     rss1, files1 = rss_mb(talker.proc.pid), len(os.listdir("/dev/shm"))
-    listener = Peer([PY, FAULTS, "count", "--topic", "/bench/forged"], env)
+    listener = Peer([PY, FAULTS, "count", "--topic", "/bench/forged", "--duration", "600"], env)
     linked = listener.wait_for(
         lambda e: e.get("event") == "count" and e["transports"] == ["SHM"] and e["received"] > 50)
     n = len([e for e in talker.events if e.get("event") == "progress"])
@@ -179,7 +179,8 @@ def victim(env: Dict[str, str], master: str) -> Dict[str, Any]:
     from micros_rt.transports.shm.host import host_identity
     from std_msgs.msg import String
 
-    listener = Peer([PY, FAULTS, "count", "--topic", "/bench/victim", "--node-name", "bench_victim"], env)
+    listener = Peer([PY, FAULTS, "count", "--topic", "/bench/victim", "--node-name", "bench_victim", "--duration",
+                     "600"], env)
     listener.wait_for(event("ready"))
     talker = Peer([PY, FAULTS, "flood", "--topic", "/bench/victim", "--node-name", "bench_victim_pub", "--rate", "100",
                    "--flooding-after", "50"], env)

@@ -208,10 +208,17 @@ def _close_all() -> None:
     with _closer_lock:
         closer = _closer
         if closer is None or not closer.is_alive():
-            closer = _closer = threading.Thread(target=_close_everything, name="micros_rt shutdown")
+            closer = _closer = threading.Thread(target=_close_logged, name="micros_rt shutdown")
             closer.start()
     main = threading.current_thread() is threading.main_thread()
     closer.join(SHUTDOWN_WAIT if main else None)
+
+
+def _close_logged() -> None:
+    try:
+        _close_everything()
+    except Exception:  # rospy's own shutdown may run beside it: say what failed, the process still ends
+        _log.exception("micros_rt: closing the node failed")
 
 
 def _close_everything() -> None:

@@ -155,6 +155,7 @@ def test_a_thousand_forged_offers_cost_the_publisher_nothing(ros_master: harness
     stopped = talker.events("stopped")[-1]
     print(f"stopped {took:.2f} s after SIGINT; longest publish() {stopped['longest_publish']:.3f} s")
     assert took < 2.0 and stopped["longest_publish"] < 1.0, (took, stopped)
+    assert stopped["statistics"]["refused_offers"] == 1000, stopped  # counted
 
 
 SEQ_PEER = str(harness.PEERS_DIR / "mrt_seq.py")
@@ -241,3 +242,37 @@ def test_two_nodes_of_another_user_share_memory_after_a_root_node_ran(ros_master
     talker.wait_for("flooding", T)
     got = listener.wait_for(lambda e: e.get("event") == "count" and e["received"] >= 50 and e["transports"], T)
     assert got["transports"] == ["SHM"], (got, talker.stderr_tail())
+
+
+def test_a_keep_last_channel_that_cannot_grow_moves_its_subscriber_off_shm_in_words(
+        ros_master: harness.RosMaster, spawn: harness.Spawner) -> None:
+    # a channel that had to grow on a full /dev/shm: iceoryx2's new segment was sparse and the first touch of it
+    # SIGBUSed the publisher; and a subscriber whose channel was closed under it never connected again
+    env = shm_env(ros_master)
+    ns = PrivateDevShm(80)
+    try:
+        topic = "/shm_faults/grow"
+        listener = spawn(ns.argv(*faults("count", "--topic", topic)), env, name="grow_listener")
+        listener.wait_for("ready", T)
+        talker = spawn(ns.argv(*faults("flood", "--topic", topic, "--queue-size", 10, "--rate", 20, "--size", 1000,
+                                       "--flooding-after", 10, "--grow-after", 60, "--grow-size", 2 << 20)), env,
+                       name="grow_talker")
+        talker.wait_for("flooding", T)
+        listener.wait_for(lambda e: e.get("event") == "count" and e["transports"] == ["SHM"], T)
+        fill = subprocess.run(ns.argv("dd", "if=/dev/zero", "of=/dev/shm/fill", "bs=1M"), capture_output=True,
+                              text=True, timeout=T)
+        assert "No space left on device" in fill.stderr, fill.stderr
+        talker.wait_for("grown", T)
+        start = listener.count("count")
+        moved = listener.wait_for(lambda e: e.get("event") == "count" and e["transports"] and
+                                  e["transports"] != ["SHM"], T, start=start)
+        listener.wait_for(lambda e: e.get("event") == "count" and e["received"] >= moved["received"] + 20, T,
+                          start=start)
+        print(f"the subscriber moved to {moved['transports']}")
+        assert "moved off shared memory" in talker.stderr_tail(200), talker.stderr_tail()
+        assert "/dev/shm has" in talker.stderr_tail(200), talker.stderr_tail()
+        assert "connected again" in listener.stderr_tail(200), listener.stderr_tail()
+        talker.proc.send_signal(signal.SIGINT)
+        assert talker.proc.wait(10.0) == 0, talker.stderr_tail()
+    finally:
+        ns.close()

@@ -1,6 +1,7 @@
 """micros_rt nodes for the shared-memory fault tests (issue 46): one JSON event per stdout line.
 
-    mrt_shm_faults.py flood --topic /f [--size 64] [--stop-with signal_shutdown]
+    mrt_shm_faults.py flood --topic /f [--size 64] [--stop-with signal_shutdown] [--queue-size N]
+                            [--grow-after N --grow-size BYTES]
         publish std_msgs/String as fast as it can (queue_size=None, lossless) until shut down; prints
         {"event": "flooding"} once 2,000 were sent to a subscriber, {"event": "stopped", ...} on the way out
         (with the longest publish() it saw)
@@ -12,6 +13,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import threading
@@ -30,7 +32,7 @@ def emit(event: str, **fields: Any) -> None:
 
 def flood(a: argparse.Namespace) -> int:
     micros_rt.init_node(a.node_name or "shm_flood", anonymous=a.node_name is None)
-    pub = micros_rt.NodeHandle().advertise(a.topic, String, None)
+    pub = micros_rt.NodeHandle().advertise(a.topic, String, a.queue_size or None)
     emit("advertised")
     deadline = time.monotonic() + 60
     while (a.wait and pub.get_num_connections() < 1 and time.monotonic() < deadline
@@ -58,11 +60,14 @@ def flood(a: argparse.Namespace) -> int:
                 emit("publish_error", error=f"{type(exc).__name__}: {exc}")
             continue
         sent += 1
+        if sent == a.grow_after:
+            msg = String(data="y" * a.grow_size)  # a channel must grow for it
+            emit("grown", sent=sent)
         if sent == a.flooding_after:
             emit("flooding", connections=pub.get_num_connections())
         if a.report and sent % a.report == 0:
             emit("progress", sent=sent, longest_publish=longest, connections=pub.get_num_connections())
-    emit("stopped", sent=sent, errors=errors, longest_publish=longest)
+    emit("stopped", sent=sent, errors=errors, longest_publish=longest, statistics=dataclasses.asdict(pub.statistics()))
     return 0
 
 
@@ -98,6 +103,9 @@ def main() -> int:
     ap.add_argument("--rate", type=float, default=0.0, help="flood: messages per second (0: as fast as it can)")
     ap.add_argument("--no-wait", dest="wait", action="store_false", help="flood: start before a subscriber")
     ap.add_argument("--flooding-after", type=int, default=2000)
+    ap.add_argument("--queue-size", type=int, default=0, help="flood: 0 is None (lossless), else KEEP_LAST")
+    ap.add_argument("--grow-after", type=int, default=0, help="flood: after this many, messages of --grow-size")
+    ap.add_argument("--grow-size", type=int, default=4 << 20)
     ap.add_argument("--hints", default="", help="count: TransportHints, a comma list of shm, dds, tcp")
     ap.add_argument("--report", type=int, default=0, help="flood: a progress line every N messages")
     a = ap.parse_args()

@@ -178,6 +178,9 @@ class ShmPublication(PublicationSide):
     def dropped(self) -> int:
         return self.shm.dropped if self.shm is not None else 0
 
+    def refused(self) -> Tuple[int, int]:
+        return self.refused_offers, self.shm.never_attached if self.shm is not None else 0
+
     def close(self) -> None:
         with self.lock:
             conns = list(self.links.values())
