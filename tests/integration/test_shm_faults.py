@@ -43,7 +43,7 @@ def test_a_node_publishing_in_a_tight_loop_over_shm_stops_within_2_s(ros_master:
     listener = spawn(faults("count", "--topic", topic), env, name="tight_listener")
     listener.wait_for("ready", T)
     extra = ["--stop-with", "signal_shutdown", "--after", 1.0] if stop == "signal_shutdown" else []
-    for run in range(3):
+    for run in range(2):  # 50 runs: benchmarks/shm_faults.py
         talker = spawn(faults("flood", "--topic", topic, *extra), env, name=f"tight_talker_{run}")
         flooding = talker.wait_for("flooding", T)
         assert flooding["connections"] == 1
@@ -185,7 +185,7 @@ class PrivateDevShm:
         self.holder.wait(10)
 
 
-@pytest.mark.parametrize("size_mb", [80, 160])
+@pytest.mark.parametrize("size_mb", [80])  # 160 MiB too: benchmarks/shm_faults.py (both SIGBUSed the old code)
 def test_a_dev_shm_filled_mid_stream_loses_no_lossless_message(ros_master: harness.RosMaster,
                                                               spawn: harness.Spawner, size_mb: int) -> None:
     # iceoryx2's data segments were sparse: when dd filled /dev/shm, the publisher's first touch of a slot not
