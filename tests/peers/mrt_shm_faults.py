@@ -21,6 +21,7 @@ import time
 from typing import Any, List
 
 import micros_rt
+import rospy
 from std_msgs.msg import String
 
 
@@ -45,7 +46,11 @@ def flood(a: argparse.Namespace) -> int:
     period = 1.0 / a.rate if a.rate > 0 else 0.0
     next_at = time.monotonic()
     if a.stop_with == "signal_shutdown":
-        threading.Timer(a.after, lambda: micros_rt.shutdown("the test's shutdown")).start()
+        def stop() -> None:
+            emit("shutting_down")
+            rospy.signal_shutdown("the test's rospy.signal_shutdown")
+
+        threading.Timer(a.after, stop).start()
     while not micros_rt.is_shutdown():
         if period:
             next_at += period
