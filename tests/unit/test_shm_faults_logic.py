@@ -84,3 +84,23 @@ def test_an_unreachable_master_refuses_in_words() -> None:
 
     reason = OfferVetting(master_uri=lambda: "http://master:1/", ask=ask).why_not("/listener", 4242)
     assert reason is not None and reason.startswith("the ROS master did not say where /listener runs")
+
+
+def test_a_directory_of_another_user_is_named_as_a_permission_problem(tmp_path: Any) -> None:
+    import os
+    import pwd
+
+    from micros_rt.transports.shm.host import permission_problem
+
+    root = tmp_path / "iox"
+    (root / "services").mkdir(parents=True)
+    assert permission_problem(f"{root}/") is None
+    if os.geteuid() != 0:
+        pytest.skip("chown needs root")
+    nobody = pwd.getpwnam("nobody").pw_uid
+    os.chown(root / "services", nobody, nobody)
+    os.chmod(root / "services", 0o750)
+    reason = permission_problem(f"{root}/")
+    assert reason is not None
+    assert f"{root}/services belongs to uid {nobody} with mode 0750" in reason
+    assert "a permission problem, not a full /dev/shm" in reason

@@ -89,9 +89,9 @@ def iceoryx2_root(uid: Optional[int] = None) -> str:
     return f"/tmp/micros_rt-iceoryx2-{os.getuid() if uid is None else uid}/"
 
 
-def permission_problem() -> Optional[str]:
-    """Why this user cannot use its iceoryx2 directory, in words, or None."""
-    root = iceoryx2_root()
+def permission_problem(root: Optional[str] = None) -> Optional[str]:
+    """Why this user cannot use its iceoryx2 directory (``root``: :func:`iceoryx2_root`), in words, or None."""
+    root = root or iceoryx2_root()
     uid = os.getuid()
     for path in (root, root + "nodes", root + "services"):
         try:
