@@ -112,8 +112,10 @@ def rss_mb(pid: int) -> float:
         return next(int(line.split()[1]) for line in f if line.startswith("VmRSS:")) / 1024
 
 
-def shm_files() -> int:
-    return len(os.listdir("/dev/shm"))
+def shm_files(pid: int) -> int:
+    """Files in /dev/shm that process ``pid`` maps (what its channels hold; other processes' come and go)."""
+    with open(f"/proc/{pid}/maps") as f:
+        return len({line.split(None, 5)[-1].strip() for line in f if "/dev/shm/" in line})
 
 
 def test_a_thousand_forged_offers_cost_the_publisher_nothing(ros_master: harness.RosMaster,
@@ -126,7 +128,7 @@ def test_a_thousand_forged_offers_cost_the_publisher_nothing(ros_master: harness
                           "--report", 100), env, name="forged_pub")
     talker.wait_for("advertised", T)
     pub_uri = harness.lookup_node(ros_master, "/shm_forged_pub")
-    rss0, files0 = rss_mb(talker.pid), shm_files()
+    rss0, files0 = rss_mb(talker.pid), shm_files(talker.pid)
     offer = forged_offer(pid=os.getpid())  # a pid that is not the named callers' (they are not nodes at all)
 
     def forge(i: int) -> Any:
@@ -137,8 +139,8 @@ def test_a_thousand_forged_offers_cost_the_publisher_nothing(ros_master: harness
         answers = list(pool.map(forge, range(1000)))
     print(f"1,000 forged offers answered in {time.monotonic() - t0:.1f} s")
     assert all(a[0] != 1 for a in answers), [a for a in answers if a[0] == 1][:3]
-    grew, more_files = rss_mb(talker.pid) - rss0, shm_files() - files0
-    print(f"publisher RSS +{grew:.1f} MB, /dev/shm files +{more_files}")
+    grew, more_files = rss_mb(talker.pid) - rss0, shm_files(talker.pid) - files0
+    print(f"publisher RSS +{grew:.1f} MB, /dev/shm files it maps +{more_files}")
     assert more_files <= 4 and grew < 20, (more_files, grew)
     assert "is not a node registered with the ROS master" in talker.stderr_tail(200)
     # a real subscriber then gets its link, and the publisher's publish() was never held

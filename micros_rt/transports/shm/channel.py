@@ -55,7 +55,7 @@ TRANSIT_DEPTH = 64
 #: than a slot then goes in pieces of a slot, which the subscriber puts together. Nothing is lost either way.
 LOSSLESS_CHANNEL_BYTES = 32 << 20
 #: The smallest slot a channel starts with.
-MIN_SLOT = 4096
+MIN_SLOT = 1024
 #: /dev/shm room a channel leaves to others when it grows.
 GROW_MARGIN = 16 << 20
 #: A piece of a message: its frame's sequence number has this bit, and ``<total u32><offset u32>`` follow the
