@@ -104,3 +104,16 @@ def test_a_directory_of_another_user_is_named_as_a_permission_problem(tmp_path: 
     assert reason is not None
     assert f"{root}/services belongs to uid {nobody} with mode 0750" in reason
     assert "a permission problem, not a full /dev/shm" in reason
+
+
+def test_a_node_keeping_its_shared_memory_elsewhere_is_declined_in_words() -> None:
+    from micros_rt.negotiation import PublicationFacts, ShmOffer, decide_shm
+    from micros_rt.qos import AdvertiseQoSOptions, SubscribeQoSOptions
+
+    facts = PublicationFacts("/chatter", "", None, "std_msgs/String", "992c", AdvertiseQoSOptions(), latch=False)
+    older = ShmOffer("boot/net/mnt/0", "992c", "std_msgs/String", SubscribeQoSOptions())  # before issue 46
+    verdict = decide_shm(older, facts, host="boot/net/mnt/0/u", unavailable=None, subscriber="/l")
+    assert not verdict.accepted and "another micros_rt version" in verdict.reason
+    other_user = ShmOffer("boot/net/mnt/1000/u", "992c", "std_msgs/String", SubscribeQoSOptions())
+    assert "another Unix user" in decide_shm(other_user, facts, host="boot/net/mnt/0/u", unavailable=None,
+                                             subscriber="/l").reason

@@ -49,11 +49,13 @@ def _ns(kind: str) -> str:
 
 
 def host_identity() -> str:
-    """``<boot id>/<network namespace>/<mount namespace>/<uid>``: equal for two processes that can share
-    iceoryx2 memory."""
+    """``<boot id>/<network namespace>/<mount namespace>/<uid>/<iceoryx2 directory scheme>``: equal for two
+    processes that can share iceoryx2 memory (micros_rt before issue 46 kept it in /tmp/iceoryx2 and sent four
+    parts: a node of that version is told apart, not given a channel it cannot open)."""
     global _identity
     if _identity is None:
-        _identity = f"{_read('/proc/sys/kernel/random/boot_id')}/{_ns('net')}/{_ns('mnt')}/{os.getuid()}"
+        _identity = (f"{_read('/proc/sys/kernel/random/boot_id')}/{_ns('net')}/{_ns('mnt')}/{os.getuid()}/"
+                     f"{_ROOT_SCHEME}")
     return _identity
 
 
@@ -79,6 +81,10 @@ def unavailable_reason(env: Mapping[str, str] = os.environ) -> Optional[str]:
         if _reason == "":
             _reason = _check()
         return _reason
+
+
+#: the iceoryx2 directory scheme, part of the host identity: "u" one directory per Unix user (iceoryx2_root)
+_ROOT_SCHEME = "u"
 
 
 def iceoryx2_root(uid: Optional[int] = None) -> str:
