@@ -189,7 +189,39 @@ def shutdown(reason: str = "micros_rt.shutdown() called") -> None:
     _close_all()
 
 
+#: How long a shutdown on the main thread waits for the closing before it lets the interrupted code go on.
+SHUTDOWN_WAIT = 1.0
+_closer: Optional[threading.Thread] = None
+_closer_lock = threading.Lock()  # held for a few bytecodes only, never across a wait
+
+
 def _close_all() -> None:
+    """Close every topic, transport and the DDS and SHM planes, on a thread of its own.
+
+    rospy runs its shutdown hooks in whatever thread calls ``signal_shutdown``: for SIGINT and SIGTERM that is
+    the main thread, interrupted at any bytecode, perhaps inside a publish() that holds a lock the closing
+    needs (issue 46: ``ShmChannel.try_send`` held its channel's lock and the hook waited for it in the same
+    thread, for ever). On the main thread the hook therefore waits at most :data:`SHUTDOWN_WAIT` for the
+    closing and then lets the interrupted code go on, which lets go of its lock; the closing thread is not a
+    daemon, so the interpreter waits for it to finish before it exits."""
+    global _closer
+    with _closer_lock:
+        closer = _closer
+        if closer is None or not closer.is_alive():
+            closer = _closer = threading.Thread(target=_close_logged, name="micros_rt shutdown")
+            closer.start()
+    main = threading.current_thread() is threading.main_thread()
+    closer.join(SHUTDOWN_WAIT if main else None)
+
+
+def _close_logged() -> None:
+    try:
+        _close_everything()
+    except Exception:  # rospy's own shutdown may run beside it: say what failed, the process still ends
+        _log.exception("micros_rt: closing the node failed")
+
+
+def _close_everything() -> None:
     wait_dds_started()
     _node.publications.close_all()
     _node.subscriptions.close_all()

@@ -373,6 +373,14 @@ def relay_marking(report: NodeReport, topic: str, *, publisher: bool) -> Optiona
     return None
 
 
+def _shm_reason(pub: NodeReport, sub: NodeReport, topic: str) -> str:
+    """Why this link is shared memory (the negotiation's rule, and what the subscriber asked for)."""
+    hints = list((sub.subscription(topic) or {}).get("hints") or [])
+    asked = f"; the subscriber's TransportHints: {', '.join(hints)}" if hints else ""
+    return (f"both nodes run on this host as the same Unix user, so the message goes through a shared-memory "
+            f"channel of their own (iceoryx2), not a socket{asked}")
+
+
 def _tcpros_reason(pub: NodeReport, sub: NodeReport, topic: str) -> Tuple[str, Optional[str]]:
     """(why this link is TCPROS, verdict kind or None)."""
     for node in (pub, sub):
@@ -429,6 +437,8 @@ def build_links(topic: str, publishers: Sequence[str], subscribers: Sequence[str
             for item in (pub.publication(topic) or {}).get("links", []):
                 if item.get("subscriber") == s and "matched" in item:
                     link.matched = bool(item["matched"])
+        elif protocol == "SHM":
+            link.reason = _shm_reason(pub, sub, topic)
         else:
             link.reason, link.verdict = _tcpros_reason(pub, sub, topic)
         links.append(link)

@@ -307,8 +307,12 @@ def check_shared_memory(env: Mapping[str, str]) -> Check:
         link.close()
         writer.close()
     except Exception as exc:
+        problem = host.permission_problem()
+        if problem is not None:
+            return Check("shared memory", FAIL, f"a shared-memory channel failed: {problem}",
+                         f"remove {host.iceoryx2_root()} (sudo rm -r): micros_rt makes it again for this user")
         return Check("shared memory", FAIL, f"a shared-memory channel failed: {exc}",
-                     "check df -h /dev/shm and that this user may write there")
+                     "check df -h /dev/shm (what fills it?); if it has room, report it with micros-rt doctor -v")
     if not crossed:
         return Check("shared memory", FAIL, "a message sent through a shared-memory channel did not arrive in 5 s",
                      "report it with the output of micros-rt doctor -v")
@@ -317,7 +321,8 @@ def check_shared_memory(env: Mapping[str, str]) -> Check:
 
     return Check("shared memory", OK, f"iceoryx2 {metadata.version('iceoryx2')}; a message crossed a channel in "
                                       f"{took * 1e3:.0f} ms; /dev/shm "
-                                      f"{free.f_bavail * free.f_frsize >> 20} MiB free")
+                                      f"{free.f_bavail * free.f_frsize >> 20} MiB free; this user's iceoryx2 "
+                                      f"directory {host.iceoryx2_root()}")
 
 
 def check_ros2_visibility(env: Mapping[str, str]) -> Check:

@@ -84,7 +84,8 @@ def format_info(data: Dict[str, Any]) -> str:
         lines.append(f"     publisher QoS:  {sides.get(('publishers', link['publisher']), 'unknown')}")
         lines.append(f"     subscriber QoS: {sides.get(('subscribers', link['subscriber']), 'unknown')}")
         if link["reason"]:
-            label = "DDS declined" if link["verdict"] else "why TCPROS"
+            label = ("why SHM" if link["protocol"] == "SHM" else "DDS declined" if link["verdict"] else
+                     "why TCPROS")
             lines.append(f"     {label}: {link['reason']}")
         for marking in link.get("relayed", []):
             lines.append(f"     {marking['summary']}")

@@ -179,7 +179,9 @@ class _Publication:
         return PublisherStatistics(published=self.published,
                                    dropped=sum(q.dropped for q in queues) + sum(s.dropped() for s in self.sides.values()),
                                    blocked_seconds=self.blocked_seconds,
-                                   expired=sum(q.expired for q in queues))
+                                   expired=sum(q.expired for q in queues),
+                                   refused_offers=sum(s.refused()[0] for s in self.sides.values()),
+                                   unused_links=sum(s.refused()[1] for s in self.sides.values()))
 
     def close(self) -> None:
         """Release the links and writers and unregister from rospy (the registry calls this once)."""

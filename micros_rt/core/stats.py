@@ -45,6 +45,11 @@ class PublisherStatistics:
     dropped: int
     blocked_seconds: float
     expired: int = 0
+    #: negotiation offers refused although their protocol's rules matched (a forged or unconfirmed caller, a live
+    #: link of the caller the offer does not name, too many links waiting), and links made for an offer that its
+    #: subscriber never took up (closed after a bound): what a flood of forged offers cost, counted
+    refused_offers: int = 0
+    unused_links: int = 0
 
 
 class LatencyStats:

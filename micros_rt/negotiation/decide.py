@@ -113,7 +113,10 @@ def decide_shm(offer: ShmOffer, facts: PublicationFacts, *, host: str, unavailab
     if offer.host != host:
         # a subscriber on another machine or network namespace is the normal case: no warning
         same_machine = offer.host.split("/")[:3] == host.split("/")[:3]
-        why = ("runs as another Unix user (processes of different users cannot share iceoryx2 memory)"
+        same_user = same_machine and offer.host.split("/")[3:4] == host.split("/")[3:4]
+        why = ("keeps its shared memory elsewhere (another micros_rt version: its iceoryx2 directory is not this "
+               "one's)" if same_user else
+               "runs as another Unix user (processes of different users cannot share iceoryx2 memory)"
                if same_machine else "is on another host")
         return Verdict(False, "shm-host", f"topic {topic}: subscriber {subscriber} {why}; not using shared memory",
                        quiet=not same_machine)

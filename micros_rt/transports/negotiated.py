@@ -85,6 +85,10 @@ class PublicationSide(abc.ABC):
         """Messages this side dropped by itself (its send queue's drops are the publication's)."""
         return 0
 
+    def refused(self) -> Tuple[int, int]:
+        """(offers refused although the rules matched, links closed because their subscriber never came)."""
+        return 0, 0
+
     def link_states(self) -> Optional[Dict[str, bool]]:
         """Per subscriber caller id: whether its link is matched yet (for ``micros-rt topic info``); None when
         this transport's links have no such step (they carry data once made)."""

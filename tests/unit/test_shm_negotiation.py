@@ -116,8 +116,8 @@ def test_default_hints_offer_shm_first() -> None:
 
 def test_host_identity_tells_users_and_namespaces_apart() -> None:
     ident = host_identity()
-    boot, net, mnt, uid = ident.split("/")
-    assert uid == str(os.getuid()) and net.isdigit() and mnt.isdigit() and boot != "?"
+    boot, net, mnt, uid, scheme = ident.split("/")
+    assert uid == str(os.getuid()) and net.isdigit() and mnt.isdigit() and boot != "?" and scheme == "u"
     # another network namespace (as the suite's netns hosts) gives another identity
     if os.geteuid() == 0 and os.path.exists("/usr/bin/unshare"):
         out = subprocess.run(["unshare", "--net", sys.executable, "-c",

@@ -10,11 +10,16 @@ only: an aarch64 robot has none), uses DDS or TCPROS, and ``unavailable_reason()
 from __future__ import annotations
 
 import os
+import stat
 import threading
-from typing import Any, Mapping, Optional
+from typing import Any, Mapping, Optional, Set
 
-__all__ = ["MIN_FREE_BYTES", "cleanup_dead_nodes", "close_node", "process_alive", "host_identity", "iceoryx2", "shm_node", "unavailable_reason", "wait_set"]
+__all__ = ["ATTACH_TIMEOUT", "MIN_FREE_BYTES", "cleanup_dead_nodes", "close_node", "commit_segments", "host_identity",
+           "iceoryx2", "iceoryx2_root", "permission_problem", "process_alive", "shm_free_bytes", "shm_node",
+           "unavailable_reason", "wait_set", "warn_if_full", "why_failed"]
 
+#: How long a channel waits for its subscriber's port (a 60-node graph starting on 2 cores took more than 10 s).
+ATTACH_TIMEOUT = 60.0
 #: ``/dev/shm`` with less room than this is not used (a full tmpfs makes iceoryx2 fail mid-stream).
 MIN_FREE_BYTES = 64 << 20
 
@@ -23,6 +28,9 @@ _identity: Optional[str] = None
 _reason: Optional[str] = ""     # "" until checked
 _module: Any = None
 _node: Any = None
+#: iceoryx2 data segments of this process already committed (their paths in /dev/shm)
+_committed: Set[str] = set()
+_commit_lock = threading.Lock()
 
 
 def _read(path: str) -> str:
@@ -41,11 +49,13 @@ def _ns(kind: str) -> str:
 
 
 def host_identity() -> str:
-    """``<boot id>/<network namespace>/<mount namespace>/<uid>``: equal for two processes that can share
-    iceoryx2 memory."""
+    """``<boot id>/<network namespace>/<mount namespace>/<uid>/<iceoryx2 directory scheme>``: equal for two
+    processes that can share iceoryx2 memory (micros_rt before issue 46 kept it in /tmp/iceoryx2 and sent four
+    parts: a node of that version is told apart, not given a channel it cannot open)."""
     global _identity
     if _identity is None:
-        _identity = f"{_read('/proc/sys/kernel/random/boot_id')}/{_ns('net')}/{_ns('mnt')}/{os.getuid()}"
+        _identity = (f"{_read('/proc/sys/kernel/random/boot_id')}/{_ns('net')}/{_ns('mnt')}/{os.getuid()}/"
+                     f"{_ROOT_SCHEME}")
     return _identity
 
 
@@ -73,6 +83,49 @@ def unavailable_reason(env: Mapping[str, str] = os.environ) -> Optional[str]:
         return _reason
 
 
+#: the iceoryx2 directory scheme, part of the host identity: "u" one directory per Unix user (iceoryx2_root)
+_ROOT_SCHEME = "u"
+
+
+def iceoryx2_root(uid: Optional[int] = None) -> str:
+    """iceoryx2's directory of micros_rt for Unix user ``uid`` (this process's): one per user. iceoryx2's default,
+    /tmp/iceoryx2, is made by its first user with mode 0750, and every other user then failed (issue 46: after a
+    root node ran, two nodes of another user fell back to DDS, told that /dev/shm might be full). Processes of two
+    users never share iceoryx2 memory anyway."""
+    return f"/tmp/micros_rt-iceoryx2-{os.getuid() if uid is None else uid}/"
+
+
+def permission_problem(root: Optional[str] = None) -> Optional[str]:
+    """Why this user cannot use its iceoryx2 directory (``root``: :func:`iceoryx2_root`), in words, or None."""
+    root = root or iceoryx2_root()
+    uid = os.getuid()
+    for path in (root, root + "nodes", root + "services"):
+        try:
+            st = os.lstat(path)
+        except FileNotFoundError:
+            continue  # iceoryx2 makes it
+        except OSError as exc:
+            return f"iceoryx2's directory {path} cannot be read ({exc.strerror})"
+        if not stat.S_ISDIR(st.st_mode) or st.st_uid != uid or not os.access(path, os.W_OK | os.X_OK):
+            return (f"iceoryx2's directory {path} belongs to uid {st.st_uid} with mode {stat.S_IMODE(st.st_mode):04o}"
+                    f"{'' if stat.S_ISDIR(st.st_mode) else ' and is no directory'}: this user (uid {uid}) cannot "
+                    f"use it, a permission problem, not a full /dev/shm (remove {root}: micros_rt makes one per "
+                    f"user)")
+    return None
+
+
+def why_failed(exc: BaseException) -> str:
+    """The cause of an iceoryx2 failure in words: permissions, a full /dev/shm, or iceoryx2's own words."""
+    problem = permission_problem()
+    if problem is not None:
+        return problem
+    free = shm_free_bytes()
+    if free < MIN_FREE_BYTES:
+        return f"/dev/shm is full ({free >> 20} MiB free: df -h /dev/shm) ({type(exc).__name__}: {exc})"
+    return (f"iceoryx2 refused ({type(exc).__name__}: {exc}); /dev/shm has {free >> 20} MiB free and "
+            f"{iceoryx2_root()} is this user's: iceoryx2's limits (ports, nodes) may be reached")
+
+
 def _check() -> Optional[str]:
     global _module
     try:
@@ -93,8 +146,25 @@ def _check() -> Optional[str]:
     except Exception as exc:  # a wheel for another platform, a broken install
         return f"the iceoryx2 package does not load: {exc}"
     iox2.set_log_level(iox2.LogLevel.Error)
+    try:
+        os.mkdir(iceoryx2_root(), 0o700)
+    except FileExistsError:
+        pass
+    except OSError as exc:
+        return f"cannot make iceoryx2's directory {iceoryx2_root()} ({exc.strerror})"
+    problem = permission_problem()
+    if problem is not None:
+        return problem
     _module = iox2
     return None
+
+
+def _config() -> Any:
+    """iceoryx2's configuration with this user's directory (:func:`iceoryx2_root`)."""
+    iox2 = _module
+    cfg = iox2.config.default()
+    cfg.global_cfg.root_path = iox2.Path.new(iceoryx2_root())
+    return cfg
 
 
 def shm_node() -> Any:
@@ -109,7 +179,7 @@ def shm_node() -> Any:
     with _lock:
         if _node is None:
             iox2 = _module
-            _node = _without_signal_handling(iox2.NodeBuilder.new()).create(iox2.ServiceType.Ipc)
+            _node = _without_signal_handling(iox2.NodeBuilder.new().config(_config())).create(iox2.ServiceType.Ipc)
         return _node
 
 
@@ -167,3 +237,66 @@ def close_node() -> None:
         import gc
 
         gc.collect()  # service factories and ports still referenced by cycles hold the node
+
+
+def shm_free_bytes() -> int:
+    """Bytes /dev/shm can still give (0 when it cannot be read)."""
+    try:
+        st = os.statvfs("/dev/shm")
+    except OSError:
+        return 0
+    return st.f_bavail * st.f_frsize
+
+
+_full_warned = 0.0
+
+
+def warn_if_full(now: float, log: Any) -> None:
+    """Say it (at most once a minute per process) when /dev/shm has less room than a channel may need to grow:
+    committed channels go on unharmed, new or growing ones fall back or go in pieces."""
+    global _full_warned
+    if now - _full_warned < 60.0 or _node is None:
+        return
+    free = shm_free_bytes()
+    if free >= 16 << 20:
+        return
+    _full_warned = now
+    log.warning("micros_rt: /dev/shm is full (%d MiB free): shared-memory channels keep the memory they committed; "
+                "new subscribers get DDS or TCPROS and lossless messages larger than a channel's slot go in "
+                "pieces (df -h /dev/shm; what else fills it?)", free >> 20)
+
+
+def commit_segments() -> None:
+    """Commit the memory of every iceoryx2 data segment this process maps and has not committed yet.
+
+    iceoryx2 sizes a segment with ``ftruncate``: on tmpfs that is a promise, kept page by page when a page is
+    first touched; when /dev/shm filled meanwhile the kernel kills the toucher with SIGBUS (issue 46: a
+    publisher died with exit 135 when ``dd`` filled /dev/shm mid-stream). ``posix_fallocate`` takes every page
+    now, so the kernel says no here, as ``OSError`` (ENOSPC) turned into a TransportError in words, and a
+    committed segment can never SIGBUS. Called after a publisher port is made and after a sample that may
+    have grown its data segment was loaned, before a byte is written. Raises TransportError."""
+    from ...exceptions import TransportError
+
+    try:
+        with open("/proc/self/maps") as f:
+            mapped = {line.split(None, 5)[-1].strip() for line in f if "/dev/shm/iox2_" in line}
+    except OSError:
+        return
+    segments = {path for path in mapped if path.endswith(".data") and not path.endswith("_mgmt.data")}
+    with _commit_lock:
+        _committed.intersection_update(mapped)  # forget what is no longer mapped
+        for path in sorted(segments - _committed):
+            try:
+                fd = os.open(path, os.O_RDWR)
+            except OSError:
+                continue  # another process's segment this process only reads (or gone meanwhile)
+            try:
+                size = os.fstat(fd).st_size
+                os.posix_fallocate(fd, 0, size)
+            except OSError as exc:
+                raise TransportError(
+                    f"/dev/shm has no room for a shared-memory segment of {size >> 20} MiB ({exc.strerror}; "
+                    f"{shm_free_bytes() >> 20} MiB free: df -h /dev/shm)") from exc
+            finally:
+                os.close(fd)
+            _committed.add(path)

@@ -16,7 +16,8 @@ from ...qos import is_lossless
 from ..negotiated import PublicationHost, PublicationSide
 from ..tcpros import patches
 from ..tcpros.patches import short
-from .host import host_identity, unavailable_reason
+from .host import ATTACH_TIMEOUT, host_identity, unavailable_reason
+from .vetting import vetting
 
 if TYPE_CHECKING:
     from .channel import ShmChannel, ShmWriter
@@ -24,6 +25,11 @@ if TYPE_CHECKING:
 __all__ = ["ShmPublication"]
 
 _log = nonblocking_logger("rosout.micros_rt")
+
+#: Most channels of one publication that may wait for their subscriber's port at once: a real subscriber
+#: attaches within a second or two (a 60-node graph starting on 2 cores: within ATTACH_TIMEOUT); more waiting
+#: means offers nobody reads (issue 46: 1,000 forged ones made 4,000 files in /dev/shm and 510 MB of RSS).
+MAX_PENDING_CHANNELS = 16
 
 
 class ShmPublication(PublicationSide):
@@ -37,6 +43,8 @@ class ShmPublication(PublicationSide):
         #: made when a first subscriber chooses SHM
         self.shm: "Optional[ShmWriter]" = None
         self.links: Dict[str, patches.DDSConnection] = {}  # subscriber caller id -> SHM link
+        #: offers refused although the rules matched: a live link of the caller, too many pending, not vetted
+        self.refused_offers = 0
 
     def negotiated(self, subscriber: str) -> Optional[NegotiatedTransport]:
         if self.refusal is not None:
@@ -58,6 +66,11 @@ class ShmPublication(PublicationSide):
             # asked again on a publisher update: the subscriber's channel is there and read, keep it
             return verdict, self._answer(offer.held)
         if verdict.accepted:
+            refusal = self._screen(offer, subscriber, who)
+            if refusal is not None:
+                self.refused_offers += 1
+                verdict = Verdict(False, "shm-refused", f"topic {host.topic}: {refusal}; serving {who} otherwise")
+        if verdict.accepted:
             try:
                 channel = self._writer().open_channel(subscriber, offer.pid)
             except MicrosRtError as exc:
@@ -78,6 +91,25 @@ class ShmPublication(PublicationSide):
         if refused is not None:
             return refused, None
         return verdict, self._answer(channel.name)
+
+    def _screen(self, offer: ShmOffer, subscriber: str, who: str) -> Optional[str]:
+        """Why an offer that the rules accept must still not get a channel (issue 46), or None:
+
+        - the subscriber it names has a live link (its channel attached, its process running) that the offer
+          does not name: a subscriber's link is its own, a call naming it does not replace it;
+        - :data:`MAX_PENDING_CHANNELS` channels already wait for their subscribers to attach;
+        - the ROS master and the named node do not confirm that the offer's process is that node's."""
+        shm = self.shm
+        live = shm.channel_for(subscriber) if shm is not None else None
+        if (live is not None and not live.closed and offer.held != live.name and live.attached()
+                and not live.subscriber_dead()):
+            return (f"{who} already reads channel {live.name} (process {live.peer_pid}); an offer in its name from "
+                    f"process {offer.pid} that does not name that channel does not replace it")
+        pending = shm.pending_count() if shm is not None else 0
+        if pending >= MAX_PENDING_CHANNELS:
+            return (f"{pending} shared-memory channels of this publisher still wait for their subscribers to attach "
+                    f"(at most {MAX_PENDING_CHANNELS}; they are closed {ATTACH_TIMEOUT:.0f} s after they were made)")
+        return vetting.why_not(subscriber, offer.pid)
 
     def _answer(self, channel: str) -> ShmAnswer:
         return ShmAnswer(channel=channel, latch=self.host.latch, qos=self.host.options, node=patches.caller_id(),
@@ -146,6 +178,9 @@ class ShmPublication(PublicationSide):
 
     def dropped(self) -> int:
         return self.shm.dropped if self.shm is not None else 0
+
+    def refused(self) -> Tuple[int, int]:
+        return self.refused_offers, self.shm.never_attached if self.shm is not None else 0
 
     def close(self) -> None:
         with self.lock:

@@ -15,7 +15,7 @@ from ...qos import UNBOUNDED_QUEUE_DEPTH
 from ..base import PushReader
 from ..negotiated import SubscriptionHost, SubscriptionSide
 from ..tcpros import patches
-from .host import host_identity, unavailable_reason
+from .host import host_identity, process_alive, unavailable_reason
 
 if TYPE_CHECKING:
     from .channel import ShmLink
@@ -81,7 +81,7 @@ class ShmSubscription(SubscriptionSide):
 
         try:
             link = ShmLink(host.topic, answer.channel, host.data_class, header=header, qos=answer.qos, put=put,
-                           on_drop=dropped, on_gone=lambda _link: self._link_gone(conn), peer_pid=answer.pid,
+                           on_drop=dropped, on_gone=lambda gone: self._link_gone(conn, gone), peer_pid=answer.pid,
                            on_latched=keep_latched if answer.latch else None)
         except MicrosRtError as exc:
             _log.warning("micros_rt: %s; the publisher %s is asked again", exc, pub_uri)
@@ -111,14 +111,29 @@ class ShmSubscription(SubscriptionSide):
         if link is not None:
             link.close()
 
-    def _link_gone(self, conn: patches.DDSConnection) -> None:
-        """The publisher's end went (unregistered, or its process died): drop the connection, so that rospy
-        connects again when the master names the publisher anew (a restart)."""
+    def _link_gone(self, conn: patches.DDSConnection, link: "Optional[ShmLink]" = None) -> None:
+        """The publisher's end went (it unregistered, its process died, or it closed this subscriber's channel:
+        /dev/shm full, a forged offer in our name on old publishers): drop the connection; while the publisher's
+        process still runs, ask it for a link again at once, as rospy's TCPROS subscriber reconnects (a
+        restarted publisher is connected when the master names it anew)."""
         if self.host.closed or conn.done:
             return
         _log.debug("micros_rt: topic %s: SHM publisher %s is gone", self.host.topic, conn.endpoint_id)
         patches.remove_pseudo_connection(self.host.topic, conn, publisher=False)
         conn.close()
+        if link is None or not process_alive(link.peer_pid) or link.peer_pid == 0:
+            return
+        topic, pub_uri = self.host.topic, conn.endpoint_id
+
+        def done(code: int, msg: str) -> None:
+            if code == 1:
+                _log.warning("micros_rt: topic %s: the shared-memory link from %s went while its publisher runs; "
+                             "connected again (%s)", topic, pub_uri, msg)
+            else:
+                _log.info("micros_rt: topic %s: the shared-memory link from %s went; asked again: %s", topic,
+                          pub_uri, msg)
+
+        patches.connect_again(topic, pub_uri, done)
 
     def close(self) -> None:
         with self.host.lock:

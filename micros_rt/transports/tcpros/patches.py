@@ -605,6 +605,25 @@ def _reg_manager() -> Any:
     return None
 
 
+def connect_again(topic: str, pub_uri: str, done: Callable[[int, str], None]) -> None:
+    """Ask publisher ``pub_uri`` of ``topic`` for a link again, on a thread of its own, as rospy's TCPROS
+    subscriber reconnects a dropped connection by itself; ``done(code, message)`` then (code 1: linked)."""
+    reg = _reg_manager()
+    handler = getattr(reg, "handler", None)
+    if handler is None or getattr(handler, "done", True) or rospy.is_shutdown():
+        return
+
+    def run() -> None:
+        try:
+            code, msg, _ = handler._connect_topic(topic, pub_uri)
+        except Exception as exc:  # the publisher's process went meanwhile: what rospy's own thread does
+            code, msg = 0, f"{type(exc).__name__}: {exc}"
+        if not rospy.is_shutdown():
+            done(int(code), str(msg))
+
+    threading.Thread(target=run, name=f"micros_rt reconnect {short(topic, 40)}", daemon=True).start()
+
+
 def reregister_all() -> Tuple[int, int, int]:
     """Register every publication, subscription and service of this node again with the master."""
     reg = _reg_manager()
