@@ -15,14 +15,14 @@ import pytest
 import harness
 from helpers import mrt
 
+pytestmark = pytest.mark.env(**harness.DDS_BETWEEN_NODES)
+
 TOPICS_SCRIPT = """
 import json
 import micros_rt
 from cyclonedds.core import Entity
 from cyclonedds.topic import Topic
 from std_msgs.msg import String
-
-pytestmark = pytest.mark.env(**harness.DDS_BETWEEN_NODES)
 
 def topics():
     return sum(isinstance(e, Topic) for e in list(Entity._entities.values()))

@@ -12,6 +12,8 @@ import pytest
 import harness
 from helpers import mrt
 
+pytestmark = pytest.mark.env(**harness.DDS_BETWEEN_NODES)
+
 STATE = """
 import json, threading, time, sys
 import micros_rt
@@ -19,8 +21,6 @@ from micros_rt.core.runtime import _node
 from cyclonedds.core import Entity, GuardCondition, WaitSet
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
-
-pytestmark = pytest.mark.env(**harness.DDS_BETWEEN_NODES)
 
 def state():
     live = list(Entity._entities.values())
