@@ -82,8 +82,13 @@ def ros2(*args: Any) -> List[str]:
     return harness.ros2_peer_argv(*[str(a) for a in args])
 
 
+@pytest.mark.parametrize("cyclonedds_uri", [True, False], ids=["CYCLONEDDS_URI", "no_CYCLONEDDS_URI"])
 def test_no_ros2_one_participant_then_an_rclpy_node_hears_and_is_heard(auto_env: Dict[str, str],
-                                                                        spawn: harness.Spawner) -> None:
+                                                                        spawn: harness.Spawner,
+                                                                        cyclonedds_uri: bool) -> None:
+    """In both environments users have: CYCLONEDDS_URI set (as ROS 2 users set it) and unset (micros_rt's rule)."""
+    if not cyclonedds_uri:
+        auto_env.pop("CYCLONEDDS_URI", None)
     talker = spawn(mrt("talk", "--topic", "/auto/out", "--count", 100000, "--rate", 20, "--duration", 90),
                    env=auto_env, name="mrt_talker")
     near = spawn(mrt("listen", "--topic", "/auto/out", "--duration", 90, "--node-name", "near"), env=auto_env, name="mrt_listener")
