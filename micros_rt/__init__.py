@@ -66,6 +66,10 @@ __all__ = [
     "QoSProfile",
     "QoSTypeError",
     "QoSValueError",
+    "ServiceClient",
+    "ServiceServer",
+    "ActionFromRos2",
+    "ActionToRos2",
     "Subscriber",
     "SubscribeQoSOptions",
     "SubscriberStatistics",
@@ -82,3 +86,20 @@ __all__ = [
     "spin",
 ]
 __version__ = "0.1.0"
+
+#: What NodeHandle's services and actions return, imported when first named (a node without services or actions
+#: never loads them: ``import micros_rt`` stays as light as before)
+_LAZY = {"ServiceClient": ".services", "ServiceServer": ".services", "ActionFromRos2": ".actions",
+         "ActionToRos2": ".actions"}
+
+
+def __getattr__(name: str) -> object:
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name], __name__), name)
+    raise AttributeError(f"module 'micros_rt' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_LAZY])

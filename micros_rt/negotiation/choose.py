@@ -1,7 +1,7 @@
 """The protocol-order loop of ``requestTopic`` (publisher side), independent of rospy.
 
 The subscriber lists protocols in its preference order; the first one this publisher can serve wins, as
-rospy's ``protocol_handlers`` loop does. Negotiated transports (DDS today) are registered by name
+rospy's ``protocol_handlers`` loop does. Negotiated transports (shared memory and DDS, and any a plug-in registers) are registered by name
 (:class:`NegotiatedTransport`: how to read that protocol's offer, and the publication's judge); other
 entries go to rospy's protocol handlers (``supports``). Malformed entries are skipped with a reason,
 never fatal.

@@ -47,8 +47,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import re
-from dataclasses import dataclass
-from typing import Any, Mapping, TypeVar, Union
+from typing import Any, Mapping, TypeVar
 
 import yaml
 
@@ -69,13 +68,6 @@ _SECTIONS: dict[str, type[AdvertiseQoSOptions] | type[SubscribeQoSOptions]] = {
 
 
 _Options = TypeVar("_Options", AdvertiseQoSOptions, SubscribeQoSOptions)
-
-
-@dataclass(frozen=True)
-class _Entry:
-    key: str
-    options: Union[AdvertiseQoSOptions, SubscribeQoSOptions]
-    order: int
 
 
 class QoSProfile:

@@ -12,7 +12,8 @@ transport its TransportHints allow: each makes the offer, reads the publisher's 
 which hands messages to the core's delivery thread (one admission path for every transport).
 
 A new negotiated transport is its package with the two sides, plus one entry in the node's registry of
-negotiated transports (:data:`micros_rt.node.NEGOTIATED`).
+negotiated transports (:data:`micros_rt.core.negotiated.TRANSPORTS`; a plug-in registers through
+:func:`micros_rt.extend.register_negotiated_transport`).
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ is looked for again every poll (:meth:`Ros2Side.poll`). Actions: :mod:`.actions`
 
 - **export** (ROS 1 -> ROS 2). A topic with a publisher in the master (other than this relay): a micros_rt
   subscription over TCPROS (stock publishers), whose callback writes each message on a DDS writer of
-  ``rt/<name>`` (``as:`` renames it) with the entry's QoS, behind the core's lane, as the graph section's
+  ``rt/<name>`` (``as:`` renames it) with the entry's QoS, behind the core's send queue, as the graph section's
   exports; rclpy reads it as any ROS 2 topic. A latching publisher (its connection header says
   ``latching=1``) makes the writer transient_local, keep_last 1, so late ROS 2 subscribers that ask for
   transient_local get the last message. A service in the master: served to ROS 2 clients by the process's ROS 2
@@ -748,8 +748,3 @@ def _service_class(type_name: str) -> Any:
         return roslib.message.get_service_class(type_name) if "/" in type_name else None
     except (ValueError, ImportError):
         return None
-
-
-def names_kept_off_dds(entries: Tuple[Ros2Entry, ...]) -> Set[str]:
-    """The ROS 1 names the relay publishes for ``ros2: import`` topics: its QoS profile keeps them TCPROS only."""
-    return {e.ros1_name for e in entries if e.direction == "import"}

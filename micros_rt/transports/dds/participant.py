@@ -434,11 +434,6 @@ class DDSParticipant:
             del self._topics[name]
         delete_entity(topic)
 
-    def topic_count(self) -> int:
-        """Topics alive in this participant (for leak checks)."""
-        with self._lock:
-            return len(self._topics)
-
     def close(self) -> None:
         """Delete the participant and everything created on it; harmless twice."""
         if self.closed:

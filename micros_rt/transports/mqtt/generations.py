@@ -77,11 +77,6 @@ class PeerGenerations:
         with self._lock:
             return bool(self._peers)
 
-    def add_written(self, topic: str) -> None:
-        with self._lock:
-            self._written.add(topic)
-            self._peers.pop(topic, None)
-
     def published(self, topic: str, announcement: bytes) -> None:
         """This client published ``announcement`` on ``topic``'s type topic (its echo is not a peer's)."""
         with self._lock:
