@@ -1,5 +1,5 @@
 #!/bin/bash
-# Set up, then run a whole robot on this host under micros_rt's defaults (about 25 s): unmodified rospy scripts
+# Set up, then run a whole robot on this host under micros_rt's defaults (about 15 s): unmodified rospy scripts
 # under `micros-rt run`, micros_rt API nodes, stock rospy, roscpp and rosbag, then rclpy nodes that join and leave;
 # prints one table of every message, call and goal. Exits 1 when a message was lost.
 #   scripts/robot_demo.sh [--domain N] [--no-cyclonedds-uri] [--json]

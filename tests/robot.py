@@ -6,7 +6,7 @@ that comes and goes; every message, call and goal accounted for in one table.
 ``scripts/robot_demo.sh`` runs it (after ``scripts/setup.sh``); ``tests/integration/test_robot.py`` runs
 :func:`run_robot` and asserts the table. It starts its own ``rosmaster`` on a free port and, on its DDS domain:
 
-- unmodified rospy scripts under ``micros-rt run``: a talker (``/robot/chatter``, 20 Hz), a listener, a latched
+- unmodified rospy scripts under ``micros-rt run``: a talker (``/robot/chatter``, 25 Hz), a listener, a latched
   map (``/robot/map``) and a late listener of it, a ``rospy.Service`` server and client, an actionlib
   ``SimpleActionServer`` and ``SimpleActionClient`` (goal, feedback, result, cancel);
 - micros_rt API nodes: a HIGH transport-priority ``/robot/cmd_vel`` publisher and its subscriber, and a node that
@@ -29,6 +29,7 @@ import re
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional
@@ -40,7 +41,7 @@ import harness  # noqa: E402
 MICROS_RT = str(harness.REPO_ROOT / ".venv" / "bin" / "micros-rt")
 PEERS = harness.PEERS_DIR
 T = 45.0            # bound on any one wait (generous: a loaded machine)
-COUNT = 300         # messages on /robot/chatter and /robot/cmd_vel, 20 Hz each
+COUNT = 200         # messages on /robot/chatter and /robot/cmd_vel, 25 Hz each (8 s)
 ORDER = 20          # the actionlib goal's feedback messages
 
 
@@ -124,10 +125,10 @@ def run_robot(domain: int, *, cyclonedds_uri: bool = True, say: Callable[[str], 
         cmd_listener.wait_for("ready", T)
         offer = start("mrt_action_offer", [harness.MICROS_RT_PYTHON, str(PEERS / "ros1_action_peer.py"), "bridge",
                                            "--to-ros2", "/robot/fib"])
-        talker = start("run_talker", run("plain_talker.py", "--topic", "/robot/chatter", "--count", COUNT, "--rate", 20,
+        talker = start("run_talker", run("plain_talker.py", "--topic", "/robot/chatter", "--count", COUNT, "--rate", 25,
                                          "--wait-subscribers", 4, "--queue-size", 1000, "__name:=run_talker"))
         cmd_talker = start("mrt_cmd_talker", [harness.MICROS_RT_PYTHON, str(PEERS / "mrt_peer.py"), "talk", "--topic",
-                                              "/robot/cmd_vel", "--count", COUNT, "--rate", 20, "--wait-subscribers", 1,
+                                              "/robot/cmd_vel", "--count", COUNT, "--rate", 25, "--wait-subscribers", 1,
                                               "--qos", json.dumps({"transport_priority": "HIGH"}),
                                               "--node-name", "mrt_cmd_talker", "--linger", 2])
         talker.wait_for("ready", T)
@@ -138,11 +139,11 @@ def run_robot(domain: int, *, cyclonedds_uri: bool = True, say: Callable[[str], 
                                                  "__name:=run_service_client"))
         action_client = start("run_action_client", run("plain_action_client.py", "/robot/fib", "--order", ORDER,
                                                         "--wait", T, "__name:=run_action_client"))
-        run_listener.wait_for_count("recv", 60, T)
+        run_listener.wait_for_count("recv", 40, T)
         say("robot: ROS 1 side running; rclpy nodes join")
 
         # a ROS 2 node joins mid-stream: echoes a topic and the latched map, calls the service, sends a goal, leaves
-        echo = start("rclpy_echo", ros2("ros2_peer.py", "listen", "--topic", "/robot/chatter", "--count", 40,
+        echo = start("rclpy_echo", ros2("ros2_peer.py", "listen", "--topic", "/robot/chatter", "--count", 20,
                                         "--duration", 60))
         map2 = start("rclpy_map", ros2("ros2_peer.py", "listen", "--topic", "/robot/map", "--count", 1,
                                        "--durability", "transient_local", "--duration", 60))
@@ -155,8 +156,8 @@ def run_robot(domain: int, *, cyclonedds_uri: bool = True, say: Callable[[str], 
             peer.wait(90)
         say("robot: the rclpy nodes left; the robot goes on")
 
-        talker.wait_for("done", T + COUNT / 20.0)
-        cmd_talker.wait_for("done", T + COUNT / 20.0)
+        talker.wait_for("done", T + COUNT / 25.0)
+        cmd_talker.wait_for("done", T + COUNT / 25.0)
         late_map.wait(T)
         client.wait(T)
         action_client.wait(90)
@@ -210,8 +211,11 @@ def run_robot(domain: int, *, cyclonedds_uri: bool = True, say: Callable[[str], 
         say(format_table(report))
         return report
     finally:
-        for peer in reversed(peers):
-            peer.stop()
+        stopping = [threading.Thread(target=peer.stop) for peer in peers]  # SIGINT to all at once, as roslaunch
+        for t in stopping:
+            t.start()
+        for t in stopping:
+            t.join()
         master.cleanup()
         subprocess.run(["rm", "-rf", str(work)], check=False)
 

@@ -46,7 +46,8 @@ def test_slow_mqtt_subscription_does_not_stall_another_mqtt_topic(
         # meanwhile, not once per fast message
         assert 1 <= slow_handled < N // 3, slow_handled
 
-        assert fast.wait(timeout=60) == 0 and slow.wait(timeout=60) == 0
+        assert fast.wait(timeout=60) == 0, fast.stderr_tail()
+        assert slow.wait(timeout=60) == 0, slow.stderr_tail()
         stats = listener.wait_for("slow_statistics", timeout=30)
         # the slow topic kept the newest (queue_size=1) and counted every message it dropped
         assert stats["dropped_queue_full"] > 0, stats

@@ -40,7 +40,7 @@ def test_a_whole_robot_under_the_defaults_loses_nothing_and_answers_everything(c
         if first is not None:
             assert row["first"] == first, row
     assert rows["run_talker -> run_listener"]["received"] == COUNT
-    assert rows["run_talker -> rclpy echo"]["received"] == 40
+    assert rows["run_talker -> rclpy echo"]["received"] == 20
     for name, call in report["calls"].items():
         assert call["answered"] == call["sent"] == call["right"], (name, call)
     goals = report["goals"]

@@ -26,12 +26,15 @@ pytestmark = pytest.mark.integration
 T = 60.0
 
 
-def shm_env(master: harness.RosMaster, mode: str = "beside_dds") -> Dict[str, str]:
-    """SHM on; the delivery thread waits on its links itself (iceoryx2's wait set). ``beside_dds``: each node
-    has DDS too (ROS 2 visibility), whose readers wake that thread from Cyclone's thread; ``alone``: no DDS."""
+def shm_env(master: harness.RosMaster, mode: str = "default") -> Dict[str, str]:
+    """SHM on; the delivery thread waits on its links itself (iceoryx2's wait set). ``default``: what users get
+    (ROS 2 visibility auto); ``beside_dds``: each node has DDS too from its start (visibility on, as once a ROS 2
+    node is on the domain), whose readers wake that thread from Cyclone's thread; ``alone``: no DDS."""
     env = {**master.env, "MICROS_RT_DISABLE_SHM": "0"}
     if mode == "alone":
         env["MICROS_RT_DISABLE_DDS"] = "1"
+    elif mode == "beside_dds":
+        env["MICROS_RT_ROS2"] = "on"
     return env
 
 
@@ -294,7 +297,7 @@ def test_a_local_shm_subscriber_costs_its_publisher_no_dds_writes(ros_master: ha
                                                                 spawn: harness.Spawner) -> None:
     """With ROS 2 visibility on, the subscriber has a DDS reader and the publisher a DDS writer, and Cyclone
     matches them; the publisher stops writing to DDS once it knows that reader is served over SHM."""
-    env = shm_env(ros_master)
+    env = shm_env(ros_master, "beside_dds")
     topic = "/shm/no_double_send"
     listener = spawn(mrt("listen", "--topic", topic, "--duration", T), env, name="listener")
     listener.wait_for("ready", T)
