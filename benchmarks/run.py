@@ -710,7 +710,8 @@ def _fig_order(f):
 
 #: one colour per stack in every plot (stock rospy red, micros_rt's DDS blue, SHM orange, its TCPROS grey;
 #: cross_host.py and constrained_link.py use the same for the stacks they share)
-COLOURS = {"micros_rt_shm": "#ff7f0e", "micros_rt_shm_ros2": "#8c564b", "micros_rt_shm_local": "#ffbb78", "micros_rt_dds": "#1f77b4",
+COLOURS = {"micros_rt_shm": "#ff7f0e", "micros_rt_shm_ros2": "#8c564b", "micros_rt_shm_service": "#e377c2",
+           "rospy_tcpros_service": "#ff9896", "micros_rt_shm_local": "#ffbb78", "micros_rt_dds": "#1f77b4",
            "micros_rt_dds_budget": "#17becf", "micros_rt_tcpros": "#7f7f7f", "rospy_tcpros": "#d62728",
            "cyclonedds_python": "#2ca02c", "rclpy_fastdds": "#9467bd"}
 
