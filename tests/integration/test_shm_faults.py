@@ -236,7 +236,11 @@ def test_two_nodes_of_another_user_share_memory_after_a_root_node_ran(ros_master
     os.chown(home, nobody.pw_uid, nobody.pw_gid)
     request.addfinalizer(lambda: shutil.rmtree(home, ignore_errors=True))
     env = {**shm_env(ros_master), "HOME": home, "ROS_HOME": home, "ROS_LOG_DIR": home}
-    as_nobody = ["setpriv", f"--reuid={nobody.pw_uid}", f"--regid={nobody.pw_gid}", "--clear-groups"]
+    # the clone may sit in a directory only root can enter (/root, a home of mode 0700): the nodes may read and
+    # search what they need to run (CAP_DAC_READ_SEARCH, nothing else: they write and own as nobody, so a root-owned
+    # iceoryx2 directory still refuses them what it refused before)
+    as_nobody = ["setpriv", f"--reuid={nobody.pw_uid}", f"--regid={nobody.pw_gid}", "--clear-groups",
+                 "--inh-caps=+dac_read_search", "--ambient-caps=+dac_read_search"]
     topic = "/shm_faults/nobody"
     listener = spawn([*as_nobody, *faults("count", "--topic", topic)], env, name="nobody_listener")
     listener.wait_for("ready", T)
