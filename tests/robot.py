@@ -50,8 +50,6 @@ def robot_env(master: harness.RosMaster, domain: int, cyclonedds_uri: bool) -> D
     Cyclone's configuration from CYCLONEDDS_URI (the loopback one of the tests) or none (micros_rt's own rule)."""
     env = {k: v for k, v in master.env.items() if not k.startswith("MICROS_RT_")}
     env.update(harness.dds_env(domain))
-    for key in [k for k in env if k.startswith("MICROS_RT_")]:
-        del env[key]
     if not cyclonedds_uri:
         env.pop("CYCLONEDDS_URI", None)
     return env

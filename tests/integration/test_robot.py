@@ -20,27 +20,26 @@ pytestmark = pytest.mark.integration
 def test_a_whole_robot_under_the_defaults_loses_nothing_and_answers_everything(cyclonedds_uri: bool) -> None:
     domain = 221 + (os.getpid() + int(cyclonedds_uri)) % 10   # the run's own domain is 1..200; AUTO_DOMAIN 201..220
     report = run_robot(domain, cyclonedds_uri=cyclonedds_uri)
-    rows = {r["link"].split(" (")[0]: r for r in report["rows"]}
-    expected = {   # link -> (transport, first message that subscriber must get)
-        "run_talker -> run_listener": ("SHM", 0),
+    rows = {r["link"]: r for r in report["rows"]}
+    expected = {   # link -> (transport, first message that subscriber must get; None: it joins later)
+        "run_talker -> run_listener (micros-rt run)": ("SHM", 0),
         "run_talker -> stock rospy listener": ("TCPROS", 0),
-        "run_talker -> rosbag record": ("TCPROS", 0),
+        "run_talker -> rosbag record (roscpp)": ("TCPROS", 0),
         "run_talker -> roscpp relay -> run_cpp_listener": ("TCPROS", None),   # the relay advertises on its 1st message
-        "run_talker -> rclpy echo": ("DDS", None),                            # joins mid-stream
-        "mrt_cmd_talker": ("SHM", 0),
-        "run_map": ("SHM", 0),
+        "run_talker -> rclpy echo (joined mid-stream)": ("DDS", None),
+        "mrt_cmd_talker (HIGH) -> mrt_cmd_listener": ("SHM", 0),
+        "run_map (latched) -> late run listener": ("SHM", 0),
+        "run_map (latched) -> rclpy (transient_local)": ("DDS", 0),
     }
-    for row in report["rows"]:
-        name = row["link"].split(" (")[0]
+    assert set(rows) == set(expected), sorted(rows)
+    for link, (transport, first) in expected.items():
+        row = rows[link]
         assert row["received"] > 0 and row["lost"] == 0 and row["duplicates"] == 0 and row["in_order"], row
-        transport, first = expected.get(name, ("DDS" if "rclpy" in row["link"] else "SHM", 0))
-        if "rclpy (transient_local)" in row["link"]:
-            transport = "DDS"
         assert row["transports"] == [transport], row
         if first is not None:
             assert row["first"] == first, row
-    assert rows["run_talker -> run_listener"]["received"] == COUNT
-    assert rows["run_talker -> rclpy echo"]["received"] == 20
+    assert rows["run_talker -> run_listener (micros-rt run)"]["received"] == COUNT
+    assert rows["run_talker -> rclpy echo (joined mid-stream)"]["received"] == 20
     for name, call in report["calls"].items():
         assert call["answered"] == call["sent"] == call["right"], (name, call)
     goals = report["goals"]
