@@ -22,6 +22,7 @@ __all__ = [
     "NodeNotInitializedError",
     "PublishTimeoutError",
     "TransportError",
+    "SettingError",
 ]
 
 
@@ -64,3 +65,8 @@ class PublishTimeoutError(MicrosRtError):
 
 class TransportError(MicrosRtError):
     """A back end (DDS, ...) failed to send or receive; the message says which topic and why."""
+
+
+class SettingError(MicrosRtError, ValueError):
+    """A ``MICROS_RT_*`` environment variable has a bad value (the message names the variable, the value and
+    what it takes; :mod:`micros_rt.settings`)."""

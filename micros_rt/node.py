@@ -32,6 +32,7 @@ from .core.reader_subscription import OpenReader, ReaderSubscription
 from .core.registry import EndpointRegistry
 from .core.subscription import DeadlineMissed, Subscriber, _Subscription
 from .log import flush as flush_logs
+from . import settings
 from .transports.base import ProfileBackend, close_profile_backends, profile_backends
 from .transports.pacing import LinkPacer
 from .transports.dds.participant import close_participant
@@ -66,18 +67,20 @@ __all__ = [
 
 
 def init_node(name: str, argv: Optional[List[str]] = None, anonymous: bool = False, *,
-              qos_profile: Optional[str] = None, **kwargs: Any) -> None:
+              qos_profile: Union[str, "os.PathLike[str]", QoSProfile, None] = None, **kwargs: Any) -> None:
     """Start this process's ROS node, like ``rospy.init_node``, with micros_rt negotiation.
 
-    ``qos_profile`` (or the ``MICROS_RT_QOS_PROFILE`` environment variable) names a
-    YAML file of per-topic QoS applied without code changes.
+    ``qos_profile``: per-topic QoS applied without code changes, a :class:`~micros_rt.QoSProfile` or the path
+    of its YAML file (else the file ``MICROS_RT_QOS_PROFILE`` names, if any). A ``MICROS_RT_*`` variable with
+    a bad value raises :class:`~micros_rt.SettingError` (:mod:`micros_rt.settings`).
 
     >>> micros_rt.init_node("talker", anonymous=True)   # doctest: +SKIP
+    >>> micros_rt.init_node("talker", qos_profile=micros_rt.QoSProfile.from_string("ros2: false"))  # doctest: +SKIP
     """
     patches.install(_node.publications.get, _node.subscriptions.get)
     _introspection.install(lambda: _node)
-    path = qos_profile or os.environ.get("MICROS_RT_QOS_PROFILE") or None
-    profile = QoSProfile.load(path) if path else None
+    settings.check()  # a mistyped MICROS_RT_* variable stops the node here, in words
+    profile = _profile(qos_profile)
     _tune_malloc()
     note_ros2_at_start(profile)
     start_dds_early(profile)
@@ -90,6 +93,14 @@ def init_node(name: str, argv: Optional[List[str]] = None, anonymous: bool = Fal
         _node.graph = _graph_id()
     rospy.on_shutdown(_close_all)
     threading.Thread(target=_housekeeping_loop, name="micros_rt housekeeping", daemon=True).start()
+
+
+def _profile(given: Union[str, "os.PathLike[str]", QoSProfile, None]) -> Optional[QoSProfile]:
+    """The node's profile: ``given``, the file it names, or the file ``MICROS_RT_QOS_PROFILE`` names."""
+    if isinstance(given, QoSProfile):
+        return given
+    path = given or settings.QOS_PROFILE.get()
+    return QoSProfile.load(path) if path else None
 
 
 def _tune_malloc() -> None:
@@ -113,15 +124,10 @@ def _tune_malloc() -> None:
         mallopt = libc.mallopt
     except (OSError, AttributeError):
         return  # not glibc: nothing to tune
-    raw = os.environ.get("MICROS_RT_MALLOC_ARENA_MAX", "2").strip()
-    try:
-        arenas = int(raw)
-    except ValueError:
-        _log.warning("micros_rt: MICROS_RT_MALLOC_ARENA_MAX=%r is not an integer; leaving malloc as it is", raw)
-        return
+    arenas = settings.MALLOC_ARENA_MAX.get()
     if arenas > 0:
         mallopt(ctypes.c_int(-8), ctypes.c_int(arenas))  # M_ARENA_MAX
-    if os.environ.get("MICROS_RT_MALLOC_KEEP_LARGE", "1").strip() != "0":
+    if settings.MALLOC_KEEP_LARGE.get():
         mallopt(ctypes.c_int(-3), ctypes.c_int(32 << 20))   # M_MMAP_THRESHOLD (glibc's maximum)
         mallopt(ctypes.c_int(-1), ctypes.c_int(128 << 20))  # M_TRIM_THRESHOLD
 

@@ -22,6 +22,7 @@ import time
 import uuid
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Mapping, Optional, Set
+from .. import settings
 from ..cyclone import import_cyclonedds
 
 __all__ = ["DEFAULT_WAIT", "NAMES_WAIT", "DdsEndpoint", "DdsView", "Ros2Node", "discover", "ros2_type_name"]
@@ -103,7 +104,7 @@ def discover(wait: float = DEFAULT_WAIT, env: Mapping[str, str] = os.environ, *,
     saw; with ``names``, then up to ``names_wait`` seconds more until every participant that announces its
     nodes on ``ros_discovery_info`` has been heard. Never raises for a DDS that cannot start: the view then says
     why (``available`` False)."""
-    if env.get("MICROS_RT_DISABLE_DDS", "") not in ("", "0"):
+    if settings.DISABLE_DDS.get(env):
         return DdsView(False, "DDS is disabled (MICROS_RT_DISABLE_DDS is set)")
     try:
         import_cyclonedds()

@@ -23,7 +23,8 @@ from typing import Dict, List, Mapping, Optional, Tuple
 from . import CommandError
 from ._args import ArgumentParser
 from ._graphinfo import MICROS_RT, Master, master_uri, probe_all
-from ..exceptions import MicrosRtError
+from .. import settings
+from ..exceptions import MicrosRtError, SettingError
 
 __all__ = ["Check", "main", "run_checks", "interface_addresses", "judge_clocks"]
 
@@ -78,7 +79,7 @@ def run_checks(env: Mapping[str, str]) -> List[Check]:
     """Every check, in order; a check that cannot run because an earlier one failed says so."""
     master = check_master(env)
     domain = check_domain(env)
-    return [master, check_address(env), check_dds_network(env), domain,
+    return [check_settings(env), master, check_address(env), check_dds_network(env), domain,
             check_cyclone(env) if not domain.failed else
             Check("Cyclone DDS", SKIP, "not started: ROS_DOMAIN_ID is invalid"),
             check_clocks(env) if not master.failed else Check("clocks", SKIP, "not checked: no ROS master"),
@@ -86,6 +87,29 @@ def run_checks(env: Mapping[str, str]) -> List[Check]:
 
 
 # --------------------------------------------------------------------------- checks
+
+def check_settings(env: Mapping[str, str]) -> Check:
+    """Every ``MICROS_RT_*`` variable of :mod:`micros_rt.settings` has a value it takes (``init_node`` refuses to
+    start otherwise); other ``MICROS_RT_*`` names are listed (a typo sets nothing)."""
+    others = settings.unknown(env)
+    also = f"; not settings of micros_rt (a typo sets nothing): {', '.join(others)}" if others else ""
+    try:
+        settings.check(env)
+    except SettingError as exc:
+        return Check("settings", FAIL, f"{exc}{also}", "correct or unset the variable named (docs/settings.md "
+                     "lists every MICROS_RT_* setting and its values)")
+    given = [s.name for s in settings.SETTINGS if s.text(env)]
+    return Check("settings", OK, (f"set: {', '.join(given)}" if given else "every MICROS_RT_* setting at its "
+                                  "default") + also)
+
+
+def _value(setting: "settings.Setting[settings.T]", env: Mapping[str, str]) -> "settings.T":
+    """``setting``'s value in ``env``; its default when the value is bad (:func:`check_settings` says so)."""
+    try:
+        return setting.get(env)
+    except SettingError:
+        return setting.unset
+
 
 def check_master(env: Mapping[str, str]) -> Check:
     uri = master_uri(env)
@@ -278,7 +302,7 @@ def check_shared_memory(env: Mapping[str, str]) -> Check:
 
     from ..transports.shm import host
 
-    if env.get("MICROS_RT_DISABLE_SHM", "") not in ("", "0"):
+    if _value(settings.DISABLE_SHM, env):
         return Check("shared memory", SKIP, "turned off by MICROS_RT_DISABLE_SHM: micros_rt nodes of this host use "
                                             "DDS between them")
     reason = host.unavailable_reason(env)
@@ -328,16 +352,17 @@ def check_shared_memory(env: Mapping[str, str]) -> Check:
 def check_ros2_visibility(env: Mapping[str, str]) -> Check:
     """When this host's nodes' topics are ROS 2 topics (MICROS_RT_ROS2, the profile's ros2:), and, with auto, whether
     the host's watcher has seen ROS 2 on the domain and which process watches."""
-    raw = env.get("MICROS_RT_ROS2", "").strip().lower()
-    if raw in ("0", "off", "false", "no"):
+    try:
+        mode = settings.ROS2.get(env)
+    except SettingError as exc:
+        return Check("ROS 2 visibility", FAIL, str(exc), "unset it (auto, the default), or export MICROS_RT_ROS2=off "
+                     "(no ROS 2 nodes on this robot) or on")
+    if mode == "off":
         return Check("ROS 2 visibility", OK, "off (MICROS_RT_ROS2): no DDS until a micros_rt peer on another "
                                              "host needs it; ROS 2 nodes do not see these nodes")
-    if raw in ("1", "on", "true", "yes"):
+    if mode == "on":
         return Check("ROS 2 visibility", OK, "on (MICROS_RT_ROS2): every node has a DDS participant and its topics "
                                              "are ROS 2 topics from its start")
-    if raw and raw != "auto":
-        return Check("ROS 2 visibility", FAIL, f"MICROS_RT_ROS2={raw!r} is not on, off or auto", "unset it (auto, the "
-                     "default), or export MICROS_RT_ROS2=off (no ROS 2 nodes on this robot) or on")
     from ..transports.dds.participant import domain_id_from_env
     from ..transports.dds.watch import watch_paths, watcher_pid
 
@@ -364,9 +389,9 @@ def check_ros2_helper(env: Mapping[str, str]) -> Check:
     from ..services.gateway import ros2_python
 
     name = "ROS 2 helper"
-    if env.get("MICROS_RT_DISABLE_ROS2_SERVICES", "") not in ("", "0"):
+    if _value(settings.DISABLE_ROS2_SERVICES, env):
         return Check(name, SKIP, "MICROS_RT_DISABLE_ROS2_SERVICES is set: services and actions stay ROS 1 only")
-    given = env.get("MICROS_RT_ROS2_PYTHON", "").strip()
+    given = settings.ROS2_PYTHON.get(env)
     python = ros2_python(dict(env))
     if python is None:
         return Check(name, SKIP, "no ROS 2 Python found (MICROS_RT_ROS2_PYTHON unset, no .venv-ros2): services and "
@@ -420,7 +445,7 @@ def check_profile(env: Mapping[str, str]) -> Check:
     from ..exceptions import ProfileError
     from ..qos import QoSProfile
 
-    path = env.get("MICROS_RT_QOS_PROFILE", "").strip()
+    path = settings.QOS_PROFILE.get(env)
     if not path:
         return Check("QoS profile", OK, "MICROS_RT_QOS_PROFILE not set (no profile)")
     try:

@@ -18,6 +18,7 @@ import types
 from typing import List, Optional, Tuple
 
 from .. import drop_in as _drop_in
+from .. import settings
 from ..exceptions import MicrosRtError
 from ..negotiation.hints import TransportHints
 from ..qos import QoSProfile
@@ -150,7 +151,7 @@ def main(argv: List[str]) -> int:
                            "SCRIPT [ARGS...])", code=2)
     _check_script(script)
     hints = parse_hints(args.hints)
-    profile = args.profile or os.environ.get("MICROS_RT_QOS_PROFILE") or None
+    profile = args.profile or settings.QOS_PROFILE.get()
     _load_profile(profile)
 
     # what `python SCRIPT ARGS...` sets up, before rospy reads its remapping arguments from sys.argv

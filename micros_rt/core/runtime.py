@@ -14,7 +14,8 @@ import rospy
 from ..cyclone import import_cyclonedds
 from .registry import EndpointRegistry
 from ..transports.dds.participant import get_participant
-from ..exceptions import MicrosRtError, NodeNotInitializedError
+from .. import settings
+from ..exceptions import MicrosRtError, NodeNotInitializedError, SettingError
 from ..qos import QoSProfile
 from ..log import nonblocking_logger
 
@@ -60,8 +61,6 @@ def _graph_id() -> str:
     return f"{run_id}@{uri}".replace(";", "_").replace("=", "_")[:200]
 
 
-_OFF = ("0", "off", "false", "no")
-_ON = ("1", "on", "true", "yes")
 ON, OFF, AUTO = "on", "off", "auto"
 _warned_modes: set[str] = set()
 
@@ -74,17 +73,16 @@ def ros2_mode(profile: Optional[QoSProfile] = None) -> str:
     - auto: as off until something other than micros_rt is on the DDS domain (a ROS 2 node or tool, seen by the
       host's watcher, :mod:`micros_rt.transports.dds.watch`), then as on.
     - off: DDS entities only when a peer needs them (a micros_rt node on another host, a relay)."""
-    raw = os.environ.get("MICROS_RT_ROS2", "").strip().lower()
-    if raw in _OFF:
-        return OFF
-    if raw in _ON:
-        return ON
-    if raw and raw != AUTO and raw not in _warned_modes:
-        _warned_modes.add(raw)  # asked per topic and per housekeeping tick: said once
-        _log.warning("micros_rt: MICROS_RT_ROS2=%r is not on, off or auto; auto it is", raw)
-    if not raw and profile is not None and profile.ros2 is not None:
+    try:
+        mode = settings.ROS2.get()
+    except SettingError as exc:  # init_node refuses it; said once here (asked per topic and per housekeeping tick)
+        if str(exc) not in _warned_modes:
+            _warned_modes.add(str(exc))
+            _log.warning("micros_rt: %s; auto it is", exc)
+        return AUTO
+    if mode is None and profile is not None and profile.ros2 is not None:
         return ON if profile.ros2 else OFF
-    return AUTO
+    return mode or AUTO
 
 
 def ros2_visible(profile: Optional[QoSProfile] = None) -> bool:
@@ -98,7 +96,7 @@ def ros2_visible(profile: Optional[QoSProfile] = None) -> bool:
 def note_ros2_at_start(profile: Optional[QoSProfile]) -> None:
     """With ``auto`` visibility, at ``init_node``: a node started while ROS 2 is there is visible from its first
     topic (the host's watcher left its marker); becoming the watcher waits for the first housekeeping tick."""
-    if ros2_mode(profile) != AUTO or os.environ.get("MICROS_RT_DISABLE_DDS", "") not in ("", "0"):
+    if ros2_mode(profile) != AUTO or settings.DISABLE_DDS.get():
         return
     from ..transports.dds.participant import domain_id_from_env
     from ..transports.dds.watch import watch_paths
@@ -115,7 +113,7 @@ def note_ros2_at_start(profile: Optional[QoSProfile]) -> None:
 def watch_ros2() -> bool:
     """With ``auto`` visibility, a housekeeping tick: take part in watching the DDS domain for ROS 2; True once,
     on the tick ROS 2 is first seen (the caller opens the topics' DDS sides)."""
-    if (os.environ.get("MICROS_RT_DISABLE_DDS", "") not in ("", "0") or ros2_mode(_node.profile) != AUTO
+    if (settings.DISABLE_DDS.get() or ros2_mode(_node.profile) != AUTO
             or rospy.is_shutdown()):
         return False
     watch = _node.ros2_watch
@@ -154,7 +152,7 @@ def start_dds_early(profile: Optional[QoSProfile] = None) -> None:
     rospy's logging is set up, so a DDS that cannot start is reported as before. rospy's ``init_node``
     imports only configparser and encodings.idna meanwhile, and the first topic waits for this thread
     (:func:`_require_node`), so no two threads import cyclonedds at once."""
-    if os.environ.get("MICROS_RT_DISABLE_DDS", "") not in ("", "0") or not ros2_visible(profile):
+    if settings.DISABLE_DDS.get() or not ros2_visible(profile):
         return  # no DDS, or DDS only when a peer needs it: no import now
 
     def start() -> None:

@@ -28,6 +28,7 @@ import sys
 import threading
 from typing import Mapping, Optional
 
+from .. import settings
 from ..log import nonblocking_logger
 from ..qos import TransportPriority
 
@@ -42,7 +43,7 @@ LOW_NICE = 5
 
 
 def enabled(env: Mapping[str, str] = os.environ) -> bool:
-    return env.get("MICROS_RT_RECEIVE_PRIORITY", "1").strip().lower() not in ("0", "false", "no", "off")
+    return settings.RECEIVE_PRIORITY.get(env)
 
 
 def nice_for(priority: TransportPriority) -> int:

@@ -47,7 +47,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import re
-from typing import Any, Mapping, TypeVar
+from typing import Any, Iterable, Mapping, Sequence, TypeVar
 
 import yaml
 
@@ -189,6 +189,23 @@ class QoSProfile:
         profile.links = links
         profile.ros2 = ros2
         return profile
+
+    def with_advertise_transports(self, topics: Iterable[str], transports: Sequence[str]) -> QoSProfile:
+        """A copy of this profile whose publishers of ``topics`` (names or patterns) serve only ``transports``, as
+        ``transport_hints`` in the file would say (``("TCPROS",)``: no DDS writer); their options stay.
+
+        >>> QoSProfile().with_advertise_transports(["/scan"], ["TCPROS"]).advertise_transports("/scan")
+        ('TCPROS',)
+        """
+        names = tuple(str(t).upper() for t in transports)
+        if TCPROS not in names or any(n not in (SHM, DDS, TCPROS) for n in names):
+            raise ProfileError(f"{self.source}: a publisher's transports must be {SHM!r}, {DDS!r} or {TCPROS!r}, "
+                               f"{TCPROS!r} among them (stock subscribers connect with nothing else), got {names!r}")
+        copy = QoSProfile(self._publishers, self._subscribers, source=self.source)
+        copy._transports = {section: dict(hints) for section, hints in self._transports.items()}
+        copy._transports["publishers"].update((topic, names) for topic in topics)
+        copy.mqtt, copy.links, copy.ros2 = self.mqtt, self.links, self.ros2
+        return copy
 
     def advertise_options(self, topic: str) -> AdvertiseQoSOptions | None:
         """Options the profile gives for publishing on the resolved ``topic``, or None."""

@@ -25,6 +25,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
+from .. import settings
 from ..exceptions import MicrosRtError
 from ..log import nonblocking_logger
 from ..transports.dds.participant import HELPER_ENCLAVE, _is_loopback
@@ -76,7 +77,7 @@ class Ros2Unavailable(MicrosRtError):
 def ros2_python(env: Optional[Dict[str, str]] = None) -> Optional[str]:
     """The Python of a ROS 2 installation: ``MICROS_RT_ROS2_PYTHON``, else a ``.venv-ros2`` beside the micros_rt
     source tree or in the working directory; None when there is none."""
-    given = (os.environ if env is None else env).get("MICROS_RT_ROS2_PYTHON", "").strip()
+    given = settings.ROS2_PYTHON.get(env)
     if given:
         return given
     for base in (Path(__file__).resolve().parents[2], Path.cwd()):
@@ -398,7 +399,7 @@ def gateway(node_name: str) -> Ros2Gateway:
             return _gateway
         if _gateway_failed is not None:
             raise Ros2Unavailable(_gateway_failed)
-        if os.environ.get("MICROS_RT_DISABLE_ROS2_SERVICES", "") not in ("", "0"):
+        if settings.DISABLE_ROS2_SERVICES.get():
             _gateway_failed = "services toward ROS 2 are off (MICROS_RT_DISABLE_ROS2_SERVICES is set)"
             raise Ros2Unavailable(_gateway_failed)
         try:

@@ -158,7 +158,7 @@ def test_graph_png_and_dot(graph: Dict[str, str], tmp_path: Path) -> None:
 def test_doctor_passes_on_a_healthy_loopback_setup(graph: Dict[str, str]) -> None:
     cp = cli(graph, "doctor")
     assert cp.returncode == 0, cp.stdout
-    assert "all 10 checks passed" in cp.stdout
+    assert "all 11 checks passed" in cp.stdout
     assert "[ OK ] ROS 2 helper" in cp.stdout and "rclpy imports" in cp.stdout
     assert "[SKIP] shared memory        turned off by MICROS_RT_DISABLE_SHM" in cp.stdout  # the suite keeps it off
     assert "[ OK ] ROS master" in cp.stdout and "multicast off" in cp.stdout
@@ -176,7 +176,7 @@ def test_doctor_fails_with_its_fix_when_the_master_is_down(graph: Dict[str, str]
     at = next(i for i, line in enumerate(lines) if line.startswith("[FAIL] ROS master"))
     assert "cannot reach the ROS master" in lines[at]
     assert "fix: start roscore" in lines[at + 1]
-    assert "1 of 10 checks failed" in cp.stdout
+    assert "1 of 11 checks failed" in cp.stdout
 
 
 def test_doctor_flags_a_ros2_helper_python_that_is_not_there(graph: Dict[str, str]) -> None:

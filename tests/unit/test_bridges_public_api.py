@@ -28,6 +28,7 @@ PUBLIC = frozenset({
     "micros_rt.rostypes",
     "micros_rt.cyclone",   # the one first import of cyclonedds (a relay reading DDS discovery goes through it)
     "micros_rt.extend",
+    "micros_rt.settings",   # the MICROS_RT_* variables (the relay reads the profile and send buffer asked)
     "micros_rt.qos",
     "micros_rt.qos.options",
     "micros_rt.qos.profiles",
@@ -52,6 +53,8 @@ PUBLIC = frozenset({
 })
 #: the command line's error type, for the programs' ``__main__`` modules (``micros-rt mqtt-bridge`` ...)
 MAIN_ONLY = frozenset({"micros_rt.cli"})
+#: the programs' shared ``__main__`` code (arguments, node, loop, exit codes), which raises the command's errors
+PROGRAM = "micros_rt.bridges.program"
 BRIDGES = "micros_rt.bridges"
 
 
@@ -62,7 +65,7 @@ def _bridge_modules() -> Dict[str, Path]:
 def _allowed(module: str, target: str) -> bool:
     if target == BRIDGES or target.startswith(BRIDGES + "."):
         return True
-    return target in PUBLIC or (module.endswith(".__main__") and target in MAIN_ONLY)
+    return target in PUBLIC or ((module.endswith(".__main__") or module == PROGRAM) and target in MAIN_ONLY)
 
 
 def non_public_imports(modules: Dict[str, Path]) -> List[str]:

@@ -98,7 +98,8 @@ def test_rospy_internals_only_in_the_tcpros_transport() -> None:
 
 #: lowest first; a module may import its own layer and the layers below it, never one above
 LAYERS = (
-    ("support", ("micros_rt.exceptions", "micros_rt.rostypes", "micros_rt.log", "micros_rt.ratelimit", "micros_rt.cyclone")),
+    ("support", ("micros_rt.exceptions", "micros_rt.rostypes", "micros_rt.log", "micros_rt.ratelimit", "micros_rt.cyclone",
+                 "micros_rt.settings")),
     ("qos and negotiation", ("micros_rt.qos", "micros_rt.negotiation")),
     ("transports", ("micros_rt.transports",)),
     ("core", ("micros_rt.core",)),

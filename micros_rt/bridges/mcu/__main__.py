@@ -10,12 +10,10 @@ miss (``{"event": "deadline", ...}``) as JSON lines on stdout; ``--check`` only 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-import threading
-from typing import Any, List, Optional
+from typing import Any, List
 
-from ...cli import CommandError
+from ..program import emit, load, open_bridge, run_command, serve, split_ros_args, start_node
 
 __all__ = ["main"]
 
@@ -32,70 +30,39 @@ def _parser() -> argparse.ArgumentParser:
     return ap
 
 
-def _emit(event: str, **fields: Any) -> None:
-    sys.stdout.write(json.dumps({"event": event, **fields}, default=str) + "\n")
-    sys.stdout.flush()
-
-
 def main(argv: List[str]) -> int:
     """Run the bridge until Ctrl-C; see the module docstring."""
-    ros_args = [a for a in argv if ":=" in a]
-    args = _parser().parse_args([a for a in argv if ":=" not in a])
+    own, ros_args = split_ros_args(argv)
+    args = _parser().parse_args(own)
 
     from .config import load_config
     from ...transports.mcu.errors import McuConfigError
 
-    try:
-        config = load_config(args.config)
-    except McuConfigError as exc:
-        raise CommandError(str(exc)) from None
+    config = load(load_config, args.config, McuConfigError)
     if args.check:
         print(f"{args.config}: OK: {len(config.from_microcontroller)} streams from the board, "
               f"{len(config.to_microcontroller)} topics to it, {len(config.services_on_microcontroller)} services "
               f"on it, {len(config.services_for_microcontroller)} for it")
         return 0
 
-    import micros_rt
-
     from .bridge import McuBridge
 
-    micros_rt.init_node(args.name, argv=[sys.argv[0], *ros_args])
+    start_node(args.name, ros_args)
     deadline_cb = None
     stats_cb = None
     if args.json:
         def deadline_cb(info: Any) -> None:
-            _emit("deadline", topic=info.topic, deadline=info.deadline, silent_for=round(info.silent_for, 3),
-                  total=info.total_count)
+            emit("deadline", topic=info.topic, deadline=info.deadline, silent_for=round(info.silent_for, 3),
+                 total=info.total_count)
 
         def stats_cb(snapshot: Any) -> None:
-            _emit("stats", **snapshot)
-    try:
-        bridge = McuBridge(config, deadline_cb=deadline_cb, stats_cb=stats_cb)
-    except micros_rt.MicrosRtError as exc:
-        micros_rt.shutdown("mcu-bridge: cannot start")
-        raise CommandError(str(exc)) from None
-    stop = threading.Event()
-    with bridge:
-        if args.json:
-            _emit("ready", stats_topic=bridge.stats_topic)
-        try:
-            while not stop.is_set() and micros_rt.ok():
-                stop.wait(0.2)
-        except KeyboardInterrupt:
-            pass
-        if args.json:
-            _emit("stats", **bridge.snapshot())
-    micros_rt.shutdown("mcu-bridge stopped")
+            emit("stats", **snapshot)
+    bridge = open_bridge("mcu-bridge", lambda: McuBridge(config, deadline_cb=deadline_cb, stats_cb=stats_cb))
+    serve("mcu-bridge", bridge, period=0.2,
+          started=(lambda: emit("ready", stats_topic=bridge.stats_topic)) if args.json else None,
+          stopping=(lambda: emit("stats", **bridge.snapshot())) if args.json else None)
     return 0
 
 
-def _run(argv: Optional[List[str]] = None) -> int:
-    try:
-        return main(list(sys.argv[1:] if argv is None else argv))
-    except CommandError as exc:
-        print(f"micros-rt mcu-bridge: {exc}", file=sys.stderr)
-        return exc.code
-
-
 if __name__ == "__main__":
-    sys.exit(_run())
+    sys.exit(run_command("mcu-bridge"))

@@ -9,13 +9,15 @@ certificate that fails verification against the configured CA, or refused creden
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
 import threading
 from typing import List
 
+import micros_rt
+
 from ...cli import CommandError
+from ..program import emit, load, open_bridge, run_command, serve, split_ros_args, start_node
 
 __all__ = ["main"]
 
@@ -33,22 +35,17 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: List[str]) -> int:
     """Run the bridge until Ctrl-C; see the module docstring."""
-    ros_args = [a for a in argv if ":=" in a]
-    args = _parser().parse_args([a for a in argv if ":=" not in a])
+    own, ros_args = split_ros_args(argv)
+    args = _parser().parse_args(own)
 
     from ...transports.mqtt.client import MqttConfigError
     from .params import ParamsError, load_params
 
-    try:
-        params, warnings = load_params(args.params)
-    except ParamsError as exc:
-        raise CommandError(str(exc)) from None
-
-    import micros_rt
+    params, warnings = load(load_params, args.params, ParamsError)
 
     from .bridge import MqttBridge
 
-    micros_rt.init_node(args.name, argv=[sys.argv[0], *ros_args])
+    start_node(args.name, ros_args)
     log = logging.getLogger("rosout.micros_rt.mqtt")
     for w in warnings:
         log.warning(w)
@@ -60,37 +57,19 @@ def main(argv: List[str]) -> int:
         fatal.append(text)
         stop.set()
 
-    try:
-        bridge = MqttBridge(params, on_fatal=on_fatal)
-    except (MqttConfigError, micros_rt.TypeMappingError) as exc:
-        micros_rt.shutdown("mqtt-bridge: bad configuration")
-        raise CommandError(str(exc)) from None
+    bridge = open_bridge("mqtt-bridge", lambda: MqttBridge(params, on_fatal=on_fatal),
+                         errors=(MqttConfigError, micros_rt.TypeMappingError))
 
     def print_counters() -> None:
-        sys.stdout.write(json.dumps({"event": "counters", **bridge.counters()}) + "\n")
-        sys.stdout.flush()
+        emit("counters", **bridge.counters())
 
-    code = 0
-    with bridge:
-        bridge.start()
-        try:
-            while not stop.is_set() and micros_rt.ok():
-                stop.wait(args.print_counters or 0.5)
-                if args.print_counters:
-                    print_counters()
-        except KeyboardInterrupt:
-            pass
-        if fatal:
-            code = 1
-    if args.print_counters:
-        print_counters()
-    micros_rt.shutdown("mqtt-bridge stopped")
+    serve("mqtt-bridge", bridge, period=args.print_counters or 0.5, started=bridge.start, stop=stop,
+          tick=print_counters if args.print_counters else None,
+          closed=print_counters if args.print_counters else None)
     if fatal:
         raise CommandError(fatal[0])
-    return code
+    return 0
 
 
 if __name__ == "__main__":
-    from ...cli import main as _cli_main
-
-    sys.exit(_cli_main(["mqtt-bridge", *sys.argv[1:]]))   # the command's error handling: one line, no traceback
+    sys.exit(run_command("mqtt-bridge"))

@@ -15,13 +15,14 @@ priority's packets get their own DSCP); ``--one-process`` keeps them all in this
 from __future__ import annotations
 
 import argparse
-import os
-import json
 import sys
-import threading
-from typing import Any, Dict, List, Optional
+from typing import Any, List, Optional
 
+from ... import settings
 from ...cli import CommandError
+from ...exceptions import MicrosRtError
+from ...qos import QoSProfile
+from ..program import emit, load, open_bridge, run_command, serve, split_ros_args, start_node, write_line
 
 __all__ = ["main"]
 
@@ -46,30 +47,14 @@ def _parser() -> argparse.ArgumentParser:
     return ap
 
 
-_out_lock = threading.Lock()
-
-
-def _write(line: str) -> None:
-    with _out_lock:
-        sys.stdout.write(line + "\n")
-        sys.stdout.flush()
-
-
-def _emit(event: str, **fields: Any) -> None:
-    _write(json.dumps({"event": event, **fields}, default=str))
-
-
 def main(argv: List[str]) -> int:
     """Run the relay until Ctrl-C; see the module docstring."""
-    ros_args = [a for a in argv if ":=" in a]
-    args = _parser().parse_args([a for a in argv if ":=" not in a])
+    own, ros_args = split_ros_args(argv)
+    args = _parser().parse_args(own)
 
     from .config import RelayConfigError, load_config, send_buffer_for
 
-    try:
-        config = load_config(args.config)
-    except RelayConfigError as exc:
-        raise CommandError(str(exc)) from None
+    config = load(load_config, args.config, RelayConfigError)
     from micros_rt.qos import TransportPriority
 
     from .processes import Children, child_argv, export_priorities, family, process_name
@@ -85,21 +70,21 @@ def main(argv: List[str]) -> int:
         return 0
 
     import micros_rt
+    from micros_rt.extend import dds_backend
 
     from .relay import Relay, Share
 
+    start_node(args.name or f"relay_{config.graph}", ros_args,
+               qos_profile=_ros2_profile(config) if args.exports_of is None else None)
     # this process's exports: a child's one priority; the first process's, unless children carry them
     mine = [TransportPriority.parse(args.exports_of)] if args.exports_of is not None else ([] if split else priorities)
-    if config.link_bandwidth is not None and mine and max(mine) < TransportPriority.HIGH:
-        # only exports below HIGH cross the link from here: keep what this process queues in it short
-        # (before init_node starts DDS; a value the user set stays)
-        os.environ.setdefault("MICROS_RT_SEND_BUFFER", str(send_buffer_for(config.link_bandwidth)))
-    profile = _ros2_profile(config) if args.exports_of is None else None
-    try:
-        micros_rt.init_node(args.name or f"relay_{config.graph}", argv=[sys.argv[0], *ros_args], qos_profile=profile)
-    finally:
-        if profile is not None:
-            os.unlink(profile)
+    if config.link_bandwidth is not None and mine and max(mine) < TransportPriority.HIGH \
+            and settings.SEND_BUFFER.get() is None:
+        # only exports below HIGH cross the link from here: keep what this process queues in it short (a send
+        # buffer the user set stays)
+        backend = dds_backend()
+        if backend is not None:
+            backend.send_buffer_below_high = send_buffer_for(config.link_bandwidth)
     node = micros_rt.node_info().name
     if args.exports_of is not None:   # a child: one priority's exports, nothing else
         share = Share(exports=frozenset([int(TransportPriority.parse(args.exports_of))]), imports=False,
@@ -114,68 +99,40 @@ def main(argv: List[str]) -> int:
             lambda p: child_argv(args.config, process_name(node.rsplit("/", 1)[-1], p), node, p,
                                  poll_period=args.poll_period, json_events=args.json,
                                  stats_period=args.stats_period, ros_args=ros_args),
-            lambda p: process_name(node, p), _write).start()
-    try:
-        relay = Relay(config, poll_period=args.poll_period, event_cb=_emit if args.json else None, share=share)
-    except micros_rt.MicrosRtError as exc:
-        if children is not None:
-            children.close()
-        micros_rt.shutdown("relay: cannot start")
-        raise CommandError(str(exc)) from None
-    stop = threading.Event()
-    with relay:
-        if args.json:
-            _emit("ready", node=relay.node, graph=config.graph)
-        try:
-            while not stop.is_set() and micros_rt.ok():
-                stop.wait(args.stats_period if args.json else 0.5)
-                if args.json:
-                    _emit("stats", **(children.merge(relay.snapshot()) if children else relay.snapshot()))
-        except KeyboardInterrupt:
-            pass
+            lambda p: process_name(node, p), write_line).start()
+
+    def stats() -> None:
+        emit("stats", **(children.merge(relay.snapshot()) if children else relay.snapshot()))
+
+    def stopping() -> None:
         if children is not None:
             children.close()
         if args.json:
-            _emit("stats", **(children.merge(relay.snapshot()) if children else relay.snapshot()))
-    micros_rt.shutdown("relay stopped")
+            stats()
+
+    relay = open_bridge("relay", lambda: Relay(config, poll_period=args.poll_period,
+                                               event_cb=emit if args.json else None, share=share),
+                        cleanup=children.close if children is not None else None)
+    serve("relay", relay, period=args.stats_period if args.json else 0.5,
+          started=(lambda: emit("ready", node=relay.node, graph=config.graph)) if args.json else None,
+          tick=stats if args.json else None, stopping=stopping)
     return 0
 
 
-def _ros2_profile(config: Any) -> Optional[str]:
-    """A QoS profile (a temporary file, read by ``init_node``) that keeps the ROS 1 publications of ``ros2:``
-    imports off DDS: ROS 2 subscribers read the original publisher, not a second copy from the relay. The
-    profile ``MICROS_RT_QOS_PROFILE`` names, if any, is kept and extended."""
-    import tempfile
-
-    import yaml
-
-    import micros_rt
-
+def _ros2_profile(config: Any) -> Optional[QoSProfile]:
+    """The node's QoS profile when ``ros2:`` imports keep their ROS 1 publications off DDS: ROS 2 subscribers read
+    the original publisher, not a second copy from the relay. The profile ``MICROS_RT_QOS_PROFILE`` names, if
+    any, is kept and extended; None when there is nothing to add (``init_node`` reads that profile itself)."""
     names = sorted({e.ros1_name for e in config.ros2 if e.direction == "import"})
     if not names:
         return None
-    data: Dict[str, Any] = {}
-    given = os.environ.get("MICROS_RT_QOS_PROFILE") or ""
-    if given:
-        try:
-            micros_rt.QoSProfile.load(given)   # its errors name its own file and line
-            with open(given, encoding="utf-8") as f:
-                data = yaml.safe_load(f) or {}
-        except (OSError, yaml.YAMLError, micros_rt.MicrosRtError) as exc:
-            raise CommandError(f"{given} (MICROS_RT_QOS_PROFILE): {exc}") from None
-    publishers = data.setdefault("publishers", {}) or {}
-    data["publishers"] = publishers
-    for name in names:
-        entry = publishers.get(name) or {}
-        entry["transport_hints"] = ["TCPROS"]
-        publishers[name] = entry
-    fd, path = tempfile.mkstemp(prefix="micros_rt_relay_profile_", suffix=".yaml")
-    with os.fdopen(fd, "w") as f:
-        yaml.safe_dump(data, f)
-    return path
+    given = settings.QOS_PROFILE.get()
+    try:
+        profile = QoSProfile.load(given) if given else QoSProfile()
+    except MicrosRtError as exc:   # its errors name its own file and line
+        raise CommandError(f"{exc} (MICROS_RT_QOS_PROFILE)") from None
+    return profile.with_advertise_transports(names, ("TCPROS",))
 
 
 if __name__ == "__main__":
-    from ...cli import main as _cli_main
-
-    sys.exit(_cli_main(["relay", *sys.argv[1:]]))   # the command's error handling: one line, no traceback
+    sys.exit(run_command("relay"))

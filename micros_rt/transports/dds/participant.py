@@ -19,7 +19,8 @@ import threading
 from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 from ...cyclone import import_cyclonedds
-from ...exceptions import DDSUnavailableError
+from ... import settings
+from ...exceptions import DDSUnavailableError, SettingError
 from ..netif import interface_mtu_of, interface_of
 from ...log import nonblocking_logger
 from .batching import close_flusher
@@ -138,20 +139,16 @@ def lease_duration(env: Mapping[str, str] = os.environ) -> float:
     """The participant lease (seconds): ``MICROS_RT_LEASE_DURATION``, else, for a loopback node,
     :data:`DEFAULT_SHM_LEASE_DURATION` (:data:`DEFAULT_LEASE_DURATION` when ``MICROS_RT_DISABLE_SHM`` turns
     shared memory off), and :data:`DEFAULT_NETWORK_LEASE_DURATION` for one on a network interface."""
-    raw = env.get("MICROS_RT_LEASE_DURATION", "").strip()
-    if not raw:
-        if not _is_loopback(env):
-            return DEFAULT_NETWORK_LEASE_DURATION
-        shm_off = env.get("MICROS_RT_DISABLE_SHM", "") not in ("", "0")
-        return DEFAULT_LEASE_DURATION if shm_off else DEFAULT_SHM_LEASE_DURATION
     try:
-        value = float(raw)
-    except ValueError:
-        raise DDSUnavailableError(
-            f"MICROS_RT_LEASE_DURATION={raw!r} is not a number of seconds (expected 0.5..3600)") from None
-    if not 0.5 <= value <= 3600.0:
-        raise DDSUnavailableError(f"MICROS_RT_LEASE_DURATION={value:g} is out of range (expected 0.5..3600 seconds)")
-    return value
+        value = settings.LEASE_DURATION.get(env)
+        shm_off = settings.DISABLE_SHM.get(env)
+    except SettingError as exc:
+        raise DDSUnavailableError(str(exc)) from None
+    if value is not None:
+        return value
+    if not _is_loopback(env):
+        return DEFAULT_NETWORK_LEASE_DURATION
+    return DEFAULT_LEASE_DURATION if shm_off else DEFAULT_SHM_LEASE_DURATION
 
 
 #: On loopback (64 KiB MTU) samples travel in 63 KB fragments instead of Cyclone's 1,344 B, which suits
@@ -186,10 +183,6 @@ RECEIVE_BUFFER_CONFIG = '<SocketReceiveBufferSize max="8MB"/>'
 NETWORK_MAX_MESSAGE = 65500
 
 
-#: The kernel's smallest useful UDP send buffer micros_rt accepts (it doubles what is asked, see socket(7)).
-MIN_SEND_BUFFER = 4096
-
-
 def send_buffer(env: Mapping[str, str] = os.environ) -> Optional[int]:
     """The UDP send buffer Cyclone asks for (bytes): ``MICROS_RT_SEND_BUFFER``, else None (Cyclone's own).
 
@@ -200,17 +193,10 @@ def send_buffer(env: Mapping[str, str] = os.environ) -> Optional[int]:
     instead of 23/31 ms, the camera's frames unchanged; at 4 kB the camera starved). Never for a process
     with HIGH topics: they wait in the same socket.
     """
-    raw = env.get("MICROS_RT_SEND_BUFFER", "").strip()
-    if not raw:
-        return None
-    match = re.match(r"^([0-9]+)\s*(k|kb|kib|m|mb|mib)?$", raw, re.IGNORECASE)
-    if not match:
-        raise DDSUnavailableError(f"MICROS_RT_SEND_BUFFER={raw!r} is not a size in bytes (e.g. 16384 or 16kB)")
-    unit = (match.group(2) or "").lower()[:1]
-    size = int(match.group(1)) * {"": 1, "k": 1024, "m": 1024 * 1024}[unit]
-    if size < MIN_SEND_BUFFER:
-        raise DDSUnavailableError(f"MICROS_RT_SEND_BUFFER={raw!r} is too small (at least {MIN_SEND_BUFFER} bytes)")
-    return size
+    try:
+        return settings.SEND_BUFFER.get(env)
+    except SettingError as exc:
+        raise DDSUnavailableError(str(exc)) from None
 
 
 def interface_mtu(address: str) -> Optional[int]:
@@ -479,7 +465,7 @@ def get_participant() -> Optional[DDSParticipant]:
             return _participant
         if _failed is not None:
             return None
-        if os.environ.get("MICROS_RT_DISABLE_DDS", "") not in ("", "0"):
+        if settings.DISABLE_DDS.get():
             _failed = "MICROS_RT_DISABLE_DDS is set"
             _log.warning("micros_rt: DDS disabled (MICROS_RT_DISABLE_DDS is set); using TCPROS for every topic")
             return None

@@ -8,8 +8,8 @@ files: the first start of a type builds them, later starts read two small files'
 
 The key covers everything the bytes depend on: the DDS type name, the ROS message definition (md5 and
 full text), micros_rt's field mapping of it and the cyclonedds version. A file that does not read back
-exactly (size, checksum) is ignored and rebuilt. ``MICROS_RT_TYPE_CACHE=0`` turns the cache off; any
-other value names the directory to use.
+exactly (size, checksum) is ignored and rebuilt. ``MICROS_RT_TYPE_CACHE=0`` turns the cache off; a
+path names the directory to use (:data:`micros_rt.settings.TYPE_CACHE`).
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import threading
 from pathlib import Path
 from typing import Any, Mapping, Optional, Tuple
 
+from ... import settings
 from ...cyclone import import_cyclonedds
 from ...log import nonblocking_logger
 
@@ -35,11 +36,11 @@ _lock = threading.Lock()
 
 def cache_dir(env: Mapping[str, str] = os.environ) -> Optional[Path]:
     """Where type data is cached; None when ``MICROS_RT_TYPE_CACHE`` is 0/off/false."""
-    raw = env.get("MICROS_RT_TYPE_CACHE", "").strip()
-    if raw.lower() in ("0", "off", "false", "no"):
+    given = settings.TYPE_CACHE.get(env)
+    if given is False:
         return None
-    if raw:
-        return Path(raw)
+    if isinstance(given, Path):
+        return given
     base = env.get("XDG_CACHE_HOME") or str(Path(env.get("HOME") or Path.home()) / ".cache")
     return Path(base) / "micros_rt" / "xtypes"
 

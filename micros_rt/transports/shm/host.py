@@ -14,6 +14,8 @@ import stat
 import threading
 from typing import Any, Mapping, Optional, Set
 
+from ... import settings
+
 __all__ = ["ATTACH_TIMEOUT", "MIN_FREE_BYTES", "cleanup_dead_nodes", "close_node", "commit_segments", "host_identity",
            "iceoryx2", "iceoryx2_root", "permission_problem", "process_alive", "shm_free_bytes", "shm_node",
            "unavailable_reason", "wait_set", "warn_if_full", "why_failed"]
@@ -75,7 +77,7 @@ def unavailable_reason(env: Mapping[str, str] = os.environ) -> Optional[str]:
     """None when this process can use shared memory, else why not, in words (checked once; ``env``'s
     MICROS_RT_DISABLE_SHM each time)."""
     global _reason
-    if env.get("MICROS_RT_DISABLE_SHM", "") not in ("", "0"):
+    if settings.DISABLE_SHM.get(env):
         return "turned off by MICROS_RT_DISABLE_SHM"
     with _lock:
         if _reason == "":
