@@ -1,6 +1,6 @@
 """Every ``MICROS_RT_*`` environment variable micros_rt reads, in one table: its name, the values it takes, its
-default and what it does (:data:`SETTINGS`; docs/settings.md shows the same table, and a test keeps the two
-alike). No other module of the package reads a ``MICROS_RT_*`` variable from the environment: each asks its
+default and what it does (:data:`SETTINGS`; docs/troubleshooting.md#settings shows the same table, and a test
+keeps the two alike). No other module of the package reads a ``MICROS_RT_*`` variable from the environment: each asks its
 :class:`Setting` (``DISABLE_DDS.get()``, or ``.get(env)`` with a mapping of its own, as the tools and tests do).
 
 A value is parsed where it is read, each time (a test or a tool may change the environment between two reads),
@@ -178,7 +178,7 @@ MALLOC_KEEP_LARGE: Setting[bool] = Setting(
     "on: large blocks stay in the heap (glibc's mmap and trim thresholds raised), so big messages reuse memory",
     _switch, True)
 
-#: Every setting, in the order docs/settings.md lists them.
+#: Every setting, in the order docs/troubleshooting.md#settings lists them.
 SETTINGS: Tuple[Setting[Any], ...] = (QOS_PROFILE, DISABLE_DDS, DISABLE_SHM, ROS2, DISABLE_ROS2_SERVICES, ROS2_PYTHON,
                                       LEASE_DURATION, SEND_BUFFER, TYPE_CACHE, RECEIVE_PRIORITY, MALLOC_ARENA_MAX,
                                       MALLOC_KEEP_LARGE)

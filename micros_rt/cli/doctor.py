@@ -96,7 +96,7 @@ def check_settings(env: Mapping[str, str]) -> Check:
     try:
         settings.check(env)
     except SettingError as exc:
-        return Check("settings", FAIL, f"{exc}{also}", "correct or unset the variable named (docs/settings.md "
+        return Check("settings", FAIL, f"{exc}{also}", "correct or unset the variable named (docs/troubleshooting.md#settings "
                      "lists every MICROS_RT_* setting and its values)")
     given = [s.name for s in settings.SETTINGS if s.text(env)]
     return Check("settings", OK, (f"set: {', '.join(given)}" if given else "every MICROS_RT_* setting at its "
@@ -239,7 +239,7 @@ def check_dds_network(env: Mapping[str, str], interfaces: Optional[Mapping[str, 
         participant.cyclone_config(env)
         lease = participant.lease_duration(env)
     except DDSUnavailableError as exc:
-        if "MICROS_RT_SEND_BUFFER" in str(exc):
+        if settings.SEND_BUFFER.name in str(exc):
             return Check(name, FAIL, str(exc),
                          "unset MICROS_RT_SEND_BUFFER (Cyclone's own send buffer) or give it a size such as 16kB, "
                          "only in a process whose DDS topics are all below HIGH")
