@@ -11,6 +11,7 @@ A bridge's ``__main__`` keeps only what is its own: its options, its configurati
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 import threading
@@ -21,11 +22,23 @@ import micros_rt
 from ..cli import CommandError
 from ..qos import QoSProfile
 
-__all__ = ["emit", "load", "open_bridge", "run_command", "serve", "split_ros_args", "start_node", "write_line"]
+__all__ = ["emit", "load", "open_bridge", "parser", "run_command", "serve", "split_ros_args", "start_node", "write_line"]
 
 T = TypeVar("T")
 
 _out_lock = threading.Lock()
+
+
+def parser(command: str, description: str, *, config: str, config_help: str, name: Optional[str],
+           name_help: str = "", check: bool = True) -> argparse.ArgumentParser:
+    """The command's parser with what every bridge takes: its file (``config``, e.g. ``--config``, required), the
+    node's ``--name`` (default ``name``) and, with ``check``, ``--check`` (validate the file and exit)."""
+    ap = argparse.ArgumentParser(prog=f"micros-rt {command}", description=description)
+    ap.add_argument(config, required=True, help=config_help)
+    ap.add_argument("--name", default=name, help=f"ROS node name (default: {name_help or name})")
+    if check:
+        ap.add_argument("--check", action="store_true", help="validate the configuration and exit")
+    return ap
 
 
 def split_ros_args(argv: List[str]) -> Tuple[List[str], List[str]]:

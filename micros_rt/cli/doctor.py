@@ -245,9 +245,9 @@ def check_dds_network(env: Mapping[str, str], interfaces: Optional[Mapping[str, 
                          "only in a process whose DDS topics are all below HIGH")
         return Check(name, FAIL, str(exc), "unset MICROS_RT_LEASE_DURATION or give it 0.5..3600 seconds")
     sending = participant.send_buffer(env)
-    settings = f"lease {lease:g} s"
+    chosen = f"lease {lease:g} s"
     if sending is not None:
-        settings += f", UDP send buffer {sending} B (MICROS_RT_SEND_BUFFER)"
+        chosen += f", UDP send buffer {sending} B (MICROS_RT_SEND_BUFFER)"
     user = env.get("CYCLONEDDS_URI", "").strip()
     if user:
         try:
@@ -255,13 +255,13 @@ def check_dds_network(env: Mapping[str, str], interfaces: Optional[Mapping[str, 
         except ValueError as exc:
             return Check(name, FAIL, str(exc), "point CYCLONEDDS_URI at a readable Cyclone XML file, or unset it")
         return Check(name, OK, f"{network} (CYCLONEDDS_URI={user}, layered over micros_rt's defaults: "
-                     f"{settings})")
+                     f"{chosen})")
     address = participant._ros_address(env)
     if participant._is_loopback(env):
         return Check(name, OK, f"interface lo ({address} is loopback): multicast off, unicast discovery on "
-                     f"127.0.0.1, 63 KB fragments, {settings}")
+                     f"127.0.0.1, 63 KB fragments, {chosen}")
     iface = ifaces.get(address, "no interface holds it")
-    return Check(name, OK, f"interface {iface} ({address}): multicast on (Cyclone's default), {settings}")
+    return Check(name, OK, f"interface {iface} ({address}): multicast on (Cyclone's default), {chosen}")
 
 
 def check_domain(env: Mapping[str, str]) -> Check:

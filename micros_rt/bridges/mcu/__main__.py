@@ -13,20 +13,17 @@ import argparse
 import sys
 from typing import Any, List
 
-from ..program import emit, load, open_bridge, run_command, serve, split_ros_args, start_node
+from ..program import emit, load, open_bridge, parser, run_command, serve, split_ros_args, start_node
 
 __all__ = ["main"]
 
 
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="micros-rt mcu-bridge",
-                                 description="Bridge ROS topics and services to a microcontroller: MessagePack "
-                                             "datagrams over UDP, service calls over TCP (see docs/mcu.md).")
-    ap.add_argument("--config", required=True, help="bridge configuration (YAML)")
-    ap.add_argument("--name", default="mcu_bridge", help="ROS node name (default: mcu_bridge)")
+    ap = parser("mcu-bridge", "Bridge ROS topics and services to a microcontroller: MessagePack datagrams over UDP, "
+                              "service calls over TCP (see docs/mcu.md).",
+                config="--config", config_help="bridge configuration (YAML)", name="mcu_bridge")
     ap.add_argument("--json", action="store_true",
                     help="print counters and deadline misses as JSON lines on stdout")
-    ap.add_argument("--check", action="store_true", help="validate the configuration and exit")
     return ap
 
 

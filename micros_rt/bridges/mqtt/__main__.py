@@ -17,17 +17,15 @@ from typing import List
 import micros_rt
 
 from ...cli import CommandError
-from ..program import emit, load, open_bridge, run_command, serve, split_ros_args, start_node
+from ..program import emit, load, open_bridge, parser, run_command, serve, split_ros_args, start_node
 
 __all__ = ["main"]
 
 
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="micros-rt mqtt-bridge",
-                                 description="Bridge ROS topics and an MQTT broker, configured with mqtt_client's "
-                                             "parameter file (see docs/mqtt.md).")
-    ap.add_argument("--params", required=True, help="mqtt_client parameter file (YAML)")
-    ap.add_argument("--name", default="mqtt_client", help="ROS node name (default: mqtt_client)")
+    ap = parser("mqtt-bridge", "Bridge ROS topics and an MQTT broker, configured with mqtt_client's parameter file "
+                               "(see docs/mqtt.md).",
+                config="--params", config_help="mqtt_client parameter file (YAML)", name="mqtt_client", check=False)
     ap.add_argument("--print-counters", type=float, default=0.0, metavar="SECONDS",
                     help="print the counters as a JSON line on stdout every SECONDS and at exit (0: never)")
     return ap

@@ -22,22 +22,19 @@ from ... import settings
 from ...cli import CommandError
 from ...exceptions import MicrosRtError
 from ...qos import QoSProfile
-from ..program import emit, load, open_bridge, run_command, serve, split_ros_args, start_node, write_line
+from ..program import emit, load, open_bridge, parser, run_command, serve, split_ros_args, start_node, write_line
 
 __all__ = ["main"]
 
 
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="micros-rt relay",
-                                 description="Carry named topics between ROS graphs (robots with their own "
-                                             "masters) over DDS, with QoS per topic.")
-    ap.add_argument("--config", required=True, help="relay configuration (YAML)")
-    ap.add_argument("--name", default=None, help="ROS node name (default: relay_<graph>)")
+    ap = parser("relay", "Carry named topics between ROS graphs (robots with their own masters) over DDS, with QoS "
+                         "per topic.",
+                config="--config", config_help="relay configuration (YAML)", name=None, name_help="relay_<graph>")
     ap.add_argument("--json", action="store_true", help="print readiness and counters as JSON lines on stdout")
     ap.add_argument("--stats-period", type=float, default=5.0, help="seconds between counters with --json")
     ap.add_argument("--poll-period", type=float, default=1.0,
                     help="seconds between looks for new topics to export and exporters to import from")
-    ap.add_argument("--check", action="store_true", help="validate the configuration and exit")
     ap.add_argument("--one-process", action="store_true",
                     help="carry exports of every transport priority in this process (their DDS packets then all "
                          "carry the DSCP of the highest)")
