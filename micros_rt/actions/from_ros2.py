@@ -19,8 +19,8 @@ import actionlib  # type: ignore[import-untyped]
 import rospy
 
 from ..log import nonblocking_logger
-from ..services.gateway import (A_CANCEL, A_FORGET, A_SEND, G_ACCEPTED, G_FEEDBACK, G_RESULT, GONE, Ros2Gateway,
-                                Ros2Unavailable)
+from ..services.gateway import GONE, Ros2Gateway, Ros2Unavailable
+from ..services.helper_protocol import A_CANCEL, A_FORGET, A_SEND, G_ACCEPTED, G_FEEDBACK, G_RESULT
 from .mapping import ROS2, ActionMapping, action_mapping, status_name
 
 __all__ = ["ActionFromRos2", "FEEDBACK_GRACE"]

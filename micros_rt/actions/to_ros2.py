@@ -19,7 +19,8 @@ import rospy
 from actionlib_msgs.msg import GoalStatusArray  # type: ignore[import-untyped]
 
 from ..log import nonblocking_logger
-from ..services.gateway import A_DONE, A_FEEDBACK, A_VERDICT, G_CANCEL, G_GOAL, GONE, Ros2Gateway, Ros2Unavailable
+from ..services.gateway import GONE, Ros2Gateway, Ros2Unavailable
+from ..services.helper_protocol import A_DONE, A_FEEDBACK, A_VERDICT, G_CANCEL, G_GOAL
 from .mapping import ROS1, ActionMapping, action_mapping, ros1_to_ros2_status, status_name
 
 __all__ = ["ActionToRos2", "ACCEPT_TIMEOUT"]

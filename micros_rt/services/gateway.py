@@ -17,7 +17,6 @@ import json
 import os
 import re
 import socket
-import struct
 import subprocess
 import tempfile
 import threading
@@ -28,25 +27,20 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 from .. import settings
 from ..exceptions import MicrosRtError
 from ..log import nonblocking_logger
+from .helper_protocol import (A_CANCEL, A_CLIENT, A_DONE, A_FEEDBACK, A_FORGET, A_READY, A_SEND, A_SERVE, A_UNSERVE,
+                              A_VERDICT, ADVERTISE, CALL, CANCEL, CLIENT, ERROR, FAIL, G_ACCEPTED, G_CANCEL, G_FEEDBACK,
+                              G_GOAL, G_RESULT, HEAD, HELLO, READY, REQUEST, RESPONSE, RESULT, SERVICE_NAMES, STATUS,
+                              UNADVERTISE)
 from ..transports.dds.participant import HELPER_ENCLAVE, _is_loopback
 
 __all__ = ["Ros2Gateway", "Ros2Unavailable", "gateway", "close_gateway", "ros2_python"]
 
 _log = nonblocking_logger("rosout.micros_rt.services")
 
-# the helper's frame codes (ros2_helper.py)
-ADVERTISE, UNADVERTISE, CLIENT, READY, CALL, CANCEL, RESPONSE, FAIL = 1, 2, 3, 4, 5, 6, 7, 8
-STATUS, RESULT, ERROR, REQUEST, HELLO = 20, 21, 22, 23, 24
-# actions (micros_rt.actions), micros_rt -> helper: serve a ROS 1 action to ROS 2 (A_SERVE .. A_DONE), reach a
-# ROS 2 action server (A_CLIENT .. A_FORGET)
-A_SERVE, A_UNSERVE, A_VERDICT, A_FEEDBACK, A_DONE, A_CLIENT, A_SEND, A_CANCEL, A_READY, A_FORGET = range(9, 19)
-SERVICE_NAMES = 19
-# helper -> micros_rt, each with {"name": action}: a ROS 2 client's goal and cancel; a ROS 2 server's answers
-G_GOAL, G_CANCEL, G_ACCEPTED, G_FEEDBACK, G_RESULT = range(25, 30)
 #: what an action sink gets when the helper is gone: ``sink(GONE, 0, {"error": words}, b"")``
 GONE = 0
 ACTION_EVENTS = frozenset((G_GOAL, G_CANCEL, G_ACCEPTED, G_FEEDBACK, G_RESULT))
-_HEAD = struct.Struct("<IBIH")
+_HEAD = HEAD
 
 HELPER = Path(__file__).resolve().parent / "ros2_helper.py"
 #: seconds the helper may take to import rclpy and start its node

@@ -3,7 +3,8 @@
 Run by :mod:`micros_rt.services.gateway` with the Python of a ROS 2 installation (rclpy with its RMW, Fast DDS
 in Jazzy), never inside the rospy process: ``python ros2_helper.py FD NODE_NAME``. ``FD`` is one end of a Unix
 socket pair whose other end is the micros_rt process; when that end closes (the process exits or dies), the
-helper exits. It imports nothing of micros_rt or ROS 1.
+helper exits. It imports nothing of micros_rt or ROS 1 but ``helper_protocol.py`` beside it (standard library
+only). Imported as part of the package (beside rospy, without rclpy) it defines its names and runs nothing.
 
 Why a helper and not Cyclone in the micros_rt process (docs/services.md): ROS 2's Fast DDS RMW identifies a
 request by its RTPS sample identity and answers with a ``related_sample_identity`` inline QoS parameter, and a
@@ -11,8 +12,7 @@ Fast DDS client drops every reply without one that names it (rmw_fastrtps_shared
 ``__rmw_take_response``). Cyclone DDS (11.0.1) writes no such parameter and passes none it receives to the
 application, so a Cyclone participant can neither answer a Fast DDS client nor tell which reply is its own.
 
-Frames, both ways: ``<I`` length of the rest, ``<BIH`` op, call id, meta length, then the meta (UTF-8 JSON)
-and a binary body (a serialized ROS 2 message, CDR with its encapsulation header).
+Frames, both ways: :mod:`micros_rt.services.helper_protocol` (the one table of op codes both sides import).
 
 Actions (:mod:`micros_rt.actions`) live on a second node, ``<node>_actions``, spun by a multi-threaded executor of
 their own: an action server's execute callback holds a thread for its goal's life (rclpy 7's executor polls a
@@ -27,25 +27,32 @@ import json
 import os
 import queue
 import socket
-import struct
 import sys
 import threading
 import time
 from collections import deque
 from typing import Any, Deque, Dict, List, Optional, Tuple
 
-import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.serialization import deserialize_message, serialize_message
+try:
+    import rclpy
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.serialization import deserialize_message, serialize_message
+except ImportError:
+    if not __package__:
+        raise  # run as the helper: rclpy is what it is for
+    # imported as micros_rt.services.ros2_helper beside rospy (the package's doctests, the protocol's test): its
+    # names and op codes, nothing that runs
 
-# micros_rt -> helper
-ADVERTISE, UNADVERTISE, CLIENT, READY, CALL, CANCEL, RESPONSE, FAIL = 1, 2, 3, 4, 5, 6, 7, 8
-A_SERVE, A_UNSERVE, A_VERDICT, A_FEEDBACK, A_DONE, A_CLIENT, A_SEND, A_CANCEL, A_READY, A_FORGET = range(9, 19)
-#: the names of the services ROS 2 servers offer now (DDS discovery), whatever their type
-SERVICE_NAMES = 19
-# helper -> micros_rt
-STATUS, RESULT, ERROR, REQUEST, HELLO = 20, 21, 22, 23, 24
-G_GOAL, G_CANCEL, G_ACCEPTED, G_FEEDBACK, G_RESULT = range(25, 30)
+if __package__:
+    from .helper_protocol import (A_CANCEL, A_CLIENT, A_DONE, A_FEEDBACK, A_FORGET, A_READY, A_SEND, A_SERVE,
+                                  A_UNSERVE, A_VERDICT, ADVERTISE, CALL, CANCEL, CLIENT, ERROR, FAIL, G_ACCEPTED,
+                                  G_CANCEL, G_FEEDBACK, G_GOAL, G_RESULT, HEAD, HELLO, READY, REQUEST, RESPONSE, RESULT,
+                                  SERVICE_NAMES, STATUS, UNADVERTISE)
+else:  # run as a script by the ROS 2 interpreter: its own directory is sys.path[0]
+    from helper_protocol import (A_CANCEL, A_CLIENT, A_DONE, A_FEEDBACK, A_FORGET,  # type: ignore[import-not-found,no-redef]
+                                 A_READY, A_SEND, A_SERVE, A_UNSERVE, A_VERDICT, ADVERTISE, CALL, CANCEL, CLIENT, ERROR,
+                                 FAIL, G_ACCEPTED, G_CANCEL, G_FEEDBACK, G_GOAL, G_RESULT, HEAD, HELLO, READY, REQUEST,
+                                 RESPONSE, RESULT, SERVICE_NAMES, STATUS, UNADVERTISE)
 #: ops about goals in flight: handled on the socket's thread (setting up and tearing down go through the executor)
 _GOAL_OPS = (A_VERDICT, A_FEEDBACK, A_DONE, A_SEND, A_CANCEL, A_FORGET)
 #: action_msgs/GoalStatus codes
@@ -61,7 +68,7 @@ FEEDBACK_GRACE = 0.02
 #: is 10): a burst of feedback, or an executor behind under load, does not overwrite feedback not yet taken
 FEEDBACK_DEPTH = 1000
 
-_HEAD = struct.Struct("<IBIH")
+_HEAD = HEAD
 #: how often pending calls are checked for a server that went away
 _WATCH_PERIOD = 0.2
 
