@@ -4,12 +4,12 @@ A short-lived Cyclone participant, started with micros_rt's own configuration
 (:func:`micros_rt.transports.dds.participant.cyclone_config`: loopback only when ``ROS_IP``/``ROS_HOSTNAME`` is
 loopback, ``CYCLONEDDS_URI`` when set) on ``ROS_DOMAIN_ID``, listens for a bounded time and reads:
 
-- Cyclone's built-in DCPSPublication/DCPSSubscription topics: every reader and writer of the domain, its DDS
+- DDS discovery (:mod:`micros_rt.transports.dds.discovery`, the one reader of it): every reader and writer of the domain, its DDS
   topic and type names and its USER_DATA, where micros_rt endpoints carry their tag (``micros_rt;graph=...;
   node=...;``, :func:`micros_rt.transports.dds.endpoints.parse_user_data`). Endpoints without it belong to
   other DDS programs: ROS 2 nodes.
 - ROS 2's ``ros_discovery_info`` topic (``rmw_dds_common/msg/ParticipantEntitiesInfo``, the type micros_rt
-  announces its own nodes with, :mod:`micros_rt.transports.dds.ros2_graph`): per participant, its nodes and the
+  announces its own nodes with, :mod:`micros_rt.transports.dds.ros2_graph`; read by the same module): per participant, its nodes and the
   GIDs of their readers and writers. That is how ``ros2 node list`` names nodes, and how this module does.
 
 The participant announces nothing (no ``ros_discovery_info`` of its own), so ROS 2 tools do not list it as a node.
@@ -19,9 +19,9 @@ from __future__ import annotations
 
 import os
 import time
-import uuid
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Mapping, Optional, Set
+from typing import Dict, List, Mapping, Optional, Set
+
 from .. import settings
 from ..cyclone import import_cyclonedds
 
@@ -94,10 +94,6 @@ def ros2_type_name(dds_type: str) -> str:
     return dds_type
 
 
-def _guid(data: Any) -> str:
-    return str(uuid.UUID(bytes=bytes(bytearray(int(b) & 0xFF for b in data))))
-
-
 def discover(wait: float = DEFAULT_WAIT, env: Mapping[str, str] = os.environ, *, names: bool = True,
              names_wait: float = NAMES_WAIT) -> DdsView:
     """Join ``ROS_DOMAIN_ID`` with micros_rt's Cyclone configuration for ``wait`` seconds and return what it
@@ -108,84 +104,47 @@ def discover(wait: float = DEFAULT_WAIT, env: Mapping[str, str] = os.environ, *,
         return DdsView(False, "DDS is disabled (MICROS_RT_DISABLE_DDS is set)")
     try:
         import_cyclonedds()
-        from cyclonedds.builtin import (BuiltinDataReader, BuiltinTopicDcpsParticipant,
-                                        BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription)
-        from cyclonedds.core import DDSException, InstanceState, Policy, Qos, ReadCondition, SampleState, ViewState
-        from cyclonedds.sub import DataReader
-        from cyclonedds.topic import Topic
-
         from ..exceptions import MicrosRtError
-        from ..transports.dds.endpoints import parse_user_data
+        from ..transports.dds.discovery import Discovery, NodeAnnouncements
         from ..transports.dds.participant import DDSParticipant, cyclone_config, domain_id_from_env
-        from ..transports.dds.ros2_graph import TOPIC, ParticipantEntitiesInfo
     except ImportError as exc:
         return DdsView(False, f"Cyclone DDS cannot be imported ({exc}); run scripts/setup.sh")
     try:
         domain = domain_id_from_env(env)
         participant = DDSParticipant(domain, cyclone_config(env))
-    except (MicrosRtError, DDSException, OSError) as exc:
+    except (MicrosRtError, OSError) as exc:
         return DdsView(False, f"{exc}. Check ROS_DOMAIN_ID, CYCLONEDDS_URI and ROS_IP (micros-rt doctor checks them)")
     view = DdsView(True, domain=domain, wait=wait)
     try:
-        dp = participant.dp
-        alive = SampleState.Any | ViewState.Any | InstanceState.Alive
-        builtin = {}
-        for key, topic in (("participants", BuiltinTopicDcpsParticipant), ("writers", BuiltinTopicDcpsPublication),
-                           ("readers", BuiltinTopicDcpsSubscription)):
-            reader = BuiltinDataReader(dp, topic)
-            builtin[key] = (reader, ReadCondition(reader, alive))
-        # rmw's QoS for the topic (reliable, transient local: each writer's last sample reaches a late reader);
-        # all samples kept here, since the topic has no key and every participant writes to the one instance
-        qos = Qos(Policy.Reliability.Reliable(max_blocking_time=0), Policy.Durability.TransientLocal,
-                  Policy.History.KeepAll)
-        info_reader = DataReader(dp, Topic(dp, TOPIC, ParticipantEntitiesInfo, qos=qos), qos=qos)
-        own = str(dp.guid)
-        latest: Dict[str, Any] = {}  # participant GID -> its last announcement (samples come in arrival order)
-
-        def take_announcements() -> None:
-            for sample in info_reader.take(N=10000):
-                info = getattr(sample, "sample_info", None)
-                if info is None or info.valid_data:
-                    latest[_guid(sample.gid.data)] = sample
+        discovery = Discovery(participant.dp, kinds=("participants", "writers", "readers"))
+        announcements = NodeAnnouncements(participant.dp)
+        own = participant.guid
 
         start = time.monotonic()
         time.sleep(max(0.0, wait))
         deadline = start + wait + names_wait
         while True:
-            take_announcements()
+            announcements.take()
             if not names:
                 break
-            reader, cond = builtin["writers"]
-            announcing = {str(ep.participant_key) for ep in reader.read(N=10000, condition=cond)
-                          if ep.topic_name == TOPIC and str(ep.participant_key) != own}
-            view.unnamed = announcing - set(latest)
+            announcing = {e.participant for e in discovery.writers(announcements.topic) if e.participant != own}
+            view.unnamed = announcing - set(announcements.announced())
             if not view.unnamed or time.monotonic() >= deadline:
                 break
             time.sleep(0.1)
         view.wait = round(time.monotonic() - start, 2)
 
-        reader, cond = builtin["participants"]
-        participants = {str(p.key) for p in reader.read(N=10000, condition=cond)}
-        view.participants = participants - {own}
-        for key, is_writer in (("writers", True), ("readers", False)):
-            reader, cond = builtin[key]
-            for ep in reader.read(N=10000, condition=cond):
-                if str(ep.participant_key) == own:
+        view.participants = {p.guid for p in discovery.participants()} - {own}
+        for found, is_writer in ((discovery.writers(), True), (discovery.readers(), False)):
+            for ep in found:
+                if ep.participant == own:
                     continue
-                try:
-                    user_data = ep.qos[Policy.Userdata].data
-                except (KeyError, AttributeError, TypeError):
-                    user_data = None
-                view.endpoints.append(DdsEndpoint(str(ep.key), str(ep.participant_key), str(ep.topic_name),
-                                                  str(ep.type_name), is_writer, parse_user_data(user_data)))
-        for gid, sample in sorted(latest.items()):
-            if gid not in view.participants:
+                view.endpoints.append(DdsEndpoint(ep.guid, ep.participant, ep.topic, ep.type_name, is_writer, ep.tag))
+        for node in announcements.nodes():
+            if node.participant not in view.participants:
                 continue  # a participant that has left since it wrote
-            for node in sample.node_entities_info_seq:
-                view.nodes.append(Ros2Node(str(node.node_namespace), str(node.node_name), gid,
-                                           [_guid(g.data) for g in node.reader_gid_seq],
-                                           [_guid(g.data) for g in node.writer_gid_seq]))
-    except DDSException as exc:
+            view.nodes.append(Ros2Node(node.namespace, node.name, node.participant, node.readers, node.writers))
+    except MicrosRtError as exc:
         return DdsView(False, f"Cyclone DDS failed while reading discovery on domain {domain} ({exc})")
     finally:
         participant.close()

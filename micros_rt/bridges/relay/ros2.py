@@ -47,7 +47,6 @@ from micros_rt.log import nonblocking_logger
 from micros_rt.qos import SubscribeQoSOptions
 from micros_rt.transports.base import EndpointSpec, PushReader, TransportWriter
 
-from ...cyclone import import_cyclonedds
 from .config import ExportRule, Ros2Entry
 from .msgtypes import TypeLearningError, class_from_definition, installed_class, publisher_header
 from .services import ServiceCallError, call_service
@@ -100,56 +99,19 @@ class DiscoveredEndpoint(NamedTuple):
 
 class Ros2Directory:
     """The DDS writers and readers this participant has discovered, foreign ones included, with their type names
-    and QoS (Cyclone's built-in DCPSPublication and DCPSSubscription topics, read, never taken)."""
+    and QoS: the relay's :class:`~micros_rt.transports.dds.feed.WriterDirectory`'s ``discovery`` (the one reader of
+    DDS discovery, :mod:`micros_rt.transports.dds.discovery`)."""
 
-    def __init__(self, backend: Any, tagged: Any) -> None:
-        import_cyclonedds()
-        from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription
-        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState
-
-        dp = backend.participant.dp
-        self._tagged = tagged   # the relay's WriterDirectory: micros_rt writers' tags
-        self._lock = threading.Lock()
-        self._readers = {}
-        for kind, topic in (("writers", BuiltinTopicDcpsPublication), ("readers", BuiltinTopicDcpsSubscription)):
-            reader = BuiltinDataReader(dp, topic)
-            self._readers[kind] = (reader, ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Alive))
+    def __init__(self, tagged: Any) -> None:
+        self._discovery = tagged.discovery
 
     def endpoints(self, kind: str, dds_topic: str) -> List[DiscoveredEndpoint]:
         """Writers (``kind="writers"``) or readers of ``dds_topic`` alive now."""
-        import_cyclonedds()
-        from cyclonedds.core import DDSException
-        from cyclonedds.qos import Policy
-
-        tags: Dict[str, Dict[str, str]] = {}
-        if kind == "writers":
-            tags = {w.guid: w.tag for w in self._tagged.writers(dds_topic)}
-        reader, alive = self._readers[kind]
-        with self._lock:
-            try:
-                found = reader.read(N=4096, condition=alive)
-            except DDSException as exc:
-                _log.debug("micros_rt: relay: reading DDS discovery: %s", exc)
-                return []
-        out: List[DiscoveredEndpoint] = []
-        for endpoint in found:
-            if getattr(endpoint, "topic_name", None) != dds_topic:
-                continue
-            qos = endpoint.qos
-            tag = tags.get(str(endpoint.key))   # readers: only ROS 2 servers' are asked for, never tagged
-            durability = _policy_name(qos, Policy.Durability)
-            reliability = _policy_name(qos, Policy.Reliability)
-            out.append(DiscoveredEndpoint(str(endpoint.key), str(endpoint.participant_key), str(endpoint.type_name),
-                                          tag, durability in ("TransientLocal", "Transient", "Persistent"),
-                                          reliability == "BestEffort"))
-        return out
-
-
-def _policy_name(qos: Any, policy: Any) -> str:
-    try:
-        return type(qos[policy]).__name__.rpartition(".")[2]
-    except (KeyError, TypeError):
-        return ""
+        writers = kind == "writers"
+        found = self._discovery.writers(dds_topic) if writers else self._discovery.readers(dds_topic)
+        # readers: only ROS 2 servers' are asked for, never tagged
+        return [DiscoveredEndpoint(e.guid, e.participant, e.type_name, e.tag if writers else None, e.transient_local,
+                                   e.best_effort) for e in found]
 
 
 # -- topics ------------------------------------------------------------------------------------------------------
@@ -428,7 +390,7 @@ class Ros2Side:
     def __init__(self, relay: Any, entries: Tuple[Ros2Entry, ...]) -> None:
         self.relay = relay
         self.entries = entries
-        self.directory = Ros2Directory(relay.backend, relay._directory)
+        self.directory = Ros2Directory(relay._directory)
         self.carried: Dict[str, Any] = {}   # key(entry) -> what carries it
         self._lock = threading.Lock()
         self._gateway: Any = None

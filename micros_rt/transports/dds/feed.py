@@ -9,8 +9,8 @@ keeps those of accepted writers, decodes them and puts them into a :class:`~micr
 which never blocks that thread (a full queue drops its oldest, counted). The subscription it feeds
 (``NodeHandle.subscribe_reader``) does the rest, as for any transport.
 
-:class:`WriterDirectory` lists the writers the participant has discovered on a DDS topic with their tags,
-from Cyclone's built-in DCPSPublication topic: how an importing relay learns the type of a topic it has
+:class:`WriterDirectory` lists the writers the participant has discovered on a DDS topic with their tags
+(:mod:`micros_rt.transports.dds.discovery`, the one reader of DDS discovery): how an importing relay learns the type of a topic it has
 never seen (the exporter's tag names it).
 """
 
@@ -18,12 +18,11 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any, Callable, Dict, FrozenSet, List, NamedTuple, Optional, Tuple
+from typing import Any, Callable, Dict, FrozenSet, List, NamedTuple, Optional
 
 from ...cyclone import import_cyclonedds
 import_cyclonedds()
-from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription
-from cyclonedds.core import DDSException, InstanceState, Listener, ReadCondition, SampleState, ViewState
+from cyclonedds.core import DDSException, Listener
 from cyclonedds.qos import Policy, Qos
 
 from ..base import EndpointSpec, PushReader
@@ -31,7 +30,8 @@ from ...log import nonblocking_logger
 from ...qos import SubscribeQoSOptions, describe_incompatible_policy, plain_reader_qos, reader_qos
 from ...ratelimit import RateLimitedLog
 from .backend import DDSBackend
-from .endpoints import DDSReader, make_user_data, parse_user_data
+from .discovery import Discovery
+from .endpoints import DDSReader, make_user_data
 from .types import dds_topic_name, dds_type_for
 
 __all__ = ["DDSFeed", "DiscoveredWriter", "WriterDirectory"]
@@ -133,39 +133,22 @@ class DiscoveredWriter(NamedTuple):
 
 
 class WriterDirectory:
-    """The DDS writers this participant has discovered, with their micros_rt tags (Cyclone's built-in
-    DCPSPublication topic, read, never taken: every call sees all writers alive), and on demand whether a
-    reader is alive (DCPSSubscription)."""
+    """The DDS writers this participant has discovered, with their micros_rt tags, and on demand whether a reader
+    is alive (:class:`~micros_rt.transports.dds.discovery.Discovery`, which :attr:`discovery` is, for the rest)."""
 
     def __init__(self, backend: DDSBackend) -> None:
-        self._dp = backend.participant.dp
-        self._reader = BuiltinDataReader(self._dp, BuiltinTopicDcpsPublication)
-        # writers alive now: a deleted writer's sample stays in the reader, its instance disposed
-        self._alive = ReadCondition(self._reader, SampleState.Any | ViewState.Any | InstanceState.Alive)
+        self.discovery = Discovery(backend.participant.dp, kinds=("writers",))
         self._lock = threading.Lock()
-        self._subscriptions: Optional[Tuple[BuiltinDataReader, ReadCondition]] = None
         self._readers: FrozenSet[str] = frozenset()
         self._readers_at = -1.0
 
     def writers(self, dds_topic: str) -> List[DiscoveredWriter]:
         """The micros_rt writers of ``dds_topic`` known now (foreign writers have no tag and are left out)."""
-        with self._lock:
-            try:
-                found = self._reader.read(N=1024, condition=self._alive)
-            except DDSException as exc:
-                _log.debug("micros_rt: reading DCPSPublication: %s", exc)
-                return []
         out: List[DiscoveredWriter] = []
-        for endpoint in found:
-            if getattr(endpoint, "topic_name", None) != dds_topic:
-                continue
-            try:
-                user_data = endpoint.qos[Policy.Userdata].data
-            except (KeyError, AttributeError, TypeError):
-                continue
-            tag = parse_user_data(user_data)
+        for endpoint in self.discovery.writers(dds_topic):
+            tag = endpoint.tag
             if tag is not None:
-                out.append(DiscoveredWriter(str(endpoint.key), str(endpoint.participant_key), tag))
+                out.append(DiscoveredWriter(endpoint.guid, endpoint.participant, tag))
         return out
 
     def tags(self, dds_topic: str) -> List[Dict[str, str]]:
@@ -177,14 +160,6 @@ class WriterDirectory:
         now = time.monotonic()
         with self._lock:
             if now - self._readers_at > 0.2:
-                if self._subscriptions is None:
-                    reader = BuiltinDataReader(self._dp, BuiltinTopicDcpsSubscription)
-                    self._subscriptions = (reader, ReadCondition(
-                        reader, SampleState.Any | ViewState.Any | InstanceState.Alive))
-                reader, alive = self._subscriptions
-                try:
-                    self._readers = frozenset(str(e.key) for e in reader.read(N=4096, condition=alive))
-                except DDSException as exc:
-                    _log.debug("micros_rt: reading DCPSSubscription: %s", exc)
+                self._readers = frozenset(e.guid for e in self.discovery.readers())
                 self._readers_at = now
             return guid in self._readers

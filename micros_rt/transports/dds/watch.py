@@ -4,8 +4,8 @@ program), not before.
 
 One node per host (network namespace), Unix user and DDS domain watches the domain for all of them: the one
 that holds the lock file :attr:`Ros2Watch.lock_path` (``flock``; the kernel lets it go when the process dies, and
-the next node to try takes over). The watcher starts its process's participant, with no topics, and reads
-Cyclone's built-in DCPSParticipant topic. micros_rt participants say so in their user data
+the next node to try takes over). The watcher starts its process's participant, with no topics, and reads the
+participants it discovers (:mod:`micros_rt.transports.dds.discovery`). micros_rt participants say so in their user data
 (:data:`PARTICIPANT_USER_DATA`); any other participant alive means ROS 2 is there, and the watcher creates the
 marker file :attr:`Ros2Watch.marker` (the foreign participants' GUIDs in it) and removes it once they are gone.
 Every node looks for the marker on its housekeeping tick (0.5 s) and then makes its writers and readers, as a
@@ -22,10 +22,11 @@ import fcntl
 import os
 import tempfile
 import time
-from typing import Any, Callable, FrozenSet, Optional, Set
+from typing import Callable, FrozenSet, Optional, Set
 
-from ...cyclone import import_cyclonedds
+from ...exceptions import TransportError
 from ...log import nonblocking_logger
+from .discovery import Discovery
 from .participant import HELPER_ENCLAVE, PARTICIPANT_USER_DATA, DDSParticipant
 
 __all__ = ["PARTICIPANT_USER_DATA", "Ros2Watch", "is_micros_rt_participant", "watch_paths", "watcher_pid"]
@@ -93,8 +94,7 @@ class Ros2Watch:
         self.lock_path, self.marker = watch_paths(domain)
         self._participant = participant
         self._fd: Optional[int] = None
-        self._reader: Any = None
-        self._alive: Any = None
+        self._reader: Optional[Discovery] = None
         self._since = 0.0              # when this node became the watcher
         self._foreign: FrozenSet[str] = frozenset()
         self._helpers: Set[str] = set()  # micros_rt's own rclpy helpers seen (said once each)
@@ -136,38 +136,30 @@ class Ros2Watch:
             self.failed = True  # DDS cannot start here: the participant said why, once
             self._release()
             return
-        import_cyclonedds()
-        from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsParticipant
-        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState
-
-        self._reader = BuiltinDataReader(participant.dp, BuiltinTopicDcpsParticipant)
-        self._alive = ReadCondition(self._reader, SampleState.Any | ViewState.Any | InstanceState.Alive)
+        try:
+            self._reader = Discovery(participant.dp, kinds=("participants",))
+        except TransportError as exc:
+            self.failed = True
+            self._release()
+            _log.warning("micros_rt: cannot watch DDS domain %d for ROS 2 nodes (%s)", self.domain, exc)
+            return
         self._since = time.monotonic()
         _log.info("micros_rt: this node watches DDS domain %d for ROS 2 nodes on this host (%s)", self.domain,
                   self.lock_path)
 
     def _look(self) -> None:
-        import_cyclonedds()
-        from cyclonedds.core import DDSException
-        from cyclonedds.qos import Policy
-
-        try:
-            found = self._reader.read(N=4096, condition=self._alive)
-        except DDSException as exc:
-            _log.debug("micros_rt: reading DCPSParticipant: %s", exc)
+        reader = self._reader
+        if reader is None:
             return
         foreign = set()
-        for p in found:
-            try:
-                user_data = p.qos[Policy.Userdata].data
-            except (KeyError, AttributeError, TypeError):
-                user_data = None
+        for p in reader.participants():
+            user_data = p.user_data
             if not is_micros_rt_participant(user_data):
-                foreign.add(str(p.key))
-            elif bytes(user_data or b"").startswith(_HELPER_USER_DATA) and str(p.key) not in self._helpers:
-                self._helpers.add(str(p.key))
+                foreign.add(p.guid)
+            elif bytes(user_data or b"").startswith(_HELPER_USER_DATA) and p.guid not in self._helpers:
+                self._helpers.add(p.guid)
                 _log.info("micros_rt: a micros_rt ROS 2 helper joined DDS domain %d (%s); it is not a ROS 2 node, "
-                          "and this host's topics stay off DDS for it", self.domain, p.key)
+                          "and this host's topics stay off DDS for it", self.domain, p.guid)
         if foreign != self._foreign:
             if foreign - self._foreign:
                 _log.info("micros_rt: %d DDS participant(s) that are not micros_rt on domain %d (ROS 2 nodes or "
@@ -211,5 +203,5 @@ class Ros2Watch:
 
     def close(self) -> None:
         """Stop watching (at shutdown; the next node to try takes over). The marker stays for the next watcher."""
-        self._reader = self._alive = None  # deleted with the participant
+        self._reader = None  # its readers are deleted with the participant
         self._release()
