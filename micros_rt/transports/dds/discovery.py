@@ -90,6 +90,7 @@ class Discovery:
     def _reader(self, kind: str) -> Tuple[Any, Any]:
         found = self._readers.get(kind)
         if found is None:
+            import_cyclonedds()
             from cyclonedds.builtin import (BuiltinDataReader, BuiltinTopicDcpsParticipant,
                                             BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription)
             from cyclonedds.core import DDSException, InstanceState, ReadCondition, SampleState, ViewState
@@ -106,6 +107,7 @@ class Discovery:
         return found
 
     def _read(self, kind: str) -> List[Any]:
+        import_cyclonedds()
         from cyclonedds.core import DDSException
 
         with self._lock:
@@ -118,6 +120,7 @@ class Discovery:
 
     def participants(self) -> List[DiscoveredParticipant]:
         """The participants alive on the domain (this one included)."""
+        import_cyclonedds()
         from cyclonedds.qos import Policy
 
         return [DiscoveredParticipant(str(p.key), _user_data(p.qos, Policy)) for p in self._read("participants")]
@@ -131,6 +134,7 @@ class Discovery:
         return self._endpoints("readers", dds_topic)
 
     def _endpoints(self, kind: str, dds_topic: Optional[str]) -> List[DiscoveredEndpoint]:
+        import_cyclonedds()
         from cyclonedds.qos import Policy
 
         out: List[DiscoveredEndpoint] = []
@@ -183,6 +187,7 @@ class NodeAnnouncements:
 
     def take(self) -> None:
         """Take the announcements that came since the last call."""
+        import_cyclonedds()
         from cyclonedds.core import DDSException
 
         try:
