@@ -1,11 +1,14 @@
 """Programs built on micros_rt (the relay, the MQTT bridge, the microcontroller bridge) import only its public
 API: every module under micros_rt/bridges/ is parsed (imports inside functions and under TYPE_CHECKING
 included, as tests/unit/test_structure.py reads them) and may name only the modules of :data:`PUBLIC`, its own
-bridge's modules, and no private (``_name``) of another package."""
+bridge's modules, and no private (``_name``) of another package. The command line (micros_rt/cli/) may reach
+below the public API only where :data:`CLI_INTERNALS` says why. Neither imports a third-party library but ROS 1's
+Python and YAML (:func:`third_party_imports`): DDS, shared memory, MQTT and ROS 2 are reached through micros_rt."""
 
 from __future__ import annotations
 
 import ast
+import sys
 from pathlib import Path
 from typing import Dict, List, Tuple
 
@@ -58,8 +61,62 @@ PROGRAM = "micros_rt.bridges.program"
 BRIDGES = "micros_rt.bridges"
 
 
+CLI = "micros_rt.cli"
+#: what the tools reach below the public API, each for a reason (a new one is a choice, written here)
+CLI_INTERNALS = {
+    "micros_rt.drop_in": "micros-rt run puts micros_rt under rospy's names",
+    "micros_rt.negotiation.hints": "micros-rt run --hints",
+    "micros_rt.core.introspection": "the microsRtInfo answer the graph tools read",
+    "micros_rt.transports.tcpros.xmlrpc": "XML-RPC with a timeout to nodes and masters",
+    "micros_rt.transports.dds.participant": "doctor and the ROS 2 view: the Cyclone configuration nodes use",
+    "micros_rt.transports.dds.discovery": "the ROS 2 view: the one reader of DDS discovery",
+    "micros_rt.transports.dds.watch": "doctor: the host's ROS 2 watcher",
+    "micros_rt.transports.shm.host": "doctor: shared memory on this host",
+    "micros_rt.transports.shm.channel": "doctor: a message through a shared-memory channel",
+    "micros_rt.services.gateway": "doctor: the ROS 2 helper's interpreter",
+}
+#: ROS 1's Python, which programs live in, besides its message and service packages (``*_msgs``, ``*_srvs``)
+ROS1 = frozenset({"rospy", "genpy", "genmsg", "roslib", "rosgraph"})
+#: third-party packages a program may import besides ROS 1's: its files' format
+THIRD_PARTY = frozenset({"yaml"})
+
+
 def _bridge_modules() -> Dict[str, Path]:
     return {name: path for name, path in _modules().items() if name == BRIDGES or name.startswith(BRIDGES + ".")}
+
+
+def _cli_modules() -> Dict[str, Path]:
+    return {name: path for name, path in _modules().items() if name == CLI or name.startswith(CLI + ".")}
+
+
+def cli_internal_imports(modules: Dict[str, Path]) -> List[str]:
+    """Each CLI module's import of a micros_rt module that is neither public, the CLI's own, nor in
+    :data:`CLI_INTERNALS`."""
+    mods = _modules()
+    return sorted(f"{name} imports {target}" for name, path in modules.items()
+                  for target in _imports(name, path, mods)
+                  if target not in PUBLIC and target not in CLI_INTERNALS and not target.startswith(CLI)
+                  and not target.startswith(BRIDGES))
+
+
+def third_party_imports(modules: Dict[str, Path]) -> List[str]:
+    """Each import (anywhere in the file) of a package that is not the standard library, micros_rt, ROS 1's Python
+    (:data:`ROS1`, message and service packages) or :data:`THIRD_PARTY`, as ``module imports package``."""
+    out = set()
+    for name, path in modules.items():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                targets = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                targets = [node.module]
+            else:
+                continue
+            for target in targets:
+                top = target.split(".")[0]
+                if not (top in sys.stdlib_module_names or top == "micros_rt" or top in ROS1 or top in THIRD_PARTY
+                        or top.endswith(("_msgs", "_srvs"))):
+                    out.add(f"{name} imports {top}")
+    return sorted(out)
 
 
 def _allowed(module: str, target: str) -> bool:
@@ -105,6 +162,24 @@ def test_bridges_import_only_the_public_api() -> None:
 
 def test_bridges_take_no_private_names_of_other_packages() -> None:
     assert private_names(_bridge_modules()) == []
+
+
+def test_the_command_line_reaches_below_the_public_api_only_where_it_says_why() -> None:
+    assert cli_internal_imports(_cli_modules()) == []
+    mods = _modules()
+    assert sorted(m for m in CLI_INTERNALS if m not in mods) == []
+
+
+def test_programs_import_no_back_end_library_of_their_own() -> None:
+    assert third_party_imports({**_bridge_modules(), **_cli_modules()}) == []
+
+
+def test_the_check_finds_a_third_party_import(tmp_path: Path) -> None:
+    path = tmp_path / "ros2.py"
+    path.write_text("import rospy, yaml, json\nfrom std_msgs.msg import String\nfrom cyclonedds.core import Policy\n"
+                    "def f():\n    import paho.mqtt.client\n    from .config import X\n")
+    assert third_party_imports({"micros_rt.bridges.relay.ros2": path}) == [
+        "micros_rt.bridges.relay.ros2 imports cyclonedds", "micros_rt.bridges.relay.ros2 imports paho"]
 
 
 def test_the_public_modules_exist() -> None:
