@@ -29,7 +29,7 @@ PUBLIC = frozenset({
     "micros_rt.log",
     "micros_rt.ratelimit",
     "micros_rt.rostypes",
-    "micros_rt.cyclone",   # the one first import of cyclonedds (a relay reading DDS discovery goes through it)
+    "micros_rt.cyclone",   # the one first import of cyclonedds
     "micros_rt.extend",
     "micros_rt.settings",   # the MICROS_RT_* variables (the relay reads the profile and send buffer asked)
     "micros_rt.qos",
