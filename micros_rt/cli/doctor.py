@@ -1,9 +1,10 @@
 """``micros-rt doctor``: check the set-up a micros_rt node depends on, each failure with a one-line fix.
 
-Checks: the ``MICROS_RT_*`` settings take their values (:mod:`micros_rt.settings`); the ROS master answers; ``ROS_IP``/``ROS_HOSTNAME`` resolve to this host and agree; which network
-interface and Cyclone configuration micros_rt will use (the same functions the library uses:
-:mod:`micros_rt.transports.dds.participant`) and whether multicast is on; ``ROS_DOMAIN_ID`` is valid; Cyclone starts
-with that configuration; the clocks of the graph's micros_rt nodes agree with this one; the YAML profile
+Checks: the ``MICROS_RT_*`` settings take their values (:mod:`micros_rt.settings`); the ROS master answers;
+``ROS_IP``/``ROS_HOSTNAME`` resolve to this host and agree; which network interface and Cyclone configuration
+micros_rt will use (the same functions the library uses: :mod:`micros_rt.transports.dds.participant`) and whether
+multicast is on; ``ROS_DOMAIN_ID`` is valid; Cyclone starts with that configuration; the clocks of the graph's
+micros_rt nodes agree with this one; shared memory, ROS 2 visibility and the ROS 2 helper; the YAML profile
 named by ``MICROS_RT_QOS_PROFILE`` is valid. Exit code 0 only when every check passes.
 """
 
