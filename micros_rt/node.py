@@ -77,9 +77,9 @@ def init_node(name: str, argv: Optional[List[str]] = None, anonymous: bool = Fal
     >>> micros_rt.init_node("talker", anonymous=True)   # doctest: +SKIP
     >>> micros_rt.init_node("talker", qos_profile=micros_rt.QoSProfile.from_string("ros2: false"))  # doctest: +SKIP
     """
+    settings.check()  # a mistyped MICROS_RT_* variable stops the node here, in words, before anything starts
     patches.install(_node.publications.get, _node.subscriptions.get)
     _introspection.install(lambda: _node)
-    settings.check()  # a mistyped MICROS_RT_* variable stops the node here, in words
     profile = _profile(qos_profile)
     _tune_malloc()
     note_ros2_at_start(profile)

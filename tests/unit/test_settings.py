@@ -4,7 +4,10 @@ and each bad value is an error naming the variable, the value and what it takes.
 from __future__ import annotations
 
 import ast
+import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 from typing import List
 
@@ -104,3 +107,13 @@ def test_check_names_every_bad_variable_and_doctor_says_so() -> None:
     check = check_settings(env)
     assert check.failed and "MICROS_RT_DISABLE_DDS='maybe'" in check.detail and "MICROS_RT_DISABEL_SHM" in check.detail
     assert not check_settings({"MICROS_RT_ROS2": "on"}).failed
+
+
+def test_init_node_refuses_a_bad_setting_before_it_starts_anything() -> None:
+    # no master needed: the check comes first (ROS_MASTER_URI names a port nobody listens on)
+    env = {**os.environ, "MICROS_RT_LEASE_DURATION": "soon", "ROS_MASTER_URI": "http://127.0.0.1:9/"}
+    code = ("import micros_rt, rospy\ntry:\n    micros_rt.init_node('x')\nexcept micros_rt.SettingError as e:\n"
+            "    print('refused:', e, rospy.core.is_initialized())\n")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    assert out.stdout.startswith("refused: MICROS_RT_LEASE_DURATION='soon' is not a number of seconds"), out
+    assert out.stdout.strip().endswith("False"), out.stdout
