@@ -70,6 +70,7 @@ __all__ = [
     "ServiceServer",
     "ActionFromRos2",
     "ActionToRos2",
+    "Ros2TypeError",
     "Subscriber",
     "SubscribeQoSOptions",
     "SubscriberStatistics",
@@ -82,15 +83,19 @@ __all__ = [
     "is_shutdown",
     "ok",
     "node_info",
+    "ros2_action_class",
+    "ros2_message_class",
+    "ros2_service_class",
     "shutdown",
     "spin",
 ]
 __version__ = "0.1.0"
 
-#: What NodeHandle's services and actions return, imported when first named (a node without services or actions
-#: never loads them: ``import micros_rt`` stays as light as before)
+#: What NodeHandle's services and actions return, and the classes of ROS 2-only types, imported when first named
+#: (a node without them never loads them: ``import micros_rt`` stays as light as before)
 _LAZY = {"ServiceClient": ".services", "ServiceServer": ".services", "ActionFromRos2": ".actions",
-         "ActionToRos2": ".actions"}
+         "ActionToRos2": ".actions", "Ros2TypeError": ".ros2_types", "ros2_action_class": ".ros2_types",
+         "ros2_message_class": ".ros2_types", "ros2_service_class": ".ros2_types"}
 
 
 def __getattr__(name: str) -> object:

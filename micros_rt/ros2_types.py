@@ -76,9 +76,10 @@ def build_classes(type_name: str, definition: str, md5: str = "") -> Type[genpy.
         raise Ros2TypeError(f"cannot build {type_name} from its definition: {exc}") from None
     cls = classes.get(type_name)
     if cls is None:
-        raise Ros2TypeError(f"the definition given for {type_name} does not define it")
+        raise Ros2TypeError(f"the definition of {type_name} does not define it")
     if md5 and cls._md5sum != md5:
-        raise Ros2TypeError(f"the definition given for {type_name} gives md5 {cls._md5sum}, not the announced {md5}")
+        raise Ros2TypeError(f"the definition of {type_name} gives md5 {cls._md5sum}, not the {md5} announced with "
+                           "it")
     register_message_classes(classes)
     with _lock:
         return _built.setdefault((type_name, md5), cls)
@@ -231,7 +232,10 @@ class _Converter:
             return full
         if full in self._active:
             raise Ros2TypeError(f"{where}: {full} contains itself ({' -> '.join(self._active)})")
-        path = _interface_file(self.shares, dep_pkg, "msg", name)
+        try:
+            path = _interface_file(self.shares, dep_pkg, "msg", name)
+        except Ros2TypeError as exc:
+            raise Ros2TypeError(f"{where}: {exc}") from None
         self._active.append(full)
         try:
             text = self.text(path.read_text(), dep_pkg, f"{path}")
@@ -295,7 +299,7 @@ def ros2_message_class(ros2_type: str, *, python: Optional[str] = None) -> Type[
             text = converter.text(path.read_text(), pkg, str(path))
             found = _classes[key] = build_classes(f"{pkg}/{name}", _full_text(text, converter.deps))
             _remember(f"{pkg}/{name}", "msg", text, converter)
-        return found  # type: ignore[no-any-return]
+        return found
 
 
 def _srv_md5(type_name: str, text: str, deps: Dict[str, str]) -> str:
@@ -389,11 +393,7 @@ def _action_from(path: Path, pkg: str, name: str, shares: Sequence[Path]) -> Any
 # -- for stock ROS 1 tools -----------------------------------------------------------------------------------
 
 def python_modules_dir() -> Path:
-    """Where :func:`write_python_modules` writes by default: ``MICROS_RT_ROS1_TYPES_DIR``, else
-    ``$ROS_HOME/micros_rt/ros1_types`` (``~/.ros/...``)."""
-    given = os.environ.get("MICROS_RT_ROS1_TYPES_DIR", "").strip()
-    if given:
-        return Path(given)
+    """Where :func:`write_python_modules` writes by default: ``$ROS_HOME/micros_rt/ros1_types`` (``~/.ros/...``)."""
     home = os.environ.get("ROS_HOME", "").strip() or os.path.join(os.path.expanduser("~"), ".ros")
     return Path(home) / "micros_rt" / "ros1_types"
 

@@ -48,6 +48,8 @@ from micros_rt.qos import SubscribeQoSOptions
 from micros_rt.transports.base import EndpointSpec, PushReader, TransportWriter
 
 from ...cyclone import import_cyclonedds
+from ...ros2_types import (Ros2TypeError, python_modules_dir, ros2_message_class, ros2_service_class,
+                           write_python_modules)
 from .config import ExportRule, Ros2Entry
 from .msgtypes import TypeLearningError, class_from_definition, installed_class, publisher_header
 from .services import ServiceCallError, call_service
@@ -470,6 +472,32 @@ class Ros2Side:
                          "not used", self.relay.config.graph, entry.where, entry.name, what,
                          ", ".join(entry.topic_keys))
 
+    def _ros2_service_class(self, type_name: str) -> Any:
+        """The installed ROS 1 service class of ``type_name``, else the one built from the ROS 2 installation of the
+        process's helper (which serves the calls, so has the type)."""
+        found = _service_class(type_name)
+        if found is None:
+            pkg, _, name = type_name.partition("/")
+            found = ros2_service_class(f"{pkg}/srv/{name}", python=self.gateway().python)
+            self._for_stock_tools(type_name)
+        return found
+
+    def _for_stock_tools(self, type_name: str) -> None:
+        """A type built from ROS 2's definition: its Python modules where stock ROS 1 tools can import them
+        (``rostopic echo`` loads a topic's class by its package name)."""
+        directory = python_modules_dir()
+        try:
+            packages = write_python_modules(directory)
+        except (OSError, ValueError) as exc:
+            _log.warning("micros_rt: relay %s: %s has no ROS 1 package here and was built from its ROS 2 definition; "
+                         "its Python modules for stock ROS 1 tools could not be written to %s: %s",
+                         self.relay.config.graph, type_name, directory, exc)
+            return
+        if type_name.partition("/")[0] in packages:
+            _log.info("micros_rt: relay %s: %s has no ROS 1 package here: built from its ROS 2 definition; stock ROS "
+                      "1 tools (rostopic echo, rosservice call) read it with PYTHONPATH=%s", self.relay.config.graph,
+                      type_name, directory)
+
     # -- ROS 1 -> ROS 2 --------------------------------------------------------------------------------------
     def _export(self, entry: Ros2Entry, state: GraphState) -> Optional[str]:
         own = self._own()
@@ -567,11 +595,12 @@ class Ros2Side:
         if not uri:
             return None
         type_name = header.get("type", "")
-        service_class = _service_class(type_name)
-        if service_class is None:
+        try:
+            service_class = self._ros2_service_class(type_name)
+        except (Ros2TypeError, ValueError, micros_rt.MicrosRtError) as exc:
             return (f"{entry.where}: cannot export service {entry.name} ({type_name or 'type unknown'}) to ROS 2: "
                     f"its package is not installed on this host, and a ROS 2 client's request must be mapped field "
-                    f"by field; install the package (ROS 1) on the relay's host")
+                    f"by field, from the ROS 2 definition when there is no ROS 1 package: {exc}")
         if header.get("md5sum") and header["md5sum"] != service_class._md5sum:
             return (f"{entry.where}: cannot export service {entry.name}: its server has another definition of "
                     f"{type_name} (md5 {header['md5sum']}, here {service_class._md5sum})")
@@ -642,6 +671,8 @@ class Ros2Side:
             cls, source = self._action_class(entry, ros2_type)
         except TypeLearningError as exc:
             return f"{what}: {exc}"
+        if source != "installed":
+            self._for_stock_tools(cls._type)
         self._topic_options_on_service(entry, "an action")
         try:
             incoming = ActionIn(self.relay.nh, entry, cls, ros2_type, source)
@@ -663,9 +694,13 @@ class Ros2Side:
                     f"({', '.join([type_name, *others])})")
         data_class = installed_class(type_name)
         if data_class is None:
-            return (f"{entry.where}: cannot import {entry.name} from ROS 2: its type {type_name} is not installed "
-                    f"on this host (ROS 2 discovery carries no definition); install the ROS 1 package "
-                    f"{type_name.split('/')[0]} on the relay's host")
+            pkg, _, name = type_name.partition("/")
+            try:   # ROS 2 discovery carries no definition: the ROS 2 installation's
+                data_class = ros2_message_class(f"{pkg}/msg/{name}")
+            except (Ros2TypeError, ValueError) as exc:
+                return (f"{entry.where}: cannot import {entry.name} from ROS 2: its type {type_name} has no ROS 1 "
+                        f"package on this host and cannot be built from its ROS 2 definition: {exc}")
+            self._for_stock_tools(type_name)
         local = state.type_in_use(entry.ros1_name, self._own())
         if local is not None and local != type_name:
             return (f"{entry.where}: cannot import {entry.name} from ROS 2 as {entry.ros1_name}: ROS 2 sends "
@@ -691,11 +726,11 @@ class Ros2Side:
         if others:
             return (f"{entry.where}: cannot import service {entry.name} from ROS 2 as {entry.ros1_name}: "
                     f"{', '.join(others)} serves {entry.ros1_name} in this graph already")
-        service_class = _service_class(type_name)
-        if service_class is None:
-            return (f"{entry.where}: cannot import service {entry.name} from ROS 2: its type {type_name} is not "
-                    f"installed on this host (ROS 2 discovery carries no definition); install the ROS 1 package "
-                    f"{type_name.split('/')[0]} on the relay's host")
+        try:
+            service_class = self._ros2_service_class(type_name)
+        except (Ros2TypeError, ValueError, micros_rt.MicrosRtError) as exc:
+            return (f"{entry.where}: cannot import service {entry.name} from ROS 2: its type {type_name} has no "
+                    f"ROS 1 package on this host and cannot be built from its ROS 2 definition: {exc}")
         from micros_rt.services import srv_mapping
 
         try:
