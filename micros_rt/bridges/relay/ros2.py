@@ -41,7 +41,7 @@ import roslib.message
 import rospy
 
 import micros_rt
-from micros_rt.extend import SendQueue, sender_for
+from micros_rt.extend import SendQueue, latch_several, sender_for
 from micros_rt.qos.options import drop_counters
 from micros_rt.log import nonblocking_logger
 from micros_rt.qos import SubscribeQoSOptions
@@ -265,15 +265,20 @@ class _TopicIn:
     kind = "topic"
 
     def __init__(self, side: "Ros2Side", entry: Ros2Entry, data_class: Type[genpy.Message], latch: bool,
-                 best_effort: bool) -> None:
+                 best_effort: bool, type_source: str) -> None:
         from micros_rt.transports.dds.feed import DDSFeed
 
         relay = side.relay
         self.entry = entry
         self.latch = latch
+        self.type_source = type_source   # "installed" (ROS 1's package) or "ROS 2 definition" (built here)
         self.feed: Optional[DDSFeed] = None
         own_graph = relay.graph_id
-        queue_size = 1 if latch else entry.queue_size
+        # latched: each transient_local writer's last message (several writers' at once, as static transform
+        # broadcasters send theirs on discovery), kept for late ROS 1 subscribers as ROS 1 keeps one per publisher
+        self.latched: Dict[str, Any] = {}   # writer guid -> its last message, oldest first
+        self._lock = threading.Lock()
+        queue_size = entry.queue_size
         options = entry.import_options
         if best_effort and not (options and options.using_best_effort_protocol):
             # a reliable reader does not match a best-effort writer: take it as it is sent
@@ -294,17 +299,35 @@ class _TopicIn:
 
         # the relay's QoS profile keeps this publication off DDS (TCPROS only): ROS 2 has the original
         self.pub = relay.nh.advertise(entry.ros1_name, data_class, queue_size, latch=latch)
+        if latch:
+            latch_several(self.pub, self._lock, lambda: list(self.latched.values()))
         self.sub = relay.nh.subscribe_reader(f"relay ROS 2 import {entry.ros2_name}", data_class, open_reader,
-                                             self.pub.publish, queue_size, options)
+                                             self._publish_latched if latch else self.pub.publish, queue_size,
+                                             options)
+
+    def _publish_latched(self, msg: Any) -> None:
+        writer = (getattr(msg, "_connection_header", None) or {}).get("writer", "")
+        with self._lock:
+            self.latched.pop(writer, None)
+            self.latched[writer] = msg
+            self.pub.publish(msg)
 
     def refresh(self, side: "Ros2Side", state: GraphState) -> None:
-        pass
+        if not self.latched:
+            return
+        from micros_rt.transports.dds.types import dds_topic_name
+
+        alive = {w.guid for w in side.directory.endpoints("writers", dds_topic_name(self.entry.ros2_name))}
+        with self._lock:
+            for writer in [w for w in self.latched if w not in alive]:
+                del self.latched[writer]   # a ROS 2 writer gone takes its latched message with it, as in ROS 1
 
     def stats(self) -> Dict[str, Any]:
         s = self.sub.statistics()
         feed = self.feed
         return {"direction": "import", "kind": "topic", "name": self.entry.name, "as": self.entry.ros1_name,
-                "latch": self.latch, "received": s.received, "published": s.delivered,
+                "type_source": self.type_source, "latch": self.latch, "latched_writers": len(self.latched), "received": s.received,
+                "published": s.delivered,
                 "dropped_queue_full": s.dropped_queue_full, **{c: getattr(s, c) for c in drop_counters()},
                 "refused": feed.refused if feed else 0, "bad_input": feed.bad_input if feed else 0,
                 "lost": feed.lost if feed else 0}
@@ -693,7 +716,9 @@ class Ros2Side:
             return (f"{entry.where}: cannot import {entry.name} from ROS 2: its publishers use different types "
                     f"({', '.join([type_name, *others])})")
         data_class = installed_class(type_name)
+        type_source = "installed"
         if data_class is None:
+            type_source = "ROS 2 definition"
             pkg, _, name = type_name.partition("/")
             try:   # ROS 2 discovery carries no definition: the ROS 2 installation's
                 data_class = ros2_message_class(f"{pkg}/msg/{name}")
@@ -709,7 +734,7 @@ class Ros2Side:
         latch = entry.latch if entry.latch is not None else any(w.transient_local for w in writers)
         best_effort = all(w.best_effort for w in writers)
         try:
-            incoming = _TopicIn(self, entry, data_class, latch, best_effort)
+            incoming = _TopicIn(self, entry, data_class, latch, best_effort, type_source)
         except micros_rt.MicrosRtError as exc:
             return f"{entry.where}: cannot import {entry.name} from ROS 2: {exc}"
         self._add(entry, incoming)
