@@ -11,6 +11,8 @@ over Cyclone DDS, with stock ROS nodes over TCPROS, negotiated per publisher.
 >>> pub = nh.advertise_with_qos("chatter", String, 10, micros_rt.TransportPriority.HIGH)  # doctest: +SKIP
 """
 
+import typing as _typing
+
 from .exceptions import (
     DDSUnavailableError,
     MicrosRtError,
@@ -90,6 +92,9 @@ __all__ = [
     "spin",
 ]
 __version__ = "0.1.0"
+
+if _typing.TYPE_CHECKING:   # the lazy names below, typed for users' type checkers
+    from .ros2_types import Ros2TypeError, ros2_action_class, ros2_message_class, ros2_service_class
 
 #: What NodeHandle's services and actions return, and the classes of ROS 2-only types, imported when first named
 #: (a node without them never loads them: ``import micros_rt`` stays as light as before)

@@ -287,7 +287,8 @@ def configure_subscriber_impl(impl: Any, *, buff_size: Optional[int] = None, tcp
 
 class _LatchedReplay:
     """A rospy subscriber listener: a new subscriber of a latching publisher gets each message ``messages()``
-    names (oldest first) before the one rospy latches itself, which stays the latched one."""
+    names (oldest first) before the one rospy latches itself, which stays the latched one (unless ``messages()``
+    no longer has it: its source left, and the newest of the others takes its place)."""
 
     def __init__(self, impl: Any, lock: Any, messages: Callable[[], List[Any]]) -> None:
         self._impl = impl
@@ -299,8 +300,11 @@ class _LatchedReplay:
         # makes the message written rospy's latched one, so the newest is put back (``lock``: the owner's
         # publishing lock, so no publish() comes in between)
         with self._lock:
+            current = self._messages()
             newest = self._impl.latch
-            for msg in self._messages():
+            if newest is not None and not any(msg is newest for msg in current):
+                newest = current[-1] if current else None   # its source is gone: the newest left is latched
+            for msg in current:
                 if msg is not newest:
                     peer_publish(msg)
             self._impl.latch = newest
