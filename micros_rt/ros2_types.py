@@ -1,7 +1,8 @@
 """ROS 1 classes of ROS 2-only types, built at run time from the ROS 2 installation micros_rt already uses.
 
 A ROS 2 type with no ROS 1 package on this host (``test_msgs/msg/BasicTypes``) is defined in that installation's
-``share/<pkg>/msg/<Name>.msg`` (``srv/*.srv``, ``action/*.action``; the Python of the ROS 2 helper,
+``share/<pkg>/msg/<Name>.msg`` (``srv/*.srv``, ``action/*.action``, or the ``.idl`` where only that exists:
+:func:`idl_to_ros2_text`; the Python of the ROS 2 helper,
 ``MICROS_RT_ROS2_PYTHON`` or ``.venv-ros2``, tells where it is, as do ``AMENT_PREFIX_PATH``'s prefixes). Each
 definition is rewritten as the ROS 1 definition of ``pkg/Name`` (``pkg/NameRequest``/``Response``,
 ``pkg/NameAction`` and its parts as actionlib's genaction expands them) and genpy builds the classes from that
@@ -13,8 +14,9 @@ The rewriting, field by field:
 - primitives keep their names (ROS 2's ``byte`` and ``char`` are one byte on the wire, as ROS 1's);
 - ``builtin_interfaces/Time`` and ``Duration`` are ROS 1's ``time`` and ``duration``; ``std_msgs/Header`` is ROS 1's
   ``Header`` (DESIGN.md's wire rule: no ``seq`` on DDS);
-- a nested type is ROS 1's installed class when there is one (its field names must be the ROS 2 type's, else the
-  definition is refused naming the field), else it is rewritten from the ROS 2 installation in turn;
+- a nested type is ROS 1's installed class when there is one (its field names must be the ROS 2 type's, compared
+  lower-cased as the wire rule maps them, else the definition is refused naming the field), else it is rewritten
+  from the ROS 2 installation in turn;
 - bounded strings and sequences (``string<=10``, ``int32[<=5]``) are unbounded (the wire is the same; what ROS 2
   sends always fits);
 - default values (ROS 2 only) are dropped; constants are kept (a string constant's quotes removed, a bool's
@@ -38,7 +40,7 @@ import genpy
 from .exceptions import TypeMappingError
 from .transports.dds.types import register_message_classes
 
-__all__ = ["Ros2TypeError", "build_classes", "ros1_field_line", "ros2_action_class", "ros2_message_class",
+__all__ = ["Ros2TypeError", "build_classes", "idl_to_ros2_text", "ros1_field_line", "ros2_action_class", "ros2_message_class",
            "ros2_service_class", "ros2_share_dirs", "python_modules_dir", "write_python_modules"]
 
 SEPARATOR = "=" * 80 + "\n"
@@ -115,18 +117,20 @@ def ros2_share_dirs(python: Optional[str] = None) -> List[Path]:
     return [p / "share" for p in prefixes]
 
 
-def _interface_file(shares: Sequence[Path], pkg: str, kind: str, name: str) -> Path:
+def _definition(shares: Sequence[Path], pkg: str, kind: str, name: str) -> Tuple[str, Path]:
+    """The ROS 2 definition of ``pkg/kind/name`` in ROS 2's own syntax and its file: the ``.msg``/``.srv``/``.action``
+    file, else the ``.idl`` one read back into that syntax (:func:`idl_to_ros2_text`)."""
     for share in shares:
         candidate = share / pkg / kind / f"{name}.{kind}"
         if candidate.is_file():
-            return candidate
-    idl = next((share / pkg / kind / f"{name}.idl" for share in shares
-                if (share / pkg / kind / f"{name}.idl").is_file()), None)
-    if idl is not None:
-        raise Ros2TypeError(f"{pkg}/{kind}/{name} is defined only as {idl}: micros_rt reads .{kind} definitions, "
-                            f"not IDL; install the ROS 1 package {pkg} on this host")
+            return candidate.read_text(), candidate
+    for share in shares:
+        idl = share / pkg / kind / f"{name}.idl"
+        if idl.is_file():
+            return idl_to_ros2_text(idl.read_text(), kind, name, str(idl)), idl
     raise Ros2TypeError(f"{pkg}/{kind}/{name} is not installed in ROS 1 on this host, and its ROS 2 definition "
-                        f"{pkg}/{kind}/{name}.{kind} is in none of {', '.join(str(s) for s in shares) or '(none)'}")
+                        f"{pkg}/{kind}/{name}.{kind} (or .idl) is in none of "
+                        f"{', '.join(str(s) for s in shares) or '(none)'}")
 
 
 def _split_type(ros2_type: str, kind: str) -> Tuple[str, str]:
@@ -145,6 +149,167 @@ def _installed(ros1_type: str) -> Optional[Any]:
     except (ValueError, ImportError):
         return None
     return cls if isinstance(cls, type) and issubclass(cls, genpy.Message) else None
+
+
+# -- IDL (rosidl's) -> ROS 2 text -------------------------------------------------------------------------------
+
+_IDL_TYPES = {"boolean": "bool", "octet": "byte", "float": "float32", "double": "float64", "char": "char",
+              "wchar": "wchar", "int8": "int8", "uint8": "uint8", "int16": "int16", "uint16": "uint16",
+              "int32": "int32", "uint32": "uint32", "int64": "int64", "uint64": "uint64", "string": "string",
+              "wstring": "wstring"}
+_IDL_TOKEN = re.compile(r'"(?:\\.|[^"\\])*"|//[^\n]*|/\*.*?\*/|::|[A-Za-z_]\w*|-?\d[\w.+-]*|\S', re.S)
+
+
+def _idl_tokens(text: str) -> List[str]:
+    """rosidl's IDL as tokens, without comments, ``#include`` lines and annotations (``@verbatim(...)``,
+    ``@default(...)``: ROS 1 has no default values, the comments do not count)."""
+    text = "\n".join(line for line in text.splitlines() if not line.lstrip().startswith("#"))
+    out: List[str] = []
+    tokens = [t for t in _IDL_TOKEN.findall(text) if not t.startswith(("//", "/*"))]
+    i = 0
+    while i < len(tokens):
+        if tokens[i] == "@":
+            i += 2   # '@' and the annotation's name
+            if i < len(tokens) and tokens[i] == "(":
+                depth = 0
+                while i < len(tokens):
+                    depth += {"(": 1, ")": -1}.get(tokens[i], 0)
+                    i += 1
+                    if depth == 0:
+                        break
+            continue
+        out.append(tokens[i])
+        i += 1
+    return out
+
+
+def idl_to_ros2_text(text: str, kind: str, name: str, where: str) -> str:
+    """A rosidl ``.idl`` file read back into ROS 2's ``.msg``/``.srv``/``.action`` syntax (what rosidl_adapter
+    wrote it from): its structs (``Name``; ``Name_Request``/``_Response``; ``Name_Goal``/``_Result``/``_Feedback``),
+    their constants (module ``<struct>_Constants``), typedef'd arrays, sequences and bounded strings. IDL's
+    ``uint8`` is ROS's ``uint8`` (a ``char`` written as ``.msg`` became ``uint8`` too)."""
+    tokens = _idl_tokens(text)
+    aliases: Dict[str, Tuple[str, str]] = {}   # typedef name -> (ROS 2 base type, array suffix)
+    structs: Dict[str, List[str]] = {}
+    constants: Dict[str, List[str]] = {}
+    pos = [0]
+
+    def take(expected: Optional[str] = None) -> str:
+        if pos[0] >= len(tokens):
+            raise Ros2TypeError(f"{where}: the IDL ends early")
+        token = tokens[pos[0]]
+        if expected is not None and token != expected:
+            raise Ros2TypeError(f"{where}: expected {expected!r} in the IDL, found {token!r}")
+        pos[0] += 1
+        return token
+
+    def peek() -> str:
+        return tokens[pos[0]] if pos[0] < len(tokens) else ""
+
+    def read_type() -> Tuple[str, str]:
+        """(ROS 2 base type, array suffix) of the type at the cursor."""
+        first = take()
+        if first == "sequence":
+            take("<")
+            base, suffix = read_type()
+            if suffix:
+                raise Ros2TypeError(f"{where}: a sequence of arrays has no ROS form")
+            bound = ""
+            if peek() == ",":
+                take(",")
+                bound = take()
+            take(">")
+            return base, f"[<={bound}]" if bound else "[]"
+        if first in ("string", "wstring") and peek() == "<":
+            take("<")
+            bound = take()
+            take(">")
+            return f"{_IDL_TYPES[first]}<={bound}", ""
+        if first == "unsigned" or first == "long" or first == "short":
+            raise Ros2TypeError(f"{where}: the IDL type {first!r} is not one rosidl writes")
+        parts = [first]
+        while peek() == "::":
+            take("::")
+            parts.append(take())
+        if len(parts) == 1:
+            if first in aliases:
+                return aliases[first]
+            if first in _IDL_TYPES:
+                return _IDL_TYPES[first], ""
+            return first, ""   # a struct of this module
+        if len(parts) == 3:
+            return f"{parts[0]}/{parts[2]}", ""   # pkg::msg::Type
+        raise Ros2TypeError(f"{where}: cannot read the IDL type {'::'.join(parts)!r}")
+
+    def read_module() -> None:
+        module = take()
+        take("{")
+        owner = module[: -len("_Constants")] if module.endswith("_Constants") else None
+        while peek() != "}":
+            read_declaration(owner)
+        take("}")
+        take(";")
+
+    def read_declaration(constants_of: Optional[str]) -> None:
+        token = peek()
+        if token == "module":
+            take()
+            read_module()
+        elif token == "typedef":
+            take()
+            base, suffix = read_type()
+            alias = take()
+            if peek() == "[":
+                take("[")
+                suffix = f"[{take()}]"
+                take("]")
+            take(";")
+            aliases[alias] = (base, suffix)
+        elif token == "const":
+            take()
+            base, _ = read_type()
+            const_name = take()
+            take("=")
+            values = [take()]
+            while peek() != ";":
+                values.append(take())   # "a" "b": one string in parts
+            take(";")
+            if all(v.startswith('"') for v in values):
+                value = '"' + "".join(v[1:-1] for v in values) + '"'
+            else:
+                value = {"TRUE": "true", "FALSE": "false"}.get("".join(values), "".join(values))
+            constants.setdefault(constants_of or "", []).append(f"{base} {const_name}={value}")
+        elif token == "struct":
+            take()
+            struct = take()
+            take("{")
+            members: List[str] = []
+            while peek() != "}":
+                base, suffix = read_type()
+                member = take()
+                if peek() == "[":
+                    take("[")
+                    suffix = f"[{take()}]"
+                    take("]")
+                take(";")
+                members.append(f"{base}{suffix} {member}")
+            take("}")
+            take(";")
+            if members == ["uint8 structure_needs_at_least_one_member"]:
+                members = []   # ROS 2's stand-in for an empty message
+            structs[struct] = members
+        else:
+            raise Ros2TypeError(f"{where}: cannot read the IDL at {token!r}")
+
+    while pos[0] < len(tokens):
+        read_declaration(None)
+    parts = {"msg": [name], "srv": [f"{name}_Request", f"{name}_Response"],
+             "action": [f"{name}_Goal", f"{name}_Result", f"{name}_Feedback"]}[kind]
+    missing = [p for p in parts if p not in structs]
+    if missing:
+        raise Ros2TypeError(f"{where}: the IDL defines no struct {', '.join(missing)}")
+    return "---\n".join("".join(f"{line}\n" for line in (*constants.get(part, []), *structs[part]))
+                        for part in parts)
 
 
 # -- ROS 2 text -> ROS 1 text ------------------------------------------------------------------------------
@@ -233,12 +398,12 @@ class _Converter:
         if full in self._active:
             raise Ros2TypeError(f"{where}: {full} contains itself ({' -> '.join(self._active)})")
         try:
-            path = _interface_file(self.shares, dep_pkg, "msg", name)
+            ros2_text, path = _definition(self.shares, dep_pkg, "msg", name)
         except Ros2TypeError as exc:
             raise Ros2TypeError(f"{where}: {exc}") from None
         self._active.append(full)
         try:
-            text = self.text(path.read_text(), dep_pkg, f"{path}")
+            text = self.text(ros2_text, dep_pkg, f"{path}")
         finally:
             self._active.pop()
         self.deps[full] = text
@@ -256,12 +421,13 @@ class _Converter:
         """The installed ROS 1 type must have the ROS 2 type's fields, in order (a type that changed between
         ROS 1 and ROS 2 would be misread on the wire)."""
         try:
-            path = _interface_file(self.shares, pkg, "msg", name)
+            ros2_text, path = _definition(self.shares, pkg, "msg", name)
         except Ros2TypeError:
             return   # not in the ROS 2 installation: nothing to compare
-        ros2_fields = _field_names(path.read_text())
+        ros2_fields = _field_names(ros2_text)
         ros1_fields = list(installed.__slots__)
-        if ros1_fields != ros2_fields:
+        # DESIGN.md's wire rule lower-cases names (sensor_msgs/CameraInfo's D K R P are ROS 2's d k r p)
+        if [f.lower() for f in ros1_fields] != [f.lower() for f in ros2_fields]:
             raise Ros2TypeError(f"{where}: ROS 1's installed {installed._type} has the fields "
                                 f"{', '.join(ros1_fields) or '(none)'}, ROS 2's {path} has "
                                 f"{', '.join(ros2_fields) or '(none)'}: the two definitions differ")
@@ -295,8 +461,8 @@ def ros2_message_class(ros2_type: str, *, python: Optional[str] = None) -> Type[
         found = _classes.get(key)
         if found is None:
             converter = _Converter(shares)
-            path = _interface_file(shares, pkg, "msg", name)
-            text = converter.text(path.read_text(), pkg, str(path))
+            ros2_text, path = _definition(shares, pkg, "msg", name)
+            text = converter.text(ros2_text, pkg, str(path))
             found = _classes[key] = build_classes(f"{pkg}/{name}", _full_text(text, converter.deps))
             _remember(f"{pkg}/{name}", "msg", text, converter)
         return found
@@ -331,8 +497,8 @@ def ros2_service_class(ros2_type: str, *, python: Optional[str] = None) -> Any:
         found = _classes.get(key)
         if found is not None:
             return found
-        path = _interface_file(shares, pkg, "srv", name)
-        parts = re.split(r"^---\s*$", path.read_text(), flags=re.M)
+        ros2_text, path = _definition(shares, pkg, "srv", name)
+        parts = re.split(r"^---\s*$", ros2_text, flags=re.M)
         if len(parts) != 2:
             raise Ros2TypeError(f"{path}: expected a request and a response separated by '---'")
         converter = _Converter(shares)
@@ -358,16 +524,16 @@ def ros2_action_class(ros2_type: str, *, python: Optional[str] = None) -> Tuple[
         return installed, "installed"
     shares = ros2_share_dirs(python)
     key = _cache_key(f"{pkg}/action/{name}", shares)
-    path = _interface_file(shares, pkg, "action", name)
+    ros2_text, path = _definition(shares, pkg, "action", name)
     with _lock:
         found = _classes.get(key)
         if found is None:
-            found = _classes[key] = _action_from(path, pkg, name, shares)
+            found = _classes[key] = _action_from(ros2_text, path, pkg, name, shares)
         return found, f"built from {path}"
 
 
-def _action_from(path: Path, pkg: str, name: str, shares: Sequence[Path]) -> Any:
-    parts = re.split(r"^---\s*$", path.read_text(), flags=re.M)
+def _action_from(ros2_text: str, path: Path, pkg: str, name: str, shares: Sequence[Path]) -> Any:
+    parts = re.split(r"^---\s*$", ros2_text, flags=re.M)
     if len(parts) != 3:
         raise Ros2TypeError(f"{path}: expected goal, result and feedback separated by '---'")
     converter = _Converter(shares)

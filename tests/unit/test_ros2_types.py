@@ -3,12 +3,13 @@ rewriting rules, the md5 ROS 1 computes, refusals naming the field, and the modu
 
 from __future__ import annotations
 
+import re
 import subprocess
 from pathlib import Path
 import pytest
 
-from micros_rt.ros2_types import (Ros2TypeError, _Converter, ros2_action_class, ros2_message_class,
-                                  ros2_service_class, write_python_modules)
+from micros_rt.ros2_types import (Ros2TypeError, _Converter, idl_to_ros2_text, ros2_action_class,
+                                  ros2_message_class, ros2_service_class, write_python_modules)
 
 ROOT = Path(__file__).resolve().parents[2]
 ROS2_PYTHON = str(ROOT / ".venv-ros2" / "bin" / "python")
@@ -100,3 +101,52 @@ def test_installed_ros1_packages_win() -> None:
     with pytest.raises(ValueError, match="not a ROS 2 srv type"):
         ros2_service_class("std_srvs/msg/SetBool")
 
+
+
+def _constants_and_fields(ros1_text: str) -> "tuple[list[str], list[str]]":
+    # genmsg's md5 puts constants first, whatever their place: compare them apart
+    lines = ros1_text.splitlines()
+    constants = sorted(line for line in lines if re.match(r"^\S+ \w+=", line))
+    return constants, [line for line in lines if line not in constants]
+
+
+def test_every_idl_of_the_ros2_installation_reads_back_as_its_definition() -> None:
+    """A type defined only as .idl is read from it: each .idl the ROS 2 installation has beside a .msg, .srv or
+    .action gives the same ROS 1 definition (IDL has no ``char``: a .msg's char is uint8 there)."""
+    share = Path(ROS2_PYTHON).parent.parent / "share"
+    compared = 0
+    for kind in ("msg", "srv", "action"):
+        for idl in sorted(share.glob(f"*/{kind}/*.idl")):
+            source, pkg = idl.with_suffix(f".{kind}"), idl.parent.parent.name
+            try:
+                want = [_Converter([share]).text(part, pkg, str(source))
+                        for part in re.split(r"^---\s*$", source.read_text(), flags=re.M)]
+            except Ros2TypeError:
+                continue   # what ROS 1 cannot hold (wstring): refused from either file
+            got = [_Converter([share]).text(part, pkg, str(idl))
+                   for part in idl_to_ros2_text(idl.read_text(), kind, idl.stem, str(idl)).split("---\n")]
+            want = [re.sub(r"^char(\[|\s)", r"uint8\1", part, flags=re.M) for part in want]
+            assert [_constants_and_fields(p) for p in got] == [_constants_and_fields(p) for p in want], idl
+            compared += 1
+    assert compared > 100, compared   # std_msgs, geometry_msgs, sensor_msgs, test_msgs, action_msgs, ...
+
+
+def test_a_type_defined_only_as_idl_is_built_from_it(tmp_path: Path) -> None:
+    share = tmp_path / "share"
+    _write(share, "idlpkg/msg/Reading.idl", '#include "builtin_interfaces/msg/Time.idl"\n'
+           "module idlpkg {\n  module msg {\n    module Reading_Constants {\n      const uint8 OK = 1;\n"
+           '      const string LABEL = "a // b";\n    };\n    typedef double double__3[3];\n'
+           '    @verbatim (language="comment", text=\n      "one reading (see http://x)")\n'
+           "    struct Reading {\n      builtin_interfaces::msg::Time stamp;\n\n      @default (value=2)\n"
+           "      uint8 status;\n\n      double__3 xyz;\n\n      sequence<float, 8> samples;\n\n"
+           "      string<16> name;\n    };\n  };\n};\n")
+    cls = ros2_message_class("idlpkg/msg/Reading", python=str(tmp_path / "bin" / "python"))
+    assert cls.__slots__ == ["stamp", "status", "xyz", "samples", "name"] and cls.OK == 1 and cls.LABEL == "a // b"
+    import genmsg
+    import genmsg.msg_loader
+
+    context = genmsg.MsgContext.create_default()
+    spec = genmsg.msg_loader.load_msg_from_string(
+        context, "uint8 OK=1\nstring LABEL=a // b\ntime stamp\nuint8 status\nfloat64[3] xyz\nfloat32[] samples\n"
+                 "string name\n", "idlpkg/Reading")
+    assert cls._md5sum == genmsg.compute_md5(context, spec)
