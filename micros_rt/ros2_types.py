@@ -241,6 +241,17 @@ def idl_to_ros2_text(text: str, kind: str, name: str, where: str) -> str:
             return f"{parts[0]}/{parts[2]}", ""   # pkg::msg::Type
         raise Ros2TypeError(f"{where}: cannot read the IDL type {'::'.join(parts)!r}")
 
+    def read_typed_name() -> Tuple[str, str, str]:
+        """``T name;`` or ``T name[N];`` (a typedef's or a member's): (name, ROS 2 base type, array suffix)."""
+        base, suffix = read_type()
+        name_read = take()
+        if peek() == "[":
+            take("[")
+            suffix = f"[{take()}]"
+            take("]")
+        take(";")
+        return name_read, base, suffix
+
     def read_module() -> None:
         module = take()
         take("{")
@@ -257,13 +268,7 @@ def idl_to_ros2_text(text: str, kind: str, name: str, where: str) -> str:
             read_module()
         elif token == "typedef":
             take()
-            base, suffix = read_type()
-            alias = take()
-            if peek() == "[":
-                take("[")
-                suffix = f"[{take()}]"
-                take("]")
-            take(";")
+            alias, base, suffix = read_typed_name()
             aliases[alias] = (base, suffix)
         elif token == "const":
             take()
@@ -285,13 +290,7 @@ def idl_to_ros2_text(text: str, kind: str, name: str, where: str) -> str:
             take("{")
             members: List[str] = []
             while peek() != "}":
-                base, suffix = read_type()
-                member = take()
-                if peek() == "[":
-                    take("[")
-                    suffix = f"[{take()}]"
-                    take("]")
-                take(";")
+                member, base, suffix = read_typed_name()
                 members.append(f"{base}{suffix} {member}")
             take("}")
             take(";")
