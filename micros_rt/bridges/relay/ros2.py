@@ -520,6 +520,10 @@ class Ros2Side:
             _log.info("micros_rt: relay %s: %s has no ROS 1 package here: built from its ROS 2 definition; stock ROS "
                       "1 tools (rostopic echo, rosservice call) read it with PYTHONPATH=%s", self.relay.config.graph,
                       type_name, directory)
+        else:   # ROS 1 has the package, without this type: modules beside it would hide the installed ones
+            _log.warning("micros_rt: relay %s: %s was built from its ROS 2 definition, but ROS 1's package %s is "
+                         "installed without it: stock ROS 1 tools cannot load it (the relay carries it all the same)",
+                         self.relay.config.graph, type_name, type_name.partition("/")[0])
 
     # -- ROS 1 -> ROS 2 --------------------------------------------------------------------------------------
     def _export(self, entry: Ros2Entry, state: GraphState) -> Optional[str]:
