@@ -11,6 +11,8 @@ over Cyclone DDS, with stock ROS nodes over TCPROS, negotiated per publisher.
 >>> pub = nh.advertise_with_qos("chatter", String, 10, micros_rt.TransportPriority.HIGH)  # doctest: +SKIP
 """
 
+import typing as _typing
+
 from .exceptions import (
     DDSUnavailableError,
     MicrosRtError,
@@ -72,6 +74,7 @@ __all__ = [
     "ServiceServer",
     "ActionFromRos2",
     "ActionToRos2",
+    "Ros2TypeError",
     "Subscriber",
     "SubscribeQoSOptions",
     "SubscriberStatistics",
@@ -84,15 +87,22 @@ __all__ = [
     "is_shutdown",
     "ok",
     "node_info",
+    "ros2_action_class",
+    "ros2_message_class",
+    "ros2_service_class",
     "shutdown",
     "spin",
 ]
 __version__ = "0.1.0"
 
-#: What NodeHandle's services and actions return, imported when first named (a node without services or actions
-#: never loads them: ``import micros_rt`` stays as light as before)
+if _typing.TYPE_CHECKING:   # the lazy names below, typed for users' type checkers
+    from .ros2_types import Ros2TypeError, ros2_action_class, ros2_message_class, ros2_service_class
+
+#: What NodeHandle's services and actions return, and the classes of ROS 2-only types, imported when first named
+#: (a node without them never loads them: ``import micros_rt`` stays as light as before)
 _LAZY = {"ServiceClient": ".services", "ServiceServer": ".services", "ActionFromRos2": ".actions",
-         "ActionToRos2": ".actions"}
+         "ActionToRos2": ".actions", "Ros2TypeError": ".ros2_types", "ros2_action_class": ".ros2_types",
+         "ros2_message_class": ".ros2_types", "ros2_service_class": ".ros2_types"}
 
 
 def __getattr__(name: str) -> object:

@@ -13,6 +13,8 @@ itself (a DDS writer with a tag of its own, a reader it feeds).
   superseded before they left, and those older than the lifespan, are dropped and counted).
 - :class:`TimeoutTransport`: an :mod:`xmlrpc.client` transport with a timeout of its own (rospy sets a
   process-wide socket timeout), for XML-RPC calls to other nodes and masters.
+- :func:`latch_several`: a latching :class:`~micros_rt.Publisher` that gives a new TCPROS subscriber several
+  latched messages (the relay's import of a topic with several transient_local ROS 2 writers: each one's last).
 - :func:`register_negotiated_transport` (a :class:`NegotiatedTransport`: a protocol name and the makers of its
   :class:`PublicationSide` and :class:`SubscriptionSide`): a transport ``requestTopic`` negotiates as it does
   shared memory and DDS, offered on the topics made from then on and chosen by name in TransportHints
@@ -30,6 +32,8 @@ itself (a DDS writer with a tag of its own, a reader it feeds).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any, Callable, List
+
 from .core.introspection import register_section as register_info_section
 from .core.negotiated import NegotiatedTransport
 from .core.negotiated import register as register_negotiated_transport
@@ -40,6 +44,19 @@ from .core.runtime import dds_backend
 from .transports.negotiated import PublicationHost, PublicationSide, SubscriptionHost, SubscriptionSide
 from .transports.tcpros.xmlrpc import TimeoutTransport
 
+if TYPE_CHECKING:
+    from .core.publication import Publisher
+
 __all__ = ["NegotiatedTransport", "PublicationHost", "PublicationSide", "SendQueue", "SubscriptionHost",
-           "SubscriptionSide", "TimeoutTransport", "dds_backend", "register_info_section",
+           "SubscriptionSide", "TimeoutTransport", "dds_backend", "latch_several", "register_info_section",
            "register_negotiated_transport", "sender_for", "unregister_info_section", "unregister_negotiated_transport"]
+
+
+def latch_several(pub: "Publisher", lock: Any, messages: Callable[[], List[Any]]) -> None:
+    """Latching ``pub`` (``advertise(..., latch=True)``) sends each new TCPROS subscriber every message of
+    ``messages()``, oldest first, then its own latched message (the newest published). ``messages()`` is called
+    under ``lock``, which the caller holds while it publishes on ``pub``. ROS 1 keeps one latched message per
+    publisher; this keeps several in one (a relay's import of several transient_local ROS 2 writers)."""
+    from .transports.tcpros import patches
+
+    patches.replay_latched(pub.resolved_name, lock, messages)

@@ -29,7 +29,7 @@ APT_PACKAGES=(
     python3-venv tcpdump nftables iproute2 python3-matplotlib python3-numpy
     python3-std-srvs python3-roslaunch python3-rosservice python3-dev gcc
     mosquitto mosquitto-clients libmsgpack-dev graphviz openssl
-    python3-actionlib python3-actionlib-msgs
+    python3-actionlib python3-actionlib-msgs python3-tf2-msgs python3-tf2-ros   # /tf_static through the relay
     g++ pkgconf libroscpp-dev libstd-srvs-dev    # the stock roscpp test peer, tests/peers/roscpp_setbool.cpp
 )
 
@@ -50,7 +50,7 @@ for exe in /usr/bin/python3 /usr/bin/rosmaster /usr/bin/rostopic /usr/bin/rosnod
     [[ -x "$exe" ]] || die "$exe missing after package install"
 done
 quiet "stock rospy import check" env -u PYTHONPATH -u PYTHONHOME /usr/bin/python3 -c \
-    "import rospy, rosgraph, rostopic, roslaunch, std_msgs.msg, std_srvs.srv, geometry_msgs.msg, sensor_msgs.msg, actionlib, actionlib_msgs.msg"
+    "import rospy, rosgraph, rostopic, roslaunch, std_msgs.msg, std_srvs.srv, geometry_msgs.msg, sensor_msgs.msg, actionlib, actionlib_msgs.msg, tf2_msgs.msg, tf2_ros"
 
 # ---------------------------------------------------------------- .venv (micros_rt, rospy visible)
 VENV=.venv

@@ -174,20 +174,3 @@ def test_an_action_that_cannot_be_carried_is_said_in_words(setup: Setup) -> None
     assert "relay.yaml:4" in why and "an action keeps its name on both sides" in why, why
     assert harness.system_state(setup.master)["publishers"].get(f"{RENAMED}/status") is None
     assert harness.system_state(setup.master)["publishers"].get("/elsewhere/status") is None
-
-
-def test_ros2_action_definitions_map_back_to_ros1() -> None:
-    """The part of the relay that reads a ROS 2 .action part as a ROS 1 definition, on the constructs ROS 1 lacks."""
-    from micros_rt.bridges.relay.actions import _ros1_text
-    from micros_rt.bridges.relay.msgtypes import TypeLearningError
-
-    deps: Dict[str, str] = {}
-    text = _ros1_text("# a comment\nint32 order 5  # a default value\nstring<=8 name\nint32[<=4] few\n"
-                      "float64[3] xyz\nbuiltin_interfaces/Time stamp\nbuiltin_interfaces/Duration span\n"
-                      "std_msgs/Header header\nint8 MODE=2  # a constant\nstring NAME=a#b\n", "pkg", deps, "x")
-    assert text == ("int32 order\nstring name\nint32[] few\nfloat64[3] xyz\ntime stamp\nduration span\n"
-                    "std_msgs/Header header\nint8 MODE=2\nstring NAME=a#b\n"), text
-    assert "std_msgs/Header" in deps   # a nested type's ROS 1 definition comes from its installed package
-    for bad, words in (("wstring w", "no wstring"), ("NoSuchType t", "pkg/NoSuchType is not installed")):
-        with pytest.raises(TypeLearningError, match=words):
-            _ros1_text(bad, "pkg", {}, "x")

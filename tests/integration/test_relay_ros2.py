@@ -7,12 +7,16 @@ tests/peers/stock_relay_peer.py, a stock rospy node (/usr/bin/python3, no micros
 ``/clock`` and the latched ``/ros1_latched``, serves ``/set_flag`` and subscribes to ``/ros2_chatter``;
 tests/peers/ros2_relay_peer.py, an rclpy node (.venv-ros2, Fast DDS on loopback) that publishes ``/ros2_chatter``
 and the transient_local ``/ros2_latched``, serves ``/ros2_trigger`` and subscribes to ``/chatter`` and ``/clock``;
-and the stock ``rostopic`` and ``rosservice`` tools.
+tests/peers/dds_static_broadcasters.py, two static transform broadcasters as ROS 2 has them on the wire (``/tf_static``);
+and the stock ``rostopic`` and ``rosservice`` tools and a stock tf2_ros listener. test_msgs/BasicTypes (``/r2_custom``,
+``/r2_basic``, ``/ros1_basic``) has no ROS 1 package on this host: the relay builds it from the ROS 2 installation,
+and the stock tools read it from the modules the relay writes.
 """
 
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterator, List, Optional
@@ -29,16 +33,19 @@ ROSSERVICE = "/usr/bin/rosservice"
 CONFIG = """\
 graph: robot
 ros2:
-  export: {/chatter: {}, /set_flag: {}, /ros1_latched: {}, /clock: {}}   # ROS 1 topic or service, to ROS 2
-  import: {/ros2_chatter: {}, /ros2_trigger: {}, /ros2_latched: {}}  # ROS 2 topic or service, offered to ROS 1
+  export: {/chatter: {}, /set_flag: {}, /ros1_latched: {}, /clock: {}, /ros1_basic: {}}   # ROS 1 topic or service
+  import: {/ros2_chatter: {}, /ros2_trigger: {}, /ros2_latched: {}, /r2_custom: {}, /r2_basic: {}, /tf_static: {}}
 """
+#: the frames of /tf_static's two broadcasters
+STATIC_FRAMES = ("base_link:laser", "base_link:camera")
 T = 30.0   # generous bound on any one wait (the 2-core machine may be busy)
 
 
 class Setup:
     def __init__(self, master: harness.RosMaster, relay: harness.Peer, stock: harness.Peer, ros2: harness.Peer,
-                 stock_dir: Path, ros2_dir: Path) -> None:
+                 stock_dir: Path, ros2_dir: Path, broadcasters: harness.Peer) -> None:
         self.master, self.relay, self.stock, self.ros2 = master, relay, stock, ros2
+        self.broadcasters = broadcasters
         self.stock_dir, self.ros2_dir = stock_dir, ros2_dir
 
     def ros2_entry(self, direction: str, name: str, ready: Callable[[Dict[str, Any]], bool]) -> Dict[str, Any]:
@@ -76,18 +83,23 @@ def setup(dds_domain: int, tmp_path_factory: pytest.TempPathFactory) -> Iterator
         ros2 = harness.Peer([harness.ROS2_PYTHON, str(harness.PEERS_DIR / "ros2_relay_peer.py"),
                              "--trigger-dir", str(ros2_dir)], env, name="ros2_peer")
         peers.append(ros2)
+        broadcasters = harness.Peer([str(harness.REPO_ROOT / ".venv" / "bin" / "python"),
+                                     str(harness.PEERS_DIR / "dds_static_broadcasters.py"), "--frames",
+                                     *STATIC_FRAMES], env, name="static_broadcasters")
+        peers.append(broadcasters)
         for peer in peers:
             peer.wait_for("ready", timeout=T)
-        yield Setup(master, relay, stock, ros2, stock_dir, ros2_dir)
+        yield Setup(master, relay, stock, ros2, stock_dir, ros2_dir, broadcasters)
     finally:
         for peer in reversed(peers):
             peer.stop()
         master.cleanup()
 
 
-def _tool(master: harness.RosMaster, tool: str, *args: str, timeout: float = T) -> str:
-    cp = subprocess.run([harness.STOCK_PYTHON, tool, *args], env=master.env, stdin=subprocess.DEVNULL,
-                        capture_output=True, text=True, timeout=timeout)
+def _tool(master: harness.RosMaster, tool: str, *args: str, timeout: float = T,
+          env: Optional[Dict[str, str]] = None) -> str:
+    cp = subprocess.run([harness.STOCK_PYTHON, tool, *args], env={**master.env, **(env or {})},
+                        stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=timeout)
     assert cp.returncode == 0, f"{Path(tool).name} {' '.join(args)} exited {cp.returncode}:\n{cp.stdout}\n{cp.stderr}"
     return cp.stdout
 
@@ -163,17 +175,93 @@ def test_latched_late_joiners_both_ways(setup: Setup) -> None:
         (setup.ros2_dir / "late").touch()
         (setup.stock_dir / "late").touch()
         lates = setup.ros2.wait_for_count("late", 2, timeout=T)
-        late1 = setup.stock.wait_for("late", timeout=T)
+        # the other way, the rclpy node's two transient_local writers of /ros2_latched: a late stock subscriber
+        # gets each one's message, as it would from two latched ROS 1 publishers
+        lates1 = setup.stock.wait_for_count("late", 2, timeout=T)
     finally:
         second.terminate()
         second.wait(10)
     assert sorted(e["data"] for e in lates) == sorted(
         [f"ros1 latched {setup.stock.events('ready')[0]['pid']}", "latched by rostopic"]), lates
     late2 = max(lates, key=lambda e: e["after_ms"])
-    assert late1["data"] == f"ros2 latched {setup.ros2.events('ready')[0]['pid']}", late1
+    ros2_pid = setup.ros2.events("ready")[0]["pid"]
+    both = sorted([f"ros2 latched {ros2_pid}", f"ros2 latched 2 {ros2_pid}"])
+    assert sorted(e["data"] for e in lates1) == both, lates1
+    late1 = max(lates1, key=lambda e: e["after_ms"])
     print(f"late joiners: ROS 2 subscriber of the ROS 1 latched topic {late2['after_ms']:.0f} ms, "
           f"stock ROS 1 subscriber of the ROS 2 transient_local topic {late1['after_ms']:.0f} ms")
     assert late2["after_ms"] < 2000 and late1["after_ms"] < 2000, (late2, late1)
-    # and stock `rostopic echo` of the imported latched topic gets it at once
-    echoed = _tool(setup.master, harness.ROSTOPIC, "echo", "-n", "1", "/ros2_latched")
-    assert "ros2 latched" in echoed, echoed
+    # and stock `rostopic echo -n 2` of the imported latched topic gets both writers' messages at once
+    echoed = _tool(setup.master, harness.ROSTOPIC, "echo", "-n", "2", "/ros2_latched", timeout=10.0)
+    print(f"late `rostopic echo -n 2 /ros2_latched` (2 transient_local ROS 2 writers):\n{echoed}")
+    assert sorted(re.findall(r'data: "(ros2 latched[^"]*)"', echoed)) == both, echoed
+
+
+def test_every_static_transform_reaches_a_late_ros1_tf_listener(setup: Setup) -> None:
+    """Two static transform broadcasters on ROS 2's side of /tf_static: a stock tf2_ros listener that starts after
+    the relay has both gets both frames (ROS 1 keeps one latched message per publisher)."""
+    incoming = setup.ros2_entry("import", "/tf_static", lambda e: e.get("published", 0) >= len(STATIC_FRAMES))
+    assert incoming["latch"] is True and incoming["refused"] == 0, incoming
+    script = ("import json, sys, time, rospy, tf2_ros\n"
+              "rospy.init_node('late_tf_listener', anonymous=True, disable_signals=True)\n"
+              "buf = tf2_ros.Buffer()\nlistener = tf2_ros.TransformListener(buf)\n"
+              "frames = sys.argv[1:]\ndeadline = time.monotonic() + 15\n"
+              "def have(f): return buf.can_transform('base_link', f, rospy.Time(0))\n"
+              "while time.monotonic() < deadline and not all(have(f) for f in frames): time.sleep(0.05)\n"
+              "print(json.dumps({f: buf.lookup_transform('base_link', f, rospy.Time(0)).transform.translation.x "
+              "for f in frames if have(f)}))\n")
+    children = [pair.split(":")[1] for pair in STATIC_FRAMES]
+    out = _tool(setup.master, "-c", script, *children)
+    got = json.loads(out.strip().splitlines()[-1])
+    print(f"late tf2_ros listener of /tf_static (2 ROS 2 static broadcasters): {got}")
+    assert got == {child: float(i + 1) for i, child in enumerate(children)}, got
+
+
+def _yaml_fields(echoed: str) -> Dict[str, Any]:
+    import yaml
+
+    return {k: v for k, v in yaml.safe_load(echoed.split("---")[0]).items()}
+
+
+#: what the rclpy peer publishes on /r2_custom (tests/peers/ros2_relay_peer.py BASIC), as ROS 1 reads it: the same
+#: bits, ROS 1's ``byte`` being int8 where ROS 2's is an octet (200 is -56)
+BASIC = {"bool_value": True, "byte_value": 200, "char_value": 100, "float32_value": 1.5, "float64_value": -2.25e300,
+         "int8_value": -128, "uint8_value": 255, "int16_value": -32768, "uint16_value": 65535,
+         "int32_value": -2 ** 31, "uint32_value": 2 ** 32 - 1, "int64_value": -2 ** 63, "uint64_value": 2 ** 64 - 1}
+BASIC_ROS1 = {**BASIC, "byte_value": 200 - 256}
+
+
+def _types_path(setup: Setup) -> Dict[str, str]:
+    """Where the relay writes the modules of the types it built (``$ROS_HOME/micros_rt/ros1_types``): on the stock
+    tools' PYTHONPATH, as a user does with the path the relay's log names."""
+    return {"PYTHONPATH": str(Path(setup.master.env["ROS_HOME"]) / "micros_rt" / "ros1_types")}
+
+
+def test_a_ros2_only_type_reaches_stock_rostopic_echo_with_every_field(setup: Setup) -> None:
+    incoming = setup.ros2_entry("import", "/r2_custom", lambda e: e.get("published", 0) >= 1)
+    assert incoming["kind"] == "topic" and incoming["bad_input"] == 0, incoming
+    assert incoming["type_source"] == "ROS 2 definition", incoming
+    info = _tool(setup.master, harness.ROSTOPIC, "info", "/r2_custom")
+    assert "Type: test_msgs/BasicTypes" in info, info
+    echoed = _tool(setup.master, harness.ROSTOPIC, "echo", "-n", "1", "/r2_custom", env=_types_path(setup))
+    print(f"stock `rostopic echo -n 1 /r2_custom` (test_msgs/BasicTypes from rclpy, no ROS 1 package):\n{echoed}")
+    assert _yaml_fields(echoed) == BASIC_ROS1, echoed   # stock rospy connected: the md5s agree
+
+
+def test_services_of_a_ros2_only_type_both_ways(setup: Setup) -> None:
+    # ROS 1 -> ROS 2: stock `rosservice call` of the rclpy server, once the relay offers it
+    master = harness.xmlrpc_proxy(setup.master.uri)
+    harness.wait_until(lambda: list(master.lookupService("/test", "/r2_basic"))[0] == 1, T,  # type: ignore[arg-type]
+                       message="the relay offering /r2_basic in ROS 1")
+    request = {**BASIC_ROS1, "string_value": "héllo"}
+    answer = _tool(setup.master, ROSSERVICE, "call", "/r2_basic", json.dumps(request), env=_types_path(setup))
+    assert _yaml_fields(answer) == request, answer
+    # ROS 2 -> ROS 1: an rclpy client of the stock rospy server, whose class is built at run time (same md5)
+    (setup.ros2_dir / "call_basic.tmp").write_text(json.dumps({"name": "/ros1_basic",
+                                                               "fields": {**BASIC, "string_value": "wörld"}}))
+    (setup.ros2_dir / "call_basic.tmp").rename(setup.ros2_dir / "call_basic")
+    called = setup.ros2.wait_for("called_basic", timeout=T)
+    assert called.get("fields") == {**BASIC, "string_value": "wörld"}, called
+    for direction, name in (("import", "/r2_basic"), ("export", "/ros1_basic")):
+        entry = setup.ros2_entry(direction, name, lambda e: e.get("calls", 0) >= 1)
+        assert entry["failed"] == 0 and entry["type"] == "test_msgs/BasicTypes", entry

@@ -168,6 +168,29 @@ def test_rclpy_talker_to_micros_rt_listener(ros_master: harness.RosMaster, spawn
     assert talker.alive() or talker.returncode == 0
 
 
+def test_rclpy_talker_of_a_ros2_only_type_to_a_micros_rt_listener(ros_master: harness.RosMaster,
+                                                                  spawn: harness.Spawner) -> None:
+    """A NodeHandle subscription with ``micros_rt.ros2_message_class("test_msgs/msg/BasicTypes")``: a type ROS 1
+    has no package of, built from the ROS 2 installation; every field arrives (ROS 1's byte is int8, ROS 2's an
+    octet: the same bits, 200 is -56)."""
+    topic = "/interop/r2_only_from_ros2"
+    values = {"bool_value": True, "byte_value": 200, "char_value": 100, "float32_value": 1.5,
+              "float64_value": -2.25e300, "int8_value": -128, "uint8_value": 255, "int16_value": -32768,
+              "uint16_value": 65535, "int32_value": -2 ** 31, "uint32_value": 2 ** 32 - 1, "int64_value": -2 ** 63,
+              "uint64_value": 2 ** 64 - 1}
+    listener = spawn(mrt("listen", "--topic", topic, "--type", "test_msgs/msg/BasicTypes", "--full-msg",
+                         "--exit-after", 3, "--duration", 25), name="mrt_listener")
+    listener.wait_for("ready", T)
+    talker = spawn(ros2("talk", "--topic", topic, "--type", "test_msgs/msg/BasicTypes", "--count", 100, "--rate", 20,
+                        "--data-json", json.dumps(values), "--wait-subscribers", 1, "--wait-timeout", T,
+                        "--duration", 25), name="rclpy_talker")
+    got = listener.wait_for_count("recv", 3, T)
+    assert all(ev["transport"] == "DDS" for ev in got)
+    for ev in got:
+        assert ev["msg"] == {**values, "byte_value": 200 - 256}, ev["msg"]
+    assert talker.alive() or talker.returncode == 0
+
+
 # ---------------------------------------------------------------------------
 # QoS as ROS 2 sees it. Fast DDS does not report the history depth of remote endpoints (rclpy shows
 # depth 0 / "unknown" history for them), so depth is never asserted here.

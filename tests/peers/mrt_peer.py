@@ -219,7 +219,10 @@ def main() -> int:
 
     capture_logs()
 
-    data_class = roslib.message.get_message_class(args.type)
+    if args.type.count("/") == 2:   # a ROS 2 type name: ROS 1's package, else built from the ROS 2 installation
+        data_class = micros_rt.ros2_message_class(args.type)
+    else:
+        data_class = roslib.message.get_message_class(args.type)
     if data_class is None:
         emit("error", text=f"unknown type {args.type}")
         return 2

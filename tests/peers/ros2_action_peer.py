@@ -30,7 +30,7 @@ from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalRespons
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.qos import QoSProfile
-from test_msgs.action import Fibonacci  # type: ignore[import-not-found]
+from test_msgs.action import Fibonacci
 
 STATUS_NAMES = ("UNKNOWN", "ACCEPTED", "EXECUTING", "CANCELING", "SUCCEEDED", "CANCELED", "ABORTED")
 #: set when the peer stops: a "silent" goal callback returns then, so that the process exits cleanly

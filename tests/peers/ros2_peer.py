@@ -120,6 +120,8 @@ def set_fields(msg: Any, values: Dict[str, Any], i: int) -> None:
             setattr(msg, key, array.array("B", pattern_bytes(int(spec["len"]), int(spec.get("seed", 0)))))
         elif isinstance(val, dict) and hasattr(cur, "get_fields_and_field_types"):
             set_fields(cur, val, i)
+        elif elem == "octet" and not is_array and isinstance(val, int):
+            setattr(msg, key, bytes([val]))   # rclpy holds a byte as bytes of length 1
         elif isinstance(val, list) and is_array and "/" in elem:
             cls = msg_class(elem)
             items = []

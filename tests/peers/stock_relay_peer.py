@@ -4,10 +4,12 @@
     stock_relay_peer.py --trigger-dir DIR
 
 Publishes ``/chatter`` (std_msgs/String, 10 Hz, "ros1 <n>"), ``/clock`` (rosgraph_msgs/Clock, 10 Hz, 1000 s +
-n * 0.1 s) and the latched ``/ros1_latched`` (one message, "ros1 latched <pid>"); serves ``/set_flag`` (std_srvs/SetBool: success = data); listens to ``/ros2_chatter``
+n * 0.1 s) and the latched ``/ros1_latched`` (one message, "ros1 latched <pid>"); serves ``/set_flag`` (std_srvs/SetBool: success = data) and
+``/ros1_basic`` (test_msgs/BasicTypes, a type with no ROS 1 package, built here at run time: the request echoed);
+listens to ``/ros2_chatter``
 (the relay's import of a ROS 2 topic). A file ``late`` in ``--trigger-dir`` (looked for every 10 ms) makes it
-subscribe then to ``/ros2_latched`` and emit ``{"event": "late", "data", "after_ms"}`` with the time from creating
-the subscriber to its first message. Other events: ``ready``, ``recv`` for the first 20 messages of
+subscribe then to ``/ros2_latched`` and emit ``{"event": "late", "data", "after_ms"}`` for each message, with the
+time from creating the subscriber to it. Other events: ``ready``, ``recv`` for the first 20 messages of
 ``/ros2_chatter``, ``served`` per call.
 """
 
@@ -17,7 +19,6 @@ import argparse
 import json
 import os
 import sys
-import threading
 import time
 from typing import Any
 
@@ -25,6 +26,8 @@ import rospy
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, SetBoolResponse
+
+from ros1_srv_types import fields, srv_class
 
 
 def emit(event: str, **fields: Any) -> None:
@@ -56,13 +59,18 @@ def main() -> int:
         return SetBoolResponse(success=req.data, message=f"rospy {os.getpid()} got {req.data}")
 
     rospy.Service("/set_flag", SetBool, on_set)
-    got = threading.Event()
+    # test_msgs/BasicTypes has no ROS 1 package: its class built from the same definition as ROS 2's
+    basic_srv = srv_class("test_msgs/BasicTypes")
+
+    def on_basic(req: Any) -> Any:
+        emit("served", name="/ros1_basic")
+        return basic_srv._response_class(**fields(req))
+
+    rospy.Service("/ros1_basic", basic_srv, on_basic)
     start = [0.0]
 
     def on_late(msg: Any) -> None:
-        if not got.is_set():
-            got.set()
-            emit("late", data=msg.data, after_ms=(time.monotonic() - start[0]) * 1e3)
+        emit("late", data=msg.data, after_ms=(time.monotonic() - start[0]) * 1e3)
 
     emit("ready", pid=os.getpid())
     late_path = os.path.join(args.trigger_dir, "late")

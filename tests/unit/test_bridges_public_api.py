@@ -52,6 +52,7 @@ PUBLIC = frozenset({
     "micros_rt.transports.mcu.wire",
     "micros_rt.transports.dds.feed",
     "micros_rt.transports.dds.types",
+    "micros_rt.ros2_types",   # ROS 1 classes of ROS 2-only types (public: ros2_message_class ...), their modules
     "micros_rt.services",   # the services' public package (docs/services.md): the relay's ros2: services use its helper
 })
 #: the command line's error type, for the programs' ``__main__`` modules (``micros-rt mqtt-bridge`` ...)

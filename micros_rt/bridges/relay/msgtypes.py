@@ -34,15 +34,13 @@ import rospy.msg
 
 from micros_rt.exceptions import MicrosRtError
 from micros_rt.extend import TimeoutTransport
-from micros_rt.transports.dds.types import register_message_classes
+from micros_rt.ros2_types import Ros2TypeError, build_classes
 
 from .services import ServiceCallError, encode_header, read_header
 
 __all__ = ["TypeLearningError", "class_from_definition", "definition_field", "installed_class",
            "learn_from_publisher", "publisher_header", "raw_service_class"]
 
-_lock = threading.Lock()
-_built: Dict[Tuple[str, str], Type[genpy.Message]] = {}   # (type, md5) -> class built at run time
 
 
 class TypeLearningError(MicrosRtError):
@@ -93,31 +91,16 @@ def class_from_definition(type_name: str, md5: str, definition: str, *,
                           compressed: bool = False) -> Type[genpy.Message]:
     """The class of ``type_name`` built from ``definition`` (the ``message_definition`` text, or a
     :func:`definition_field` when ``compressed``), checked against ``md5``; built once per (type, md5)."""
-    with _lock:
-        found = _built.get((type_name, md5))
-    if found is not None:
-        return found
     if not definition.strip():  # e.g. an exporting relay of a micros_rt version before run-time types
         raise TypeLearningError(f"no definition of {type_name} came with it")
     try:
         text = _inflate(definition) if compressed else definition
     except (binascii.Error, zlib.error, UnicodeDecodeError, ValueError) as exc:
         raise TypeLearningError(f"the definition of {type_name} sent with it is damaged ({exc})") from None
-    import genpy.dynamic
-
     try:
-        classes: Dict[str, Type[genpy.Message]] = genpy.dynamic.generate_dynamic(type_name, text)
-    except Exception as exc:  # genmsg's parse errors have no common base: say which type and why
-        raise TypeLearningError(f"cannot build {type_name} from its definition: {exc}") from None
-    cls = classes.get(type_name)
-    if cls is None:
-        raise TypeLearningError(f"the definition sent for {type_name} does not define it")
-    if md5 and cls._md5sum != md5:
-        raise TypeLearningError(f"the definition sent for {type_name} gives md5 {cls._md5sum}, not the {md5} its "
-                                "publisher announced")
-    register_message_classes(classes)
-    with _lock:
-        return _built.setdefault((type_name, md5), cls)
+        return build_classes(type_name, text, md5)
+    except Ros2TypeError as exc:
+        raise TypeLearningError(str(exc)) from None
 
 
 def learn_from_publisher(master: Any, topic: str, *, caller_id: str, timeout: float = 5.0) -> Type[genpy.Message]:

@@ -41,12 +41,14 @@ import roslib.message
 import rospy
 
 import micros_rt
-from micros_rt.extend import SendQueue, sender_for
+from micros_rt.extend import SendQueue, latch_several, sender_for
 from micros_rt.qos.options import drop_counters
 from micros_rt.log import nonblocking_logger
 from micros_rt.qos import SubscribeQoSOptions
 from micros_rt.transports.base import EndpointSpec, PushReader, TransportWriter
 
+from ...ros2_types import (Ros2TypeError, python_modules_dir, ros2_message_class, ros2_service_class,
+                           write_python_modules)
 from .config import ExportRule, Ros2Entry
 from .msgtypes import TypeLearningError, class_from_definition, installed_class, publisher_header
 from .services import ServiceCallError, call_service
@@ -225,15 +227,20 @@ class _TopicIn:
     kind = "topic"
 
     def __init__(self, side: "Ros2Side", entry: Ros2Entry, data_class: Type[genpy.Message], latch: bool,
-                 best_effort: bool) -> None:
+                 best_effort: bool, type_source: str) -> None:
         from micros_rt.transports.dds.feed import DDSFeed
 
         relay = side.relay
         self.entry = entry
         self.latch = latch
+        self.type_source = type_source   # "installed" (ROS 1's package) or "ROS 2 definition" (built here)
         self.feed: Optional[DDSFeed] = None
         own_graph = relay.graph_id
-        queue_size = 1 if latch else entry.queue_size
+        # latched: each transient_local writer's last message (several writers' at once, as static transform
+        # broadcasters send theirs on discovery), kept for late ROS 1 subscribers as ROS 1 keeps one per publisher
+        self.latched: Dict[str, Any] = {}   # writer guid -> its last message, oldest first
+        self._lock = threading.Lock()
+        queue_size = entry.queue_size
         options = entry.import_options
         if best_effort and not (options and options.using_best_effort_protocol):
             # a reliable reader does not match a best-effort writer: take it as it is sent
@@ -254,17 +261,35 @@ class _TopicIn:
 
         # the relay's QoS profile keeps this publication off DDS (TCPROS only): ROS 2 has the original
         self.pub = relay.nh.advertise(entry.ros1_name, data_class, queue_size, latch=latch)
+        if latch:
+            latch_several(self.pub, self._lock, lambda: list(self.latched.values()))
         self.sub = relay.nh.subscribe_reader(f"relay ROS 2 import {entry.ros2_name}", data_class, open_reader,
-                                             self.pub.publish, queue_size, options)
+                                             self._publish_latched if latch else self.pub.publish, queue_size,
+                                             options)
+
+    def _publish_latched(self, msg: Any) -> None:
+        writer = (getattr(msg, "_connection_header", None) or {}).get("writer", "")
+        with self._lock:
+            self.latched.pop(writer, None)
+            self.latched[writer] = msg
+            self.pub.publish(msg)
 
     def refresh(self, side: "Ros2Side", state: GraphState) -> None:
-        pass
+        if not self.latched:
+            return
+        from micros_rt.transports.dds.types import dds_topic_name
+
+        alive = {w.guid for w in side.directory.endpoints("writers", dds_topic_name(self.entry.ros2_name))}
+        with self._lock:
+            for writer in [w for w in self.latched if w not in alive]:
+                del self.latched[writer]   # a ROS 2 writer gone takes its latched message with it, as in ROS 1
 
     def stats(self) -> Dict[str, Any]:
         s = self.sub.statistics()
         feed = self.feed
         return {"direction": "import", "kind": "topic", "name": self.entry.name, "as": self.entry.ros1_name,
-                "latch": self.latch, "received": s.received, "published": s.delivered,
+                "type_source": self.type_source, "latch": self.latch, "latched_writers": len(self.latched), "received": s.received,
+                "published": s.delivered,
                 "dropped_queue_full": s.dropped_queue_full, **{c: getattr(s, c) for c in drop_counters()},
                 "refused": feed.refused if feed else 0, "bad_input": feed.bad_input if feed else 0,
                 "lost": feed.lost if feed else 0}
@@ -432,6 +457,36 @@ class Ros2Side:
                          "not used", self.relay.config.graph, entry.where, entry.name, what,
                          ", ".join(entry.topic_keys))
 
+    def _ros2_service_class(self, type_name: str) -> Any:
+        """The installed ROS 1 service class of ``type_name``, else the one built from the ROS 2 installation of the
+        process's helper (which serves the calls, so has the type)."""
+        found = _service_class(type_name)
+        if found is None:
+            pkg, _, name = type_name.partition("/")
+            found = ros2_service_class(f"{pkg}/srv/{name}", python=self.gateway().python)
+            self._for_stock_tools(type_name)
+        return found
+
+    def _for_stock_tools(self, type_name: str) -> None:
+        """A type built from ROS 2's definition: its Python modules where stock ROS 1 tools can import them
+        (``rostopic echo`` loads a topic's class by its package name)."""
+        directory = python_modules_dir()
+        try:
+            packages = write_python_modules(directory)
+        except (OSError, ValueError) as exc:
+            _log.warning("micros_rt: relay %s: %s has no ROS 1 package here and was built from its ROS 2 definition; "
+                         "its Python modules for stock ROS 1 tools could not be written to %s: %s",
+                         self.relay.config.graph, type_name, directory, exc)
+            return
+        if type_name.partition("/")[0] in packages:
+            _log.info("micros_rt: relay %s: %s has no ROS 1 package here: built from its ROS 2 definition; stock ROS "
+                      "1 tools (rostopic echo, rosservice call) read it with PYTHONPATH=%s", self.relay.config.graph,
+                      type_name, directory)
+        else:   # ROS 1 has the package, without this type: modules beside it would hide the installed ones
+            _log.warning("micros_rt: relay %s: %s was built from its ROS 2 definition, but ROS 1's package %s is "
+                         "installed without it: stock ROS 1 tools cannot load it (the relay carries it all the same)",
+                         self.relay.config.graph, type_name, type_name.partition("/")[0])
+
     # -- ROS 1 -> ROS 2 --------------------------------------------------------------------------------------
     def _export(self, entry: Ros2Entry, state: GraphState) -> Optional[str]:
         own = self._own()
@@ -529,11 +584,12 @@ class Ros2Side:
         if not uri:
             return None
         type_name = header.get("type", "")
-        service_class = _service_class(type_name)
-        if service_class is None:
+        try:
+            service_class = self._ros2_service_class(type_name)
+        except (Ros2TypeError, ValueError, micros_rt.MicrosRtError) as exc:
             return (f"{entry.where}: cannot export service {entry.name} ({type_name or 'type unknown'}) to ROS 2: "
                     f"its package is not installed on this host, and a ROS 2 client's request must be mapped field "
-                    f"by field; install the package (ROS 1) on the relay's host")
+                    f"by field, from the ROS 2 definition when there is no ROS 1 package: {exc}")
         if header.get("md5sum") and header["md5sum"] != service_class._md5sum:
             return (f"{entry.where}: cannot export service {entry.name}: its server has another definition of "
                     f"{type_name} (md5 {header['md5sum']}, here {service_class._md5sum})")
@@ -604,6 +660,8 @@ class Ros2Side:
             cls, source = self._action_class(entry, ros2_type)
         except TypeLearningError as exc:
             return f"{what}: {exc}"
+        if source != "installed":
+            self._for_stock_tools(cls._type)
         self._topic_options_on_service(entry, "an action")
         try:
             incoming = ActionIn(self.relay.nh, entry, cls, ros2_type, source)
@@ -624,10 +682,16 @@ class Ros2Side:
             return (f"{entry.where}: cannot import {entry.name} from ROS 2: its publishers use different types "
                     f"({', '.join([type_name, *others])})")
         data_class = installed_class(type_name)
+        type_source = "installed"
         if data_class is None:
-            return (f"{entry.where}: cannot import {entry.name} from ROS 2: its type {type_name} is not installed "
-                    f"on this host (ROS 2 discovery carries no definition); install the ROS 1 package "
-                    f"{type_name.split('/')[0]} on the relay's host")
+            type_source = "ROS 2 definition"
+            pkg, _, name = type_name.partition("/")
+            try:   # ROS 2 discovery carries no definition: the ROS 2 installation's
+                data_class = ros2_message_class(f"{pkg}/msg/{name}")
+            except (Ros2TypeError, ValueError) as exc:
+                return (f"{entry.where}: cannot import {entry.name} from ROS 2: its type {type_name} has no ROS 1 "
+                        f"package on this host and cannot be built from its ROS 2 definition: {exc}")
+            self._for_stock_tools(type_name)
         local = state.type_in_use(entry.ros1_name, self._own())
         if local is not None and local != type_name:
             return (f"{entry.where}: cannot import {entry.name} from ROS 2 as {entry.ros1_name}: ROS 2 sends "
@@ -636,7 +700,7 @@ class Ros2Side:
         latch = entry.latch if entry.latch is not None else any(w.transient_local for w in writers)
         best_effort = all(w.best_effort for w in writers)
         try:
-            incoming = _TopicIn(self, entry, data_class, latch, best_effort)
+            incoming = _TopicIn(self, entry, data_class, latch, best_effort, type_source)
         except micros_rt.MicrosRtError as exc:
             return f"{entry.where}: cannot import {entry.name} from ROS 2: {exc}"
         self._add(entry, incoming)
@@ -653,11 +717,11 @@ class Ros2Side:
         if others:
             return (f"{entry.where}: cannot import service {entry.name} from ROS 2 as {entry.ros1_name}: "
                     f"{', '.join(others)} serves {entry.ros1_name} in this graph already")
-        service_class = _service_class(type_name)
-        if service_class is None:
-            return (f"{entry.where}: cannot import service {entry.name} from ROS 2: its type {type_name} is not "
-                    f"installed on this host (ROS 2 discovery carries no definition); install the ROS 1 package "
-                    f"{type_name.split('/')[0]} on the relay's host")
+        try:
+            service_class = self._ros2_service_class(type_name)
+        except (Ros2TypeError, ValueError, micros_rt.MicrosRtError) as exc:
+            return (f"{entry.where}: cannot import service {entry.name} from ROS 2: its type {type_name} has no "
+                    f"ROS 1 package on this host and cannot be built from its ROS 2 definition: {exc}")
         from micros_rt.services import srv_mapping
 
         try:

@@ -59,8 +59,11 @@ class DDSFeed:
         self.lost = 0         # samples DDS reported lost: the writer's history dropped them before they arrived whole
         self._bad_log = RateLimitedLog(_log, interval=10.0)
         self._lock = threading.Lock()  # Cyclone may call the listener from more than one receive thread
+        self._ros_type = str(spec.data_class._type)
+        self._headers: Dict[str, Dict[str, str]] = {}   # writer guid -> the messages' _connection_header
         user_data = make_user_data(**spec.tag)
-        depth = 1 if spec.latch else spec.queue_size
+        # a latched topic too: several transient_local writers each send their history at once (static transforms)
+        depth = spec.queue_size
         qos = (plain_reader_qos(queue_size=depth, transient_local=spec.latch, user_data=user_data) if options is None
                else reader_qos(options, queue_size=depth, transient_local=spec.latch, user_data=user_data))
         # not this process's own writers of the topic (an importing relay's local publication of the same name
@@ -112,6 +115,14 @@ class DDSFeed:
                             f"{writer.guid} that is not a valid {self.dds_type.type_name} ({exc}); "
                             f"{self.bad_input} so far")
                         continue
+                    header = self._headers.get(writer.guid)
+                    if header is None:
+                        # one dict per writer, as rospy shares one per connection: which writer sent it (a ROS 2
+                        # writer has no node name; a micros_rt one's tag names it)
+                        header = self._headers[writer.guid] = {
+                            "callerid": (writer.tag or {}).get("node") or writer.guid, "writer": writer.guid,
+                            "topic": self.topic, "type": self._ros_type, "transport": "DDS"}
+                    msg._connection_header = header
                     self._push.put(msg, int(info.source_timestamp), writer.guid)
 
     def matched_writers(self) -> List[str]:

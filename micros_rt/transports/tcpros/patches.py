@@ -285,6 +285,44 @@ def configure_subscriber_impl(impl: Any, *, buff_size: Optional[int] = None, tcp
         impl.set_tcp_nodelay(True)
 
 
+class _LatchedReplay:
+    """A rospy subscriber listener: a new subscriber of a latching publisher gets each message ``messages()``
+    names (oldest first) before the one rospy latches itself, which stays the latched one (unless ``messages()``
+    no longer has it: its source left, and the newest of the others takes its place)."""
+
+    def __init__(self, impl: Any, lock: Any, messages: Callable[[], List[Any]]) -> None:
+        self._impl = impl
+        self._lock = lock
+        self._messages = messages
+
+    def peer_subscribe(self, topic_name: str, topic_publish: Any, peer_publish: Callable[[Any], None]) -> None:
+        # rospy's add_connection calls this, then sends its latched message; writing to one connection also
+        # makes the message written rospy's latched one, so the newest is put back (``lock``: the owner's
+        # publishing lock, so no publish() comes in between)
+        with self._lock:
+            current = self._messages()
+            newest = self._impl.latch
+            if newest is not None and not any(msg is newest for msg in current):
+                newest = current[-1] if current else None   # its source is gone: the newest left is latched
+            for msg in current:
+                if msg is not newest:
+                    peer_publish(msg)
+            self._impl.latch = newest
+
+    def peer_unsubscribe(self, topic_name: str, num_peers: int) -> None:
+        pass
+
+
+def replay_latched(topic: str, lock: Any, messages: Callable[[], List[Any]]) -> None:
+    """Latching publisher ``topic`` sends a new TCPROS subscriber every message of ``messages()`` (taken under
+    ``lock``, which the owner also holds while it publishes), then its own latched one: several latched
+    messages per publisher, where rospy keeps one."""
+    impl = topic_impl(topic, publisher=True)
+    if impl is None or not impl.is_latch:
+        raise ValueError(f"topic {topic} has no latching publisher in this process")
+    impl.add_subscriber_listener(_LatchedReplay(impl, lock, messages))
+
+
 def latched_messages(topic: str) -> List[Any]:
     """The last message of each latching TCPROS publisher connected to subscribed ``topic`` (rospy keeps
     it on the connection for callbacks added later)."""
