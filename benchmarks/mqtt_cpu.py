@@ -4,6 +4,9 @@ real C++ mqtt_client (ROS 1) with the same parameter file, one at a time, on loo
     .venv/bin/python benchmarks/mqtt_cpu.py                                   # micros_rt's bridge, all cases
     .venv/bin/python benchmarks/mqtt_cpu.py --real-client /path/to/mqtt_client_node --rounds 3
     .venv/bin/python benchmarks/mqtt_cpu.py --cases string_out --profile /tmp/prof   # py-spy, if installed
+    .venv/bin/python benchmarks/mqtt_cpu.py --old-root /tmp/main_checkout ...   # also another checkout's bridge
+
+The real client: ``benchmarks/build_mqtt_client.sh`` builds it from mqtt_client's sources.
 
 Cases: ``string_out`` (std_msgs/String, 100 Hz, ROS -> MQTT), ``string_in`` (MQTT -> ROS), ``image_out`` and
 ``image_in`` (sensor_msgs/Image 640x480 rgb8, 921,600 data bytes, 10 Hz). ROS side: a stock rospy publisher or
@@ -12,6 +15,12 @@ announcement, retained, then the payloads) or counts. Each case gets its own ros
 runs ``--warmup`` seconds, then its process's CPU time (utime + stime of /proc/<pid>/stat) is read over
 ``--duration`` seconds and divided by the messages that crossed it in that window. Nothing is built here: the real
 client is a binary you give (``--real-client``), started with its private parameters loaded by ``rosparam``.
+ROS -> MQTT cases give the bridge ``mqtt_client_version: 2`` (mqtt_client ignores the key): no peer announces on
+the benchmark's broker, so by default the bridge would hold a topic's first 10 s (issue 44) and the window would
+measure that instead of the steady state. ``idle_busy_peer``: with ``--real-client`` the busy peer is a second
+real client (node ``/busy_peer``) fed by a stock rospy publisher at 1,000 msg/s, else a paho client in this
+process. ``--old-root``: a third stack, ``micros_rt_old``, the bridge of another checkout (its ``micros_rt``
+imported from there, this venv), alternating with the others in each round (A/B in one run).
 Results: a table on stdout and ``--out`` (JSON).
 """
 
@@ -173,11 +182,14 @@ def run_case(name: str, stack: str, args: argparse.Namespace, work: Path) -> Dic
         params = work / f"params_{name}_{stack}.yaml"
         import yaml
 
+        if case["direction"] == "out":   # the steady state, not the first 10 s's hold (see the docstring)
+            entry["mqtt_client_version"] = 2
         params.write_text(yaml.safe_dump({"broker": {"host": "127.0.0.1", "port": bport}, "bridge": entry}))
-        if stack == "micros_rt":
+        if stack.startswith("micros_rt"):
+            root = args.old_root if stack == "micros_rt_old" else str(ROOT)
             bridge = subprocess.Popen([MRT_PYTHON, "-m", "micros_rt.bridges.mqtt", "--params", str(params)], env=env,
-                                      stdout=subprocess.DEVNULL, stderr=open(work / f"bridge_{name}.log", "w"),
-                                      cwd=str(ROOT))
+                                      stdout=subprocess.DEVNULL,
+                                      stderr=open(work / f"bridge_{name}_{stack}.log", "w"), cwd=root)
         else:
             subprocess.run([ROSPARAM, "load", str(params), "/mqtt_client"], env=env, check=True, timeout=30)
             bridge = subprocess.Popen([args.real_client], env=env, stdout=subprocess.DEVNULL,
@@ -209,6 +221,18 @@ def run_case(name: str, stack: str, args: argparse.Namespace, work: Path) -> Dic
             assert sub.stdout.readline().strip() == "ready"
             if idle:
                 client.subscribe(data_topic, 0)
+            real_peer = idle and bool(args.real_client)
+            if real_peer:   # a real mqtt_client streams String at 1,000 msg/s from a stock rospy publisher
+                peer_params = work / f"busy_peer_{name}_{stack}.yaml"
+                peer_params.write_text(yaml.safe_dump({"broker": {"host": "127.0.0.1", "port": bport}, "bridge": {
+                    "ros2mqtt": [{"ros_topic": "/bench/ros_in", "mqtt_topic": data_topic}]}}))
+                subprocess.run([ROSPARAM, "load", str(peer_params), "/busy_peer"], env=env, check=True, timeout=30)
+                procs.append(subprocess.Popen([args.real_client, "__name:=busy_peer"], env=env,
+                                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+                pub = subprocess.Popen([STOCK_PYTHON, "-c", PUBLISHER, case["type"], str(case["rate"])], env=env,
+                                       stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+                procs.append(pub)
+                assert pub.stdout is not None and pub.stdout.readline().strip() == "ready"
             msg = cls()
             if case["type"] == "sensor_msgs/Image":
                 payload = image_payload()
@@ -216,7 +240,8 @@ def run_case(name: str, stack: str, args: argparse.Namespace, work: Path) -> Dic
                 msg.data = "micros_rt bench " + "x" * 40
                 payload = serialized(msg)
             announcement = codec.encode_msg_type(codec.RosMsgType.of(cls, stamped=False))
-            client.publish("mqtt_client/ros_msg_type/" + data_topic, announcement, 1, True)
+            if not real_peer:
+                client.publish("mqtt_client/ros_msg_type/" + data_topic, announcement, 1, True)
             stop_pub = threading.Event()
 
             def publish_loop() -> None:   # mqtt_client's own sender: the announcement before every payload
@@ -228,7 +253,8 @@ def run_case(name: str, stack: str, args: argparse.Namespace, work: Path) -> Dic
                         client.publish("mqtt_client/ros_msg_type/" + data_topic, announcement, 0, True)
                     client.publish(data_topic, payload, 0, False)
 
-            threading.Thread(target=publish_loop, daemon=True).start()
+            if not real_peer:
+                threading.Thread(target=publish_loop, daemon=True).start()
             result["_stop"] = stop_pub
 
             def count() -> int:
@@ -242,7 +268,7 @@ def run_case(name: str, stack: str, args: argparse.Namespace, work: Path) -> Dic
         time.sleep(args.warmup)
         n0, c0, t0 = count(), cpu_seconds(bridge.pid), time.monotonic()
         profiler = None
-        if args.profile and stack == "micros_rt":
+        if args.profile and stack.startswith("micros_rt"):
             Path(args.profile).mkdir(parents=True, exist_ok=True)
             py_spy = str(Path(sys.executable).parent / "py-spy")
             profiler = subprocess.Popen([py_spy, "record", "--pid", str(bridge.pid), "--duration",
@@ -282,9 +308,11 @@ def main(argv: List[str]) -> int:
                     help="MQTT -> ROS: send the type announcement before every payload, as mqtt_client does")
     ap.add_argument("--no-announce-each", dest="announce_each", action="store_false")
     ap.add_argument("--profile", default="", help="py-spy record the micros_rt bridge into this directory")
+    ap.add_argument("--old-root", default="", help="also run the bridge of this checkout (stack micros_rt_old)")
     ap.add_argument("--out", default=str(HERE / "results" / "mqtt_cpu.json"))
     args = ap.parse_args(argv)
-    stacks = ["micros_rt"] + (["mqtt_client"] if args.real_client else [])
+    stacks = (["micros_rt"] + (["micros_rt_old"] if args.old_root else [])
+              + (["mqtt_client"] if args.real_client else []))
     rows: List[Dict[str, Any]] = []
     with tempfile.TemporaryDirectory(prefix="mqtt_cpu_") as tmp:
         for r in range(args.rounds):
@@ -316,9 +344,15 @@ def main(argv: List[str]) -> int:
             if a and b:
                 ratio = a["us_per_message_median"] / b["us_per_message_median"]
                 print(f"{name}: micros_rt / mqtt_client = {ratio:.2f}x")
+                old = summary.get(f"{name}/micros_rt_old")
+                if old:
+                    print(f"{name}: micros_rt_old / mqtt_client = "
+                          f"{old['us_per_message_median'] / b['us_per_message_median']:.2f}x")
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps({"when": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                                           "host_cpus": os.cpu_count(), "real_client": args.real_client or None,
+                                          "old_root": args.old_root or None,
+                                          "load_average": os.getloadavg(),
                                           "rows": rows, "summary": summary}, indent=1) + "\n")
     print(f"\nwritten: {args.out}")
     return 0
