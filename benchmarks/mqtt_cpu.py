@@ -127,7 +127,7 @@ def stop(proc: Optional["subprocess.Popen[Any]"]) -> None:
         return
     proc.send_signal(signal.SIGINT)
     try:
-        proc.wait(10)
+        proc.wait(3)        # rosmaster often needs more than SIGINT: nothing here is worth waiting for
     except subprocess.TimeoutExpired:
         proc.kill()
         proc.wait(10)

@@ -36,7 +36,7 @@ def read_frames(peer: socket.socket, count: int, *, quiet: float = 10.0) -> List
     """The sequence numbers of the whole frames read from ``peer`` until ``count`` arrived or nothing came for
     ``quiet`` seconds (AssertionError on a torn frame)."""
     peer.settimeout(quiet)
-    data, seqs = b"", []
+    data, seqs = b"", []  # type: Tuple[bytes, List[int]]
     while len(seqs) < count:
         try:
             chunk = peer.recv(1 << 20)
@@ -66,7 +66,7 @@ def test_an_idle_link_is_written_from_the_publishing_thread() -> None:
             writer_threads.append(threading.current_thread().name)
             return original(data)
 
-        transport.write_data = spy  # type: ignore[method-assign]
+        transport.write_data = spy
         for n in range(100):
             conn.write_data(frame(n, 64))
             assert transport.stat_num_msg == n + 1   # on the wire when write_data returned

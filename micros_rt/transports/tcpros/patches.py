@@ -535,6 +535,8 @@ class DirectQueuedConnection(QueuedConnection):  # type: ignore[misc]
     way. rospy's hand-over to the link's thread (a Condition's notify, a ``sleep(0)``, the thread's wake-up) was
     about a third of a String's publish at 1,000 msg/s (issue 44, py-spy)."""
 
+    _queue: List[bytes]   # rospy's (set in its __init__)
+
     def __init__(self, connection: Any, queue_size: int) -> None:
         self._busy = False          # the thread is writing what it took (outside the lock)
         self._rest: Optional[bytes] = None   # what the socket did not take of a message written at once
