@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import signal
 import socket
 import socketserver
 import subprocess
@@ -42,6 +41,9 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(ROOT / "scripts"))
 import capture_cvra_fixtures as cvra  # noqa: E402
+
+sys.path.insert(0, str(HERE))
+from mqtt_cpu import stop, wait_port  # noqa: E402
 
 STOCK_PYTHON = "/usr/bin/python3"
 # CVRA's message.send and service_call.call use unbound sockets: their datagrams and connections come from
@@ -107,28 +109,6 @@ def free_port(address: str, kind: int) -> int:
     with socket.socket(socket.AF_INET, kind) as s:
         s.bind((address, 0))
         return int(s.getsockname()[1])
-
-
-def wait_port(port: int, timeout: float = 15.0) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        try:
-            with socket.create_connection(("127.0.0.1", port), timeout=0.5):
-                return
-        except OSError:
-            time.sleep(0.05)
-    raise RuntimeError(f"nothing listens on {port} after {timeout} s")
-
-
-def stop(proc: Optional["subprocess.Popen[Any]"]) -> None:
-    if proc is None or proc.poll() is not None:
-        return
-    proc.send_signal(signal.SIGINT)
-    try:
-        proc.wait(10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait(10)
 
 
 def plain(value: Any) -> Any:

@@ -122,15 +122,19 @@ def wait_port(port: int, timeout: float = 15.0) -> None:
     raise RuntimeError(f"nothing listens on {port} after {timeout} s")
 
 
-def stop(proc: Optional["subprocess.Popen[Any]"]) -> None:
-    if proc is None or proc.poll() is not None:
-        return
-    proc.send_signal(signal.SIGINT)
-    try:
-        proc.wait(3)        # rosmaster often needs more than SIGINT: nothing here is worth waiting for
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait(10)
+def stop(proc: Optional["subprocess.Popen[Any]"]) -> Optional[int]:
+    """SIGINT, then SIGKILL after 3 s (rosmaster often needs more than SIGINT); the exit code (None: no process).
+    Also used by the other benchmarks of this folder (mqtt_start_order.py, mcu_cvra_live.py)."""
+    if proc is None:
+        return None
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(3)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(10)
+    return proc.returncode
 
 
 def image_payload() -> bytes:

@@ -22,8 +22,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -32,6 +30,8 @@ from pathlib import Path
 from typing import Any, Dict, List, Optional
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+from mqtt_cpu import free_port, stop, wait_port  # noqa: E402
 ROOT = HERE.parent
 STOCK_PYTHON = "/usr/bin/python3"
 MRT_PYTHON = sys.executable
@@ -96,36 +96,6 @@ ROWS = [
     ("1.1.0 only reads, bridge first", "bridge", 4.0, False, None),
     ("1.1.0 only reads, bridge given mqtt_client_version: 1", "bridge", 4.0, False, 1),
 ]
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def wait_port(port: int, timeout: float = 15.0) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        try:
-            with socket.create_connection(("127.0.0.1", port), timeout=0.5):
-                return
-        except OSError:
-            time.sleep(0.05)
-    raise RuntimeError(f"nothing listens on {port} after {timeout} s")
-
-
-def stop(proc: Optional["subprocess.Popen[Any]"]) -> Optional[int]:
-    if proc is None:
-        return None
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(10)
-    return proc.returncode
 
 
 def run_row(row: Any, args: argparse.Namespace, work: Path, index: int) -> Dict[str, Any]:
