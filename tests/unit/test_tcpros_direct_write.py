@@ -33,11 +33,11 @@ def frame(n: int, size: int) -> bytes:
 
 
 def read_frames(peer: socket.socket, count: int, *, quiet: float = 10.0) -> List[int]:
-    """The sequence numbers of the whole frames read from ``peer`` until ``count`` arrived or nothing came for
-    ``quiet`` seconds (AssertionError on a torn frame)."""
+    """The sequence numbers of the whole frames read from ``peer`` until ``count`` arrived, or frame ``count - 1``
+    did, or nothing came for ``quiet`` seconds (AssertionError on a torn frame)."""
     peer.settimeout(quiet)
     data, seqs = b"", []  # type: Tuple[bytes, List[int]]
-    while len(seqs) < count:
+    while len(seqs) < count and not (seqs and seqs[-1] == count - 1):
         try:
             chunk = peer.recv(1 << 20)
         except (socket.timeout, TimeoutError):
