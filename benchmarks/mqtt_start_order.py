@@ -13,7 +13,8 @@ the 1.1.0 started (the issue's "publishing 3 s after that"): that is its type an
 checks every text that arrives on ``/so/from_real`` against the texts it sent: one it did not send is
 **corrupted** (1.1.0 read a 2.x payload: it takes the first byte for its "stamped" flag). "after" counts the texts
 sent after both programs ran that never arrived (held messages arrive late, not lost). The table also gives
-whether the 1.1.0 was still running at the end, and the bridge's counters (``held``, ``held_dropped`` when the
+how many of the missing texts never reached the broker (a paho client on the bridge's MQTT topic reads both
+generations' payloads), whether the 1.1.0 was still running at the end, and the bridge's counters (``held``, ``held_dropped`` when the
 newest 1,000 overflowed) and warnings about generations.
 """
 
@@ -22,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import struct
 import subprocess
 import sys
 import tempfile
@@ -82,10 +84,11 @@ for line in sys.stdin:
     elif cmd == "report":
         with lock:
             after = [x for x, at in sent.items() if both_at[0] is not None and at >= both_at[0] + 1.0]
-            missing = sum(1 for x in after if x not in seen)
+            missing = [x for x in after if x not in seen]
             print(json.dumps({"sent": len(sent), "received": got["good"] + got["corrupted"], "good": got["good"],
                               "corrupted": got["corrupted"], "examples": got["examples"],
-                              "sent_after_both": len(after), "missing_after_both": missing}), flush=True)
+                              "sent_after_both": len(after), "missing_after_both": len(missing),
+                              "missing_texts": missing}), flush=True)
 """
 
 ROWS = [
@@ -166,6 +169,22 @@ def run_row(row: Any, args: argparse.Namespace, work: Path, index: int) -> Dict[
             real, real_started = start_real(), time.monotonic()
             time.sleep(gap)
             bridge = start_bridge()
+        # what reaches the broker on the bridge's topic (either generation), to tell where a missing text stopped
+        on_broker: List[str] = []
+        import paho.mqtt.client as paho
+        from paho.mqtt.enums import CallbackAPIVersion
+
+        def on_message(client: Any, userdata: Any, msg: Any) -> None:
+            p = bytes(msg.payload)
+            if len(p) >= 5 and p[0] in (0, 1) and struct.unpack_from("<I", p, 1 + 8 * p[0])[0] == len(p) - 5 - 8 * p[0]:
+                on_broker.append(p[5 + 8 * p[0]:].decode("utf-8", "replace"))     # 1.x: [flag][stamp][String]
+            elif len(p) >= 4 and struct.unpack_from("<I", p)[0] == len(p) - 4:
+                on_broker.append(p[4:].decode("utf-8", "replace"))                # 2.x: [String]
+        watcher = paho.Client(CallbackAPIVersion.VERSION2, protocol=paho.MQTTv311)
+        watcher.on_message = on_message
+        watcher.connect("127.0.0.1", bport)
+        watcher.subscribe("so/data", 0)
+        watcher.loop_start()
         command("both")
         pub_at = real_started + 3.0
         deadline = time.monotonic() + args.duration
@@ -178,6 +197,11 @@ def run_row(row: Any, args: argparse.Namespace, work: Path, index: int) -> Dict[
         time.sleep(2.0)          # what is under way arrives
         command("report")
         report = json.loads(stock.stdout.readline())
+        watcher.loop_stop()
+        watcher.disconnect()
+        broker_texts = set(on_broker)
+        missing = report.pop("missing_texts")
+        report["missing_never_on_broker"] = sum(1 for x in missing if x not in broker_texts)
         real_alive = real.poll() is None
         counters: Dict[str, Any] = {}
         stop(bridge)
@@ -214,11 +238,12 @@ def main(argv: List[str]) -> int:
             results.append(r)
             print(json.dumps(r), flush=True)
     print("\n| start order | sent to the bridge | 1.1.0 republished | corrupted | missing (sent after both ran) "
-          "| 1.1.0 alive at the end |")
-    print("| --- | --- | --- | --- | --- | --- |")
+          "| of those, never on the broker | 1.1.0 alive at the end |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
     for r in results:
         print(f"| {r['row']} | {r['sent']} | {r['received']} | {r['corrupted']} | "
-              f"{r['missing_after_both']} of {r['sent_after_both']} | {'yes' if r['real_alive_at_end'] else 'no'} |")
+              f"{r['missing_after_both']} of {r['sent_after_both']} | {r['missing_never_on_broker']} | "
+              f"{'yes' if r['real_alive_at_end'] else 'no'} |")
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps({"when": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                                           "real_v1": args.real_v1, "rate": args.rate, "duration": args.duration,
