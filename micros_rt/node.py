@@ -25,6 +25,7 @@ from .core import introspection as _introspection
 from .transports.tcpros import patches
 from .core.publication import Publisher, _Publication
 from .core import negotiated
+from .transports.builtin import builtin_transports
 from .transports.negotiated import PublicationSide
 from .core.runtime import (_graph_id, _log, _node, _require_node, dds_backend, note_ros2_at_start, ros2_visible,
                            start_dds_early, wait_dds_started, watch_ros2)
@@ -477,6 +478,10 @@ from typing import TYPE_CHECKING  # noqa: E402  (kept beside the service methods
 if TYPE_CHECKING:  # the services and actions packages are imported on first use
     from .actions import ActionFromRos2, ActionToRos2
     from .services import ServiceClient, ServiceServer
+
+
+# the node's own negotiated transports, first in the registry's order (a program's come after them)
+negotiated.install_builtin(builtin_transports(dds_backend=dds_backend, visible=lambda: ros2_visible(_node.profile)))
 
 
 def _publication_side(transport: negotiated.NegotiatedTransport,

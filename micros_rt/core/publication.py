@@ -14,7 +14,7 @@ import genpy
 import rospy
 import rospy.topics
 
-from ..negotiation import NegotiatedTransport, Verdict, remember_verdict
+from ..negotiation import OfferJudge, Verdict, remember_verdict
 from ..qos import AdvertiseQoSOptions
 from ..transports.base import EndpointSpec, ProfileBackend, TransportWriter
 from ..transports.dds.publication import DDSPublication, ForeignSource, ForeignWriters, ReaderAlive
@@ -115,9 +115,9 @@ class _Publication:
         side.delegate(source, alive)
 
     # -- negotiation (XML-RPC threads) -------------------------------------
-    def negotiated_transports(self, subscriber: str) -> Dict[str, NegotiatedTransport]:
+    def negotiated_transports(self, subscriber: str) -> Dict[str, OfferJudge]:
         """What ``requestTopic`` may negotiate for this topic with ``subscriber``: each side's, judged there."""
-        negotiated: Dict[str, NegotiatedTransport] = {}
+        negotiated: Dict[str, OfferJudge] = {}
         for protocol, side in self.sides.items():
             transport = side.negotiated(subscriber)
             if transport is not None:

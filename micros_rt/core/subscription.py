@@ -24,6 +24,7 @@ import rospy
 
 from ..transports.tcpros import patches
 from ..transports.tcpros.reader import TcprosReader
+from ..transports.links import remove_link
 from . import threadprio
 from .delivery import Inbox
 from .registry import EndpointRegistry
@@ -505,7 +506,7 @@ class _Subscription:
             if not conn.seen:
                 _log.warning("micros_rt: topic %s: publisher %s accepted DDS but its writer was never discovered "
                              "in 30 s; check both nodes' network (ROS_IP, CYCLONEDDS_URI)", self.topic, acc.pub_uri)
-            patches.remove_pseudo_connection(self.topic, conn, publisher=False)
+            remove_link(self.topic, conn, publisher=False)
             conn.close()
         if self.queue or any(r.pending() for r in self.pushed):
             return  # samples of a gone writer still to deliver: prune next time

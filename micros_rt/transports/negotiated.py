@@ -19,14 +19,15 @@ negotiated transports (:data:`micros_rt.core.negotiated.TRANSPORTS`; a plug-in r
 from __future__ import annotations
 
 import abc
+import dataclasses
 import threading
-from typing import Any, Dict, List, Optional, Protocol, Tuple, Type
+from typing import Any, Callable, Dict, List, Optional, Protocol, Tuple, Type
 
-from ..negotiation import NegotiatedTransport, Verdict
+from ..negotiation import OfferJudge, Verdict
 from ..qos import AdvertiseQoSOptions, SubscribeQoSOptions
 from .base import PushReader, TransportWriter
 
-__all__ = ["PublicationHost", "PublicationSide", "SubscriptionHost", "SubscriptionSide"]
+__all__ = ["NegotiatedTransport", "PublicationHost", "PublicationSide", "SubscriptionHost", "SubscriptionSide"]
 
 
 class PublicationHost(Protocol):
@@ -37,6 +38,8 @@ class PublicationHost(Protocol):
     queue_size: Optional[int]
     latch: bool
     options: AdvertiseQoSOptions
+    #: what this node tags its endpoints with (node name, graph): a transport that carries tags carries these
+    tag: Dict[str, str]
 
     def remember(self, subscriber: str, verdict: Verdict) -> None:
         """Keep the last verdict for ``subscriber`` (its caller id), for ``micros-rt topic info``."""
@@ -63,9 +66,14 @@ class PublicationSide(abc.ABC):
         self.writer: Optional[TransportWriter] = None
 
     @abc.abstractmethod
-    def negotiated(self, subscriber: str) -> Optional[NegotiatedTransport]:
+    def negotiated(self, subscriber: str) -> Optional[OfferJudge]:
         """How to parse and judge ``subscriber``'s offer of this protocol; None: not judged here (a
         :attr:`refusal`): the subscriber's entry is skipped as a stock publisher would, with no warning."""
+
+    def open_now(self) -> bool:
+        """Open this side's writer now if it waits for a first subscriber (a lazy DDS writer, when ROS 2 appears);
+        True when it has one."""
+        return self.writer is not None
 
     def sending(self) -> bool:
         """Whether ``publish()`` sends through :attr:`writer` now (it has one, and someone to serve with it)."""
@@ -119,6 +127,11 @@ class SubscriptionHost(Protocol):
     def wake(self) -> None:
         """Wake the delivery thread (a link came, data may be there)."""
 
+    def poll_link(self, link: Any, inlet: PushReader) -> bool:
+        """For a side whose links the delivery thread can wait on itself (shared memory's): attach ``link``, True
+        when the delivery thread does (its messages then go through ``inlet``'s admission); False: the link's own
+        thread must hand them to ``inlet``."""
+
 
 class SubscriptionSide(abc.ABC):
     """One negotiated transport of one subscription: its entry in ``requestTopic``, and the links it makes when
@@ -159,3 +172,16 @@ class SubscriptionSide(abc.ABC):
 
     def close(self) -> None:
         """Close the links (the delivery thread has stopped)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class NegotiatedTransport:
+    """A negotiated transport as a node offers it: its protocol name in ``requestTopic`` and the makers of its two
+    sides (what :func:`micros_rt.extend.register_negotiated_transport` takes)."""
+
+    protocol: str
+    #: ``(publication, refusal) -> side``; ``refusal``: the node's profile keeps the topic off this transport
+    #: (a verdict in words), else None
+    publication: Callable[[PublicationHost, Optional[Verdict]], PublicationSide]
+    #: ``(subscription) -> side``, made when the subscription's TransportHints allow the protocol
+    subscription: Callable[[SubscriptionHost], SubscriptionSide]

@@ -15,7 +15,7 @@ from ...log import nonblocking_logger
 from ...negotiation import DDS, DDSAnswer, DDSOffer
 from ..base import EndpointSpec
 from ..negotiated import SubscriptionHost, SubscriptionSide
-from ..tcpros import patches
+from ..links import PseudoLink, add_link
 from .exactly_once import Accepted, WriterTable
 
 if TYPE_CHECKING:
@@ -136,7 +136,7 @@ class DDSSubscription(SubscriptionSide):
                 return 0, f"cannot read {answer.topic} over DDS", 0
         source = (f"straight from the writers of graph {answer.via}'s relay (now {answer.writer}), no hop through "
                   f"{answer.node or pub_uri}") if answer.via else f"from writer {answer.writer}"
-        conn = patches.DDSConnection(host.topic, pub_uri, "i", f"DDS connection on topic {dds_topic} {source}",
+        conn = PseudoLink(host.topic, pub_uri, "i", f"DDS connection on topic {dds_topic} {source}",
                                     peer_guid=answer.writer, on_close=host.writers.connection_closed,
                                     callerid_pub=answer.node)
         accepted = Accepted(pub_uri, answer.node, answer.latch, conn)
@@ -144,7 +144,7 @@ class DDSSubscription(SubscriptionSide):
         if answer.via:
             host.writers.delegate(answer.via, accepted, answer.qos)
         host.raise_priority(answer.qos)
-        if not patches.add_pseudo_connection(host.topic, conn, publisher=False):
+        if not add_link(host.topic, conn, publisher=False):
             conn.close()
             return 0, "subscriber closed", 0
         _log.debug("micros_rt: topic %s: receiving from %s over DDS", host.topic, pub_uri)
