@@ -98,6 +98,15 @@ class PublicationSide(abc.ABC):
         """(offers refused although the rules matched, links closed because their subscriber never came)."""
         return 0, 0
 
+    def delegate(self, source: Callable[[], Any], alive: Callable[[str], bool]) -> None:
+        """Serve subscribers with writers of another graph when they can take them (``source()`` names them now,
+        ``alive(peer)`` says whether a subscriber's reader still exists); a transport without delegation says so."""
+        raise NotImplementedError(f"{self.protocol or type(self).__name__} links cannot be delegated")
+
+    def delegated_links(self) -> int:
+        """Subscribers served by the writers of :meth:`delegate`, not by this side's own."""
+        return 0
+
     def link_states(self) -> Optional[Dict[str, bool]]:
         """Per subscriber caller id: whether its link is matched yet (for ``micros-rt topic info``); None when
         this transport's links have no such step (they carry data once made)."""

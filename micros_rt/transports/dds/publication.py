@@ -133,6 +133,10 @@ class DDSPublication(PublicationSide):
         self._foreign = (source, alive)
         self.host.writers_changed()
 
+    def delegated_links(self) -> int:
+        with self.lock:
+            return len(self.delegated)
+
     # -- negotiation (XML-RPC threads) -------------------------------------
     def facts(self) -> PublicationFacts:
         dds, host = self.dds, self.host
