@@ -25,7 +25,7 @@ from .core import introspection as _introspection
 from .transports.tcpros import patches
 from .core.publication import Publisher, _Publication
 from .core import negotiated
-from .transports.builtin import builtin_transports
+from .transports.builtin import builtin_transports, inbox_for
 from .transports.negotiated import PublicationSide
 from .core.runtime import (_graph_id, _log, _node, _require_node, dds_backend, note_ros2_at_start, ros2_visible,
                            start_dds_early, wait_dds_started, watch_ros2)
@@ -416,7 +416,8 @@ class NodeHandle:
             # reader comes with the first publisher that takes DDS
             dds = dds_backend() if ros2_visible(_node.profile) and hints.allows_dds else None
             sides = {name: t.subscription for name, t in negotiated.TRANSPORTS.items()}
-            new = _Subscription(resolved, data_class, queue_size, effective, hints, dds=dds, tag=_tag(),
+            inbox = inbox_for(dds=dds, allows_shm=hints.allows_shm)
+            new = _Subscription(resolved, data_class, queue_size, effective, hints, inbox=inbox, tag=_tag(),
                                 graph=_node.graph, sides=sides, extra=_profile_backends(), lifespan=lifespan)
             new.callbacks = ((callback, callback_args),)  # before start(): a latched message may come at once
             created.append(new)

@@ -107,7 +107,7 @@ def _subscription_info(sub: Any) -> Dict[str, Any]:
     stats = sub.statistics()
     return {"topic": sub.topic, "type": sub.data_class._type, "queue_size": sub.queue_size,
             "qos": sub.effective.to_dict(), "qos_given": sub.options is not None,
-            "hints": list(sub.hints.protocols), "dds_reader": bool(sub.readers),
+            "hints": list(sub.hints.protocols), "dds_reader": any(side.has_reader() for side in sub.sides.values()),
             "links": _links(sub.topic, publisher=False),
             "statistics": dataclasses.asdict(stats), "latency": sub.stats.summary()}
 

@@ -9,14 +9,17 @@ from typing import TYPE_CHECKING, Callable, Optional, Tuple, cast
 from ..negotiation import DDS, SHM, Verdict
 from .dds.publication import DDSPublication
 from .dds.subscription import DDSSubscription, DDSSubscriptionHost
+from .base import Inbox
 from .negotiated import NegotiatedTransport, PublicationHost, PublicationSide, SubscriptionHost, SubscriptionSide
+from .shm.host import unavailable_reason as shm_unavailable
+from .shm.inbox import ShmInbox
 from .shm.publication import ShmPublication
 from .shm.subscription import ShmSubscription
 
 if TYPE_CHECKING:
     from .dds.backend import DDSBackend
 
-__all__ = ["builtin_transports"]
+__all__ = ["builtin_transports", "inbox_for"]
 
 
 def builtin_transports(*, dds_backend: "Callable[[], Optional[DDSBackend]]",
@@ -39,3 +42,14 @@ def builtin_transports(*, dds_backend: "Callable[[], Optional[DDSBackend]]",
     return (NegotiatedTransport(SHM, lambda host, refusal: ShmPublication(host, refusal=refusal),
                                 lambda host: ShmSubscription(host, poll=host.poll_link)),
             NegotiatedTransport(DDS, dds_publication, dds_subscription))
+
+
+def inbox_for(*, dds: "Optional[DDSBackend]", allows_shm: bool) -> Inbox:
+    """What a subscription's delivery thread waits on. With shared memory, an iceoryx2 wait set on its SHM links'
+    listeners (one thread wake per message), and DDS readers wake it per sample from Cyclone's thread; else, with
+    a DDS reader from the start, Cyclone's wait set; else an Event until a first SHM link comes."""
+    if dds is not None and not (allows_shm and shm_unavailable() is None):
+        from .dds.inbox import CycloneInbox
+
+        return CycloneInbox(dds.participant)
+    return ShmInbox()

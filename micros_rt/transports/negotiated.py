@@ -179,6 +179,35 @@ class SubscriptionSide(abc.ABC):
         """Readers whose links' threads hand over messages, for the delivery thread to take from."""
         return ()
 
+    # -- a side with pulled readers (DDS), which the delivery thread drains (it asked: ``drain_me``) ------------
+    def drain(self, limit: int) -> bool:
+        """On the delivery thread: deliver what this side's readers hold (through the host's admission path and
+        callbacks), up to about ``limit`` per reader; True when more may be waiting."""
+        return False
+
+    def tick(self, now: float) -> None:
+        """On the delivery thread, after each drain: deliver what waited for a negotiation's answer."""
+
+    def housekeeping(self, now: float) -> None:
+        """On the delivery thread, about twice a second: drop links whose publisher went."""
+
+    def pending(self) -> bool:
+        """Messages taken from the readers and not yet delivered."""
+        return False
+
+    def latched(self) -> List[Any]:
+        """The last message of each latching publisher connected over this transport (for a callback added
+        later, as rospy replays them)."""
+        return []
+
+    def kept_writers(self) -> int:
+        """Publishers' writers this side keeps state for now (``statistics().writers``)."""
+        return 0
+
+    def has_reader(self) -> bool:
+        """Whether this side has a reader of its own open (``micros-rt topic info``)."""
+        return False
+
     def close(self) -> None:
         """Close the links (the delivery thread has stopped)."""
 
