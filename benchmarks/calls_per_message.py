@@ -78,8 +78,9 @@ if not done.wait(120):
     print(json.dumps({"error": "timed out", "got": state["n"]}), flush=True)
     sys.exit(1)
 links = {} if KIND == "rospy" else sub.connection_transports()
+dds_reader = False if KIND == "rospy" else any(s["dds_reader"] for s in micros_rt.node_info()["subscriptions"])
 print(json.dumps({"calls": calls[0], "count": COUNT, "seconds": state["t1"] - state["t0"],
-                  "links": sorted(set(links.values())),
+                  "links": sorted(set(links.values())), "dds_reader": dds_reader,
                   "by_function": None if BY is None else [(k, v / COUNT) for k, v in BY.most_common(40)]}), flush=True)
 '''
 
@@ -195,7 +196,7 @@ def main() -> None:
             if out.get("by_function"):
                 for fn, n in out["by_function"]:
                     print(f"    {n:6.2f}  {fn}")
-            links = out["links"]
+            links = out["links"] + (["a DDS reader too"] if out.get("dds_reader") else [])
         rows.append({"case": name, "calls_per_message": per, "links": links})
         print(f"{name:64s} {' '.join(f'{c:6.1f}' for c in per)}  {links}", flush=True)
     if args.only:

@@ -5,19 +5,20 @@ callbacks run on the delivery thread, never on a transport's or a socket's threa
 
 from __future__ import annotations
 
-import threading
 from typing import Any, Dict
+
+from ..transports.base import Wakeup
 
 __all__ = ["EventInbox"]
 
 
 class EventInbox:
-    """An Event: every reader and link wakes the delivery thread itself."""
+    """A wake-up flag: every reader and link wakes the delivery thread itself."""
 
     wakes_on_readers = False
 
     def __init__(self) -> None:
-        self._event = threading.Event()
+        self._event = Wakeup()
         self.links: Dict[Any, Any] = {}
 
     def attach(self, reader: Any) -> None:
@@ -34,7 +35,6 @@ class EventInbox:
 
     def wait(self, timeout: float) -> None:
         self._event.wait(timeout)
-        self._event.clear()
 
     def close(self) -> None:
         pass

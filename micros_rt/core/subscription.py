@@ -289,7 +289,7 @@ class _Subscription:
                 now = time.monotonic()
                 for side in self.pulled:
                     side.tick(now)
-                if self._deadline_on:
+                if self._deadline_on and now >= self.deadline.next_due:
                     self._check_deadline(now)
                 if now >= next_housekeeping or self._housekeeping_due:
                     self._housekeeping_due = False

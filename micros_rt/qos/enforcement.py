@@ -121,7 +121,12 @@ class SourceOrder(Admission):
         return self.enabled
 
     def check(self, sent_ns: int, source_ns: int, qos: Any) -> bool:
-        return self.admit(sent_ns)
+        if not sent_ns:
+            return True
+        if sent_ns < self._last:
+            return False
+        self._last = sent_ns
+        return True
 
     def admit(self, source_ns: int) -> bool:
         if not self.enabled or not source_ns:
@@ -178,7 +183,7 @@ class DeadlineMonitor:
     (None, 0.6, None, 2.0)
     """
 
-    __slots__ = ("deadline", "_last_delivery", "_last_report", "_missing", "missed_total")
+    __slots__ = ("deadline", "_last_delivery", "_last_report", "_missing", "missed_total", "next_due")
 
     def __init__(self, deadline: float, *, start: float) -> None:
         self.deadline = deadline
@@ -186,6 +191,8 @@ class DeadlineMonitor:
         self._last_report = start
         self._missing = False
         self.missed_total = 0
+        #: the earliest time :meth:`poll` can report a miss (a caller may skip polling before it)
+        self.next_due = start + deadline
 
     @property
     def enabled(self) -> bool:
@@ -195,6 +202,7 @@ class DeadlineMonitor:
         if not self.enabled or now - self._last_report < self.deadline:
             return None
         self._last_report = now
+        self.next_due = now + self.deadline
         self._missing = True
         self.missed_total += 1
         return now - self._last_delivery
@@ -202,6 +210,7 @@ class DeadlineMonitor:
     def delivered(self, now: float) -> Optional[float]:
         silent = now - self._last_delivery
         self._last_delivery = self._last_report = now
+        self.next_due = now + self.deadline
         if self._missing:
             self._missing = False
             return silent

@@ -26,6 +26,7 @@ itself (Cyclone: the time-based filter); the subscription's one admission path a
 from __future__ import annotations
 
 import collections
+import queue
 import importlib
 import threading
 import time
@@ -38,7 +39,7 @@ import genpy
 from ..qos import AdvertiseQoSOptions, SubscribeQoSOptions
 
 __all__ = ["BACKOFF_FIRST", "BACKOFF_MAX", "BackPressuredWriter", "send_with_backoff", "Backend", "EndpointSpec", "Feed", "MirrorWriter", "PROFILE_BACKENDS", "Inbox", "ProfileBackend", "PushInfo",
-           "PushReader", "ReaderBackend", "RemoteWriter", "Sample", "TIME_FILTER", "LIFESPAN", "SOURCE_ORDER", "TransportReader",
+           "PushReader", "ReaderBackend", "Wakeup", "RemoteWriter", "Sample", "TIME_FILTER", "LIFESPAN", "SOURCE_ORDER", "TransportReader",
            "TransportWriter", "WriterBackend", "close_profile_backends", "profile_backends"]
 
 # Names of the subscriber QoS a reader can enforce natively (:attr:`TransportReader.enforces`): the catalogue's
@@ -224,6 +225,36 @@ class Inbox(Protocol):
 
     def close(self) -> None:
         """Release the wait set (after the delivery thread stopped waiting on it) and the links it holds."""
+
+
+class Wakeup:
+    """A wake-up flag between threads, cheaper than ``threading.Event`` (whose set and wait are a dozen Python
+    calls on a Condition, per message when messages come one at a time): a C queue holding at most one token.
+
+    :meth:`set` after new data; :meth:`wait` returns at once when a set came since the last wait, else at the first
+    set or after ``timeout``. A set that comes while the waiter is draining is never lost: the flag is cleared
+    before the waiter looks at the data, so a set after that puts a token again."""
+
+    __slots__ = ("_tokens", "_raised")
+
+    def __init__(self) -> None:
+        self._tokens: "queue.SimpleQueue[None]" = queue.SimpleQueue()
+        self._raised = False
+
+    def set(self) -> None:
+        if not self._raised:
+            self._raised = True
+            self._tokens.put(None)
+
+    def is_set(self) -> bool:
+        return self._raised
+
+    def wait(self, timeout: Optional[float]) -> None:
+        try:
+            self._tokens.get(timeout=timeout)
+        except queue.Empty:
+            return
+        self._raised = False
 
 
 class PushInfo:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import threading
 from typing import TYPE_CHECKING, Any, Callable, Dict, List, Optional
 
+from ..base import Wakeup
 from .channel import wake_events
 from .host import iceoryx2, wait_set
 
@@ -22,7 +23,7 @@ class ShmInbox:
     wakes_on_readers = False
 
     def __init__(self) -> None:
-        self._event = threading.Event()
+        self._event = Wakeup()
         self._lock = threading.Lock()
         self._pending: List["ShmLink"] = []
         self.links: Dict["ShmLink", Any] = {}     # polled link -> its wait-set guard
@@ -53,7 +54,6 @@ class ShmInbox:
             self._wait_links(timeout)
         else:
             self._event.wait(timeout)
-            self._event.clear()
 
     def _wait_links(self, timeout: float) -> None:
         """On the delivery thread: attach new links, let go of closed ones, then wait on all of them."""
@@ -64,8 +64,8 @@ class ShmInbox:
             guard = waitset.attach_notification(listener)
             iox = self._iox = (waitset, listener, notifier, guard, iceoryx2().Duration.from_secs_f64)
             self._notify = notifier.notify
-            if self._event.is_set():  # a wake that came as an Event, before the notifier was there
-                self._event.clear()
+            if self._event.is_set():  # a wake that came before the notifier was there
+                self._event.wait(0)
                 return
         waitset, listener, _notifier, _guard, duration = iox
         if self._pending:
@@ -106,3 +106,4 @@ class ShmInbox:
                     port.delete()
                 except Exception:
                     pass
+
