@@ -78,7 +78,7 @@ if not done.wait(120):
     print(json.dumps({"error": "timed out", "got": state["n"]}), flush=True)
     sys.exit(1)
 links = {} if KIND == "rospy" else sub.connection_transports()
-dds_reader = False if KIND == "rospy" else any(s["dds_reader"] for s in micros_rt.node_info()["subscriptions"])
+dds_reader = False if KIND == "rospy" else any(s["dds_reader"] for s in __import__("micros_rt.core.introspection", fromlist=["x"]).node_info()["subscriptions"])
 print(json.dumps({"calls": calls[0], "count": COUNT, "seconds": state["t1"] - state["t0"],
                   "links": sorted(set(links.values())), "dds_reader": dds_reader,
                   "by_function": None if BY is None else [(k, v / COUNT) for k, v in BY.most_common(40)]}), flush=True)
@@ -149,9 +149,10 @@ def run_case(pub_kind: str, sub_kind: str, opts: str, *, count: int, skip: int, 
                     raise SystemExit("rosmaster did not come up")
                 time.sleep(0.1)
         topic = "/calls_chatter"
+        log = open(Path(tempfile.gettempdir()) / "micros_rt_calls_sub.log", "w")
         sub = subprocess.Popen([MRT if sub_kind == "mrt" else ROSPY, "-c", _SUB, str(count), str(skip),
                                 sub_kind, topic, opts], env=_env(master, domain, sub_kind == "mrt"), text=True,
-                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, start_new_session=True)
+                               stdout=subprocess.PIPE, stderr=log, start_new_session=True)
         procs.append(sub)
         assert sub.stdout is not None
         while "READY" not in (sub.stdout.readline() or "READY"):
@@ -163,7 +164,7 @@ def run_case(pub_kind: str, sub_kind: str, opts: str, *, count: int, skip: int, 
             if line.startswith("{"):
                 out: dict = json.loads(line)
                 return out
-        raise SystemExit("the subscriber ended without a result")
+        raise SystemExit(f"the subscriber ended without a result (its log: {log.name})")
     finally:
         for p in reversed(procs):
             p.terminate()
