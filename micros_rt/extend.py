@@ -45,7 +45,7 @@ from .core.negotiated import register as register_negotiated_transport
 from .core.negotiated import unregister as unregister_negotiated_transport
 from .core.introspection import unregister_section as unregister_info_section
 from .core.send_queue import SendQueue, sender_for
-from .core.runtime import dds_backend
+from .node import dds_backend
 from .negotiation import MalformedNegotiationError, OfferJudge, Verdict
 from .qos import UNBOUNDED_QUEUE_DEPTH
 from .transports.base import PushReader

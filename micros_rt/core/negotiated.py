@@ -12,11 +12,10 @@ from __future__ import annotations
 
 from typing import Dict, Tuple
 
-from ..negotiation.protocol import DDS, NEGOTIATED_PROTOCOLS, register_protocol, unregister_protocol
+from ..negotiation.protocol import NEGOTIATED_PROTOCOLS, register_protocol, unregister_protocol
 from ..transports.negotiated import NegotiatedTransport
-from .runtime import _log, _node
 
-__all__ = ["NegotiatedTransport", "TRANSPORTS", "install_builtin", "open_dds_sides", "register", "unregister"]
+__all__ = ["NegotiatedTransport", "TRANSPORTS", "install_builtin", "register", "unregister"]
 
 #: protocol name -> transport, in preference order (a publication's sides are made in this order)
 TRANSPORTS: Dict[str, NegotiatedTransport] = {}
@@ -28,22 +27,6 @@ def install_builtin(transports: Tuple[NegotiatedTransport, ...]) -> None:
     TRANSPORTS.clear()
     TRANSPORTS.update({t.protocol: t for t in transports})
     TRANSPORTS.update(plugged)
-
-
-def open_dds_sides() -> None:
-    """ROS 2 was seen (``auto`` visibility): every topic's DDS writer and reader now, as visibility on makes them
-    with the topic; the links negotiated before stay as they are."""
-    opened = 0
-    for pub in _node.publications.all():
-        writer = pub.sides.get(DDS)
-        if writer is not None and writer.open_now():
-            opened += 1
-    for sub in _node.subscriptions.all():
-        reader = sub.sides.get(DDS)
-        if reader is not None and reader.open_first():
-            opened += 1
-    _log.info("micros_rt: ROS 2 is on the DDS domain: this node's topics are ROS 2 topics now (%d DDS writers and "
-              "readers)", opened)
 
 
 def register(transport: NegotiatedTransport) -> None:

@@ -14,7 +14,8 @@ import genpy
 import rospy
 import rospy.topics
 
-from ..negotiation import DDS, OfferJudge, Verdict, remember_verdict
+from ..negotiation import OfferJudge, Verdict, remember_verdict
+from ..negotiation import protocol as names
 from ..qos import AdvertiseQoSOptions
 from ..transports.base import EndpointSpec, ProfileBackend, TransportWriter
 from ..transports.negotiated import PublicationSide
@@ -241,19 +242,19 @@ class Publisher:
         return 0 if self._pub is None else self._pub.ready_connections()
 
     def get_dds_connections(self) -> int:
-        side = None if self._pub is None else self._pub.sides.get(DDS)
+        side = None if self._pub is None else self._pub.sides.get(names.DDS)
         return 0 if side is None else side.pseudo_links()
 
     def get_delegated_dds_connections(self) -> int:
         """DDS subscribers served by the foreign writers of :meth:`delegate_dds`, not by this node."""
-        side = None if self._pub is None else self._pub.sides.get(DDS)
+        side = None if self._pub is None else self._pub.sides.get(names.DDS)
         return 0 if side is None else side.delegated_links()
 
     def delegate_dds(self, source: Callable[[], Any], alive: Callable[[str], bool]) -> None:
         """Serve this topic's micros_rt subscribers with another graph's writers when they can take them.
 
-        For a program that republishes what arrives over DDS from another ROS graph's relay (an importing
-        relay): ``source()`` names those writers now (a :class:`micros_rt.ForeignWriters`; None: none), ``alive(guid)`` says whether a reader is
+        For a program that republishes what arrives over DDS from another ROS graph's relay (a relay that
+        brings a topic in): ``source()`` names those writers now (a :class:`micros_rt.ForeignWriters`; None: none), ``alive(guid)`` says whether a reader is
         still in DDS discovery. A subscriber whose offer those writers can serve (same DDS topic and domain,
         compatible QoS) is answered with them and reads them straight, and keeps reading their successors
         (a restarted relay); any other is served by this node's own writer, which sends only while such a
@@ -261,7 +262,7 @@ class Publisher:
         subscribers that open a reader there (micros_rt's do). TCPROS subscribers are unaffected."""
         if self._pub is None:
             raise rospy.ROSException("publisher is unregistered")
-        self._pub.delegate(DDS, source, alive)
+        self._pub.delegate(names.DDS, source, alive)
 
     def statistics(self) -> PublisherStatistics:
         """Counters of this topic's publication (shared by the Publishers of the topic in this node)."""

@@ -12,6 +12,7 @@ It names no transport but TCPROS, which every subscription has.
 
 from __future__ import annotations
 
+import functools
 import math
 import threading
 import time
@@ -116,7 +117,8 @@ class _Subscription:
         self.inbox: Inbox = inbox if inbox is not None else EventInbox()
         #: sides with pulled readers, which the delivery thread drains (DDS)
         self.pulled: Tuple[SubscriptionSide, ...] = ()
-        self._polled_inlet: Optional[PushReader] = None  # the pushed reader of links the delivery thread polls
+        #: what a link the delivery thread polls hands each message to (its messages count as ``inlet``'s)
+        self._polled_deliver: Callable[[Any, int, Any], None] = lambda msg, source_ns, link: None
         #: the negotiated transports the hints allow, by protocol name (each its side of the subscription)
         self.sides: Dict[str, SubscriptionSide] = {
             protocol: make(self) for protocol, make in sides.items() if protocol in hints.protocols}
@@ -246,7 +248,7 @@ class _Subscription:
         """For a side whose links the delivery thread can wait on itself (shared memory): attach ``link``, True
         when it does (its messages then go through ``inlet``'s admission); False: the link's own thread must
         hand them to ``inlet``."""
-        self._polled_inlet = inlet
+        self._polled_deliver = functools.partial(self._deliver_pushed, inlet)
         return self.inbox.attach_link(link)
 
     def pushed_pending(self) -> bool:
@@ -321,7 +323,7 @@ class _Subscription:
             links = self.inbox.links
             if links:  # links the delivery thread waits on itself (shared memory)
                 for link in links:
-                    if link.drain(self._deliver_polled, _TAKE_BATCH) >= _TAKE_BATCH:
+                    if link.drain(self._polled_deliver, _TAKE_BATCH) >= _TAKE_BATCH:
                         more = True
             for inlet in self._pushed:
                 if inlet.queue:
@@ -380,11 +382,6 @@ class _Subscription:
         if self._checks and not self._admit_enforced(reader, source_ns, qos, sent_ns=sent_ns):
             return
         self.deliver(msg, source_ns or None, qos.latency_budget if qos is not None else 0.0)
-
-    def _deliver_polled(self, msg: Any, source_ns: int, link: Any) -> None:
-        inlet = self._polled_inlet
-        assert inlet is not None
-        self._deliver_pushed(inlet, msg, source_ns, link)
 
     def deliver(self, msg: Any, source_ts_ns: Optional[int], budget: float) -> None:
         """Hand one message to the callbacks."""

@@ -49,3 +49,20 @@ def test_a_built_in_transport_cannot_be_unregistered() -> None:
     with pytest.raises(ValueError, match="built in"):
         unregister_negotiated_transport("SHM")
     assert "SHM" in negotiated_protocols()
+
+
+def test_the_core_imports_no_module_of_any_one_transport() -> None:
+    transports = ("dds", "shm", "mqtt", "mcu")
+    offenders = []
+    for path in sorted((ROOT / "micros_rt" / "core").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                parts = node.module.split(".")
+                names = [a.name for a in node.names]
+                if (any(p in transports for p in parts) or "cyclone" in parts
+                        or (parts[-1] == "transports" and any(n in transports for n in names))):
+                    offenders.append(f"{path.name}:{node.lineno}: {node.module} {names}")
+            elif isinstance(node, ast.Import):
+                offenders += [f"{path.name}:{node.lineno}: {a.name}" for a in node.names
+                              if a.name.split(".")[0] in ("cyclonedds", "iceoryx2")]
+    assert offenders == []
