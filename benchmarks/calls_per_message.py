@@ -5,8 +5,9 @@
 
 Each case is a publisher and a subscriber in separate processes beside a rosmaster of its own (loopback, its own
 DDS domain): stock rospy to stock rospy (TCPROS, under /usr/bin/python3), micros_rt to micros_rt under the defaults
-(shared memory), stock rospy to micros_rt (TCPROS into micros_rt's admission path), and micros_rt to micros_rt with
-a time filter and a deadline asked for (the admission an option asks for). The subscriber installs a profile
+(shared memory), stock rospy to micros_rt (TCPROS into micros_rt's admission path), micros_rt to micros_rt with
+a time filter, a deadline and source order asked for (the admission options ask for), and micros_rt to micros_rt
+over DDS (shared memory off, ROS 2 visibility on: the plane between hosts, loopback-only Cyclone). The subscriber installs a profile
 function in every thread before any is started (``threading.setprofile``) and counts Python ``call`` events while
 its window is open (``CALLS_BY_FUNCTION=1``: and prints them by function): from its ``--skip``-th message to ``--count`` messages later. The count is deterministic up to
 the housekeeping threads' ticks inside the window (a few per second), so the publisher sends at ``--rate``.
@@ -25,6 +26,7 @@ import tempfile
 import time
 import xmlrpc.client
 from pathlib import Path
+from typing import Dict, Optional
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
@@ -109,11 +111,14 @@ while True:
         time.sleep(delay)
 '''
 
+#: the DDS plane between two nodes of this host, as between hosts (shared memory off, ROS 2 visibility on)
+_DDS = {"MICROS_RT_DISABLE_SHM": "1", "MICROS_RT_ROS2": "on"}
 CASES = (
-    ("rospy -> rospy (TCPROS)", "rospy", "rospy", "plain"),
-    ("micros_rt -> micros_rt (defaults: SHM)", "mrt", "mrt", "plain"),
-    ("rospy -> micros_rt (TCPROS)", "rospy", "mrt", "plain"),
-    ("micros_rt -> micros_rt, time filter + deadline + source order", "mrt", "mrt", "qos"),
+    ("rospy -> rospy (TCPROS)", "rospy", "rospy", "plain", {}),
+    ("micros_rt -> micros_rt (defaults: SHM)", "mrt", "mrt", "plain", {}),
+    ("rospy -> micros_rt (TCPROS)", "rospy", "mrt", "plain", {}),
+    ("micros_rt -> micros_rt, time filter + deadline + source order", "mrt", "mrt", "qos", {}),
+    ("micros_rt -> micros_rt over DDS (SHM off, ROS 2 visibility on)", "mrt", "mrt", "plain", _DDS),
 )
 
 
@@ -123,17 +128,21 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def _env(master: str, domain: int, mrt: bool) -> dict:
+def _env(master: str, domain: int, mrt: bool, extra: Optional[Dict[str, str]] = None) -> dict:
     env = {k: v for k, v in os.environ.items()
            if not k.startswith(("ROS_", "CYCLONEDDS", "MICROS_RT", "PYTHONPATH"))}
     env.update(ROS_MASTER_URI=master, ROS_IP="127.0.0.1", ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED="1",
                ROS_HOME=str(Path(tempfile.gettempdir()) / "micros_rt_calls_roshome"))
     if mrt:
         env["PYTHONPATH"] = str(REPO)
+        env.update(extra or {})
+        if "MICROS_RT_DISABLE_SHM" in env:  # DDS between the nodes: loopback only, as the tests configure it
+            env["CYCLONEDDS_URI"] = (REPO / "tests" / "cyclonedds_loopback.xml").as_uri()
     return env
 
 
-def run_case(pub_kind: str, sub_kind: str, opts: str, *, count: int, skip: int, rate: float, domain: int) -> dict:
+def run_case(pub_kind: str, sub_kind: str, opts: str, *, count: int, skip: int, rate: float, domain: int,
+             extra: Dict[str, str]) -> dict:
     port = _free_port()
     master = f"http://127.0.0.1:{port}"
     procs = [subprocess.Popen(["/usr/bin/rosmaster", "--core", "-p", str(port)], env=_env(master, domain, False),
@@ -151,14 +160,14 @@ def run_case(pub_kind: str, sub_kind: str, opts: str, *, count: int, skip: int, 
         topic = "/calls_chatter"
         log = open(Path(tempfile.gettempdir()) / "micros_rt_calls_sub.log", "w")
         sub = subprocess.Popen([MRT if sub_kind == "mrt" else ROSPY, "-c", _SUB, str(count), str(skip),
-                                sub_kind, topic, opts], env=_env(master, domain, sub_kind == "mrt"), text=True,
+                                sub_kind, topic, opts], env=_env(master, domain, sub_kind == "mrt", extra), text=True,
                                stdout=subprocess.PIPE, stderr=log, start_new_session=True)
         procs.append(sub)
         assert sub.stdout is not None
         while "READY" not in (sub.stdout.readline() or "READY"):
             pass
         procs.append(subprocess.Popen([MRT if pub_kind == "mrt" else ROSPY, "-c", _PUB, str(rate), pub_kind, topic],
-                                      env=_env(master, domain, pub_kind == "mrt"), stdout=subprocess.DEVNULL,
+                                      env=_env(master, domain, pub_kind == "mrt", extra), stdout=subprocess.DEVNULL,
                                       stderr=subprocess.DEVNULL, start_new_session=True))
         for line in sub.stdout:
             if line.startswith("{"):
@@ -186,13 +195,14 @@ def main() -> None:
     args = ap.parse_args()
     rows = []
     domain = 100 + os.getpid() % 100
-    for name, pub_kind, sub_kind, opts in CASES:
+    for name, pub_kind, sub_kind, opts, extra in CASES:
         if args.only not in name:
             continue
         per = []
         links: list = []
         for _ in range(args.rounds):
-            out = run_case(pub_kind, sub_kind, opts, count=args.count, skip=args.skip, rate=args.rate, domain=domain)
+            out = run_case(pub_kind, sub_kind, opts, count=args.count, skip=args.skip, rate=args.rate, domain=domain,
+                           extra=extra)
             per.append(out["calls"] / out["count"])
             if out.get("by_function"):
                 for fn, n in out["by_function"]:
