@@ -26,7 +26,7 @@ from .exceptions import (
     TypeMappingError,
     UnsupportedQoSError,
 )
-from .core.publication import ForeignWriters
+from .transports.dds.publication import ForeignWriters
 from .core.stats import PublisherStatistics, SubscriberStatistics
 from .negotiation.hints import TransportHints
 from .node import (

@@ -36,6 +36,7 @@ import rospy.names
 import rospy.topics
 
 from .transports.tcpros import patches
+from .transports.links import links_of
 from . import node as _node
 from .log import nonblocking_logger
 from .negotiation.hints import TransportHints
@@ -470,7 +471,7 @@ class _DDSSubscriberWatch:
                     return
                 work = [(t, list(ls)) for t, ls in self._topics.items()]
             for topic, listeners in work:
-                conns = patches.dds_connections(topic, publisher=True)
+                conns = links_of(topic, publisher=True)
                 for listener in listeners:
                     told = self._told.get(id(listener))
                     if told is None:

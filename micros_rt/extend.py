@@ -18,8 +18,14 @@ itself (a DDS writer with a tag of its own, a reader it feeds).
 - :func:`register_negotiated_transport` (a :class:`NegotiatedTransport`: a protocol name and the makers of its
   :class:`PublicationSide` and :class:`SubscriptionSide`): a transport ``requestTopic`` negotiates as it does
   shared memory and DDS, offered on the topics made from then on and chosen by name in TransportHints
-  (``TransportHints.from_names(["MINE", "TCPROS"])``) or a profile's ``transport_hints``
-  (``tests/contract/test_negotiated_toy.py`` is one, whole).
+  (``TransportHints.from_names(["MINE", "TCPROS"])``) or a profile's ``transport_hints``;
+  :func:`unregister_negotiated_transport` takes it back, name included. What its sides use is here too: an
+  :class:`OfferJudge` (how a publication reads and judges an offer) giving a :class:`Verdict`,
+  :class:`MalformedNegotiationError` for an offer or answer it cannot read, a :class:`PushReader` (depth
+  :data:`UNBOUNDED_QUEUE_DEPTH` for ``queue_size=None``) its links hand messages to, and a :class:`PseudoLink` per
+  peer in rospy's connection lists (:func:`attach_link` on the publisher's side, :func:`add_link` /
+  :func:`remove_link` on the subscriber's). ``tests/contract/toy_negotiated.py`` is one, whole, importing only
+  this module.
 
 >>> import micros_rt
 >>> from micros_rt.extend import dds_backend, register_info_section, sender_for
@@ -35,21 +41,27 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any, Callable, List
 
 from .core.introspection import register_section as register_info_section
-from .core.negotiated import NegotiatedTransport
 from .core.negotiated import register as register_negotiated_transport
 from .core.negotiated import unregister as unregister_negotiated_transport
 from .core.introspection import unregister_section as unregister_info_section
 from .core.send_queue import SendQueue, sender_for
-from .core.runtime import dds_backend
-from .transports.negotiated import PublicationHost, PublicationSide, SubscriptionHost, SubscriptionSide
+from .node import dds_backend
+from .negotiation import MalformedNegotiationError, OfferJudge, Verdict
+from .qos import UNBOUNDED_QUEUE_DEPTH
+from .transports.base import PushReader
+from .transports.links import PseudoLink, add_link, attach_link, remove_link
+from .transports.negotiated import (NegotiatedTransport, PublicationHost, PublicationSide, SubscriptionHost,
+                                    SubscriptionSide)
 from .transports.tcpros.xmlrpc import TimeoutTransport
 
 if TYPE_CHECKING:
     from .core.publication import Publisher
 
-__all__ = ["NegotiatedTransport", "PublicationHost", "PublicationSide", "SendQueue", "SubscriptionHost",
-           "SubscriptionSide", "TimeoutTransport", "dds_backend", "latch_several", "register_info_section",
-           "register_negotiated_transport", "sender_for", "unregister_info_section", "unregister_negotiated_transport"]
+__all__ = ["MalformedNegotiationError", "NegotiatedTransport", "OfferJudge", "PseudoLink", "PublicationHost",
+           "PublicationSide", "PushReader", "SendQueue", "SubscriptionHost", "SubscriptionSide", "TimeoutTransport",
+           "UNBOUNDED_QUEUE_DEPTH", "Verdict", "add_link", "attach_link", "dds_backend", "latch_several",
+           "register_info_section", "register_negotiated_transport", "remove_link", "sender_for",
+           "unregister_info_section", "unregister_negotiated_transport"]
 
 
 def latch_several(pub: "Publisher", lock: Any, messages: Callable[[], List[Any]]) -> None:

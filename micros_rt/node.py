@@ -25,9 +25,10 @@ from .core import introspection as _introspection
 from .transports.tcpros import patches
 from .core.publication import Publisher, _Publication
 from .core import negotiated
+from .transports.builtin import builtin_transports, inbox_for
 from .transports.negotiated import PublicationSide
-from .core.runtime import (_graph_id, _log, _node, _require_node, dds_backend, note_ros2_at_start, ros2_visible,
-                           start_dds_early, wait_dds_started, watch_ros2)
+from .core.runtime import _graph_id, _log, _node, _require_node
+from .transports.dds import process as dds_process
 from .core.reader_subscription import OpenReader, ReaderSubscription
 from .core.registry import EndpointRegistry
 from .core.subscription import DeadlineMissed, Subscriber, _Subscription
@@ -35,6 +36,7 @@ from .log import flush as flush_logs
 from . import settings
 from .transports.base import ProfileBackend, close_profile_backends, profile_backends
 from .transports.pacing import LinkPacer
+from .qos.links import send_buffer_below_high
 from .transports.dds.participant import close_participant
 from .transports.shm.host import close_node as close_shm_node
 from .exceptions import NodeNotInitializedError, QoSTypeError
@@ -82,8 +84,8 @@ def init_node(name: str, argv: Optional[List[str]] = None, anonymous: bool = Fal
     _introspection.install(lambda: _node)
     profile = _profile(qos_profile)
     _tune_malloc()
-    note_ros2_at_start(profile)
-    start_dds_early(profile)
+    dds_process.note_ros2_at_start(profile)
+    dds_process.start_early(profile)
     with patches.prompt_registration_poll():
         rospy.init_node(name, argv=argv, anonymous=anonymous, **kwargs)
     with _node.lock:
@@ -153,8 +155,8 @@ def _housekeeping_loop() -> None:
             except Exception:
                 _log.exception("micros_rt: topic %s: publisher housekeeping failed (will retry)", p.topic)
         try:
-            if watch_ros2():
-                negotiated.open_dds_sides()
+            if not rospy.is_shutdown() and dds_process.watch_ros2(_node.profile):
+                _open_dds_sides()
         except Exception:
             _log.exception("micros_rt: watching the DDS domain for ROS 2 nodes failed (will retry)")
         time.sleep(0.5)
@@ -228,17 +230,11 @@ def _close_logged() -> None:
 
 
 def _close_everything() -> None:
-    wait_dds_started()
+    dds_process.wait_started()
     _node.publications.close_all()
     _node.subscriptions.close_all()
     close_profile_backends()  # MQTT: disconnect cleanly now, not at interpreter exit
-    with _node.lock:
-        dds, _node.dds = _node.dds, None
-        watch, _node.ros2_watch = _node.ros2_watch, None
-    if watch is not None:
-        watch.close()  # another node of the host takes the watch over at its next tick
-    if dds is not None:
-        dds.close()
+    dds_process.close()  # the watch (another node of the host takes it over at its next tick), the back end
     close_participant()
     close_shm_node()  # after every channel and link: iceoryx2's files go with the node
     flush_logs()
@@ -413,9 +409,10 @@ class NodeHandle:
         def create() -> _Subscription:
             # the negotiated transports the hints allow (core/negotiated.py); with ROS 2 visibility off, the DDS
             # reader comes with the first publisher that takes DDS
-            dds = dds_backend() if ros2_visible(_node.profile) and hints.allows_dds else None
+            dds = dds_backend() if dds_process.ros2_visible(_node.profile) and hints.allows_dds else None
             sides = {name: t.subscription for name, t in negotiated.TRANSPORTS.items()}
-            new = _Subscription(resolved, data_class, queue_size, effective, hints, dds=dds, tag=_tag(),
+            inbox = inbox_for(dds=dds, allows_shm=hints.allows_shm)
+            new = _Subscription(resolved, data_class, queue_size, effective, hints, inbox=inbox, tag=_tag(),
                                 graph=_node.graph, sides=sides, extra=_profile_backends(), lifespan=lifespan)
             new.callbacks = ((callback, callback_args),)  # before start(): a latched message may come at once
             created.append(new)
@@ -476,7 +473,39 @@ from typing import TYPE_CHECKING  # noqa: E402  (kept beside the service methods
 
 if TYPE_CHECKING:  # the services and actions packages are imported on first use
     from .actions import ActionFromRos2, ActionToRos2
+    from .transports.dds.backend import DDSBackend
     from .services import ServiceClient, ServiceServer
+
+
+def _open_dds_sides() -> None:
+    """ROS 2 was seen (``auto`` visibility): every topic's DDS writer and reader now, as visibility on makes them
+    with the topic; the links negotiated before stay as they are."""
+    opened = 0
+    for pub in _node.publications.all():
+        writer = pub.sides.get(DDS)
+        if writer is not None and writer.open_now():
+            opened += 1
+    for sub in _node.subscriptions.all():
+        reader = sub.sides.get(DDS)
+        if reader is not None and reader.open_first():
+            opened += 1
+    _log.info("micros_rt: ROS 2 is on the DDS domain: this node's topics are ROS 2 topics now (%d DDS writers and "
+              "readers)", opened)
+
+
+def dds_backend() -> "Optional[DDSBackend]":
+    """The DDS back end of this process (created with the participant), or None without DDS."""
+    profile = _node.profile
+    return dds_process.backend(lambda: str(rospy.get_caller_id()),
+                               lambda: None if profile is None else send_buffer_below_high(profile.links))
+
+
+# a topic waits for the DDS import init_node started; microsRtInfo shows the process's DDS
+_node.before_topic = dds_process.wait_started
+_node.dds_info = dds_process.info
+# the node's own negotiated transports, first in the registry's order (a program's come after them)
+negotiated.install_builtin(builtin_transports(dds_backend=dds_backend,
+                                              visible=lambda: dds_process.ros2_visible(_node.profile)))
 
 
 def _publication_side(transport: negotiated.NegotiatedTransport,

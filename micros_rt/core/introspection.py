@@ -107,7 +107,7 @@ def _subscription_info(sub: Any) -> Dict[str, Any]:
     stats = sub.statistics()
     return {"topic": sub.topic, "type": sub.data_class._type, "queue_size": sub.queue_size,
             "qos": sub.effective.to_dict(), "qos_given": sub.options is not None,
-            "hints": list(sub.hints.protocols), "dds_reader": bool(sub.readers),
+            "hints": list(sub.hints.protocols), "dds_reader": any(side.has_reader() for side in sub.sides.values()),
             "links": _links(sub.topic, publisher=False),
             "statistics": dataclasses.asdict(stats), "latency": sub.stats.summary()}
 
@@ -117,14 +117,13 @@ def node_info() -> Dict[str, Any]:
     if _node_state is None:
         raise RuntimeError("micros_rt node info asked before init_node")
     _node = _node_state()
-    dds = _node.dds
     return {
         "version": INFO_VERSION,
         "node": patches.caller_id(),
         "pid": os.getpid(),
         "time": time.time(),
         "graph": _node.graph,
-        "dds": None if dds is None else {"domain": dds.domain_id, "participant": dds.participant.guid},
+        "dds": _node.dds_info(),
         "profile": None if _node.profile is None else _node.profile.source,
         "publications": [_publication_info(p) for p in _node.publications.all()],
         "subscriptions": [_subscription_info(s) for s in _node.subscriptions.all()],

@@ -14,10 +14,10 @@ import genpy
 import rospy
 import rospy.topics
 
-from ..negotiation import NegotiatedTransport, Verdict, remember_verdict
+from ..negotiation import OfferJudge, Verdict, remember_verdict
+from ..negotiation import protocol as names
 from ..qos import AdvertiseQoSOptions
 from ..transports.base import EndpointSpec, ProfileBackend, TransportWriter
-from ..transports.dds.publication import DDSPublication, ForeignSource, ForeignWriters, ReaderAlive
 from ..transports.negotiated import PublicationSide
 from ..transports.tcpros.patches import short
 from ..transports.tcpros.writer import TcprosWriter
@@ -29,7 +29,7 @@ from .stats import PublisherStatistics
 if TYPE_CHECKING:
     from ..transports.pacing import LinkPacer
 
-__all__ = ["Publisher", "ForeignWriters"]
+__all__ = ["Publisher"]
 
 _log = nonblocking_logger("rosout.micros_rt")
 
@@ -107,17 +107,16 @@ class _Publication:
                                    priority=self.options.transport_priority, pacer=self._pacer)
         self.writers_changed()
 
-    def delegate_dds(self, source: ForeignSource, alive: ReaderAlive) -> None:
-        side = self.sides.get(DDSPublication.protocol)
+    def delegate(self, protocol: str, source: Callable[[], Any], alive: Callable[[str], bool]) -> None:
+        side = self.sides.get(protocol)
         if side is None:
-            raise rospy.ROSException(f"topic {self.topic} has no DDS side to delegate (transport_hints)")
-        assert isinstance(side, DDSPublication)
+            raise rospy.ROSException(f"topic {self.topic} has no {protocol} side to delegate (transport_hints)")
         side.delegate(source, alive)
 
     # -- negotiation (XML-RPC threads) -------------------------------------
-    def negotiated_transports(self, subscriber: str) -> Dict[str, NegotiatedTransport]:
+    def negotiated_transports(self, subscriber: str) -> Dict[str, OfferJudge]:
         """What ``requestTopic`` may negotiate for this topic with ``subscriber``: each side's, judged there."""
-        negotiated: Dict[str, NegotiatedTransport] = {}
+        negotiated: Dict[str, OfferJudge] = {}
         for protocol, side in self.sides.items():
             transport = side.negotiated(subscriber)
             if transport is not None:
@@ -243,22 +242,19 @@ class Publisher:
         return 0 if self._pub is None else self._pub.ready_connections()
 
     def get_dds_connections(self) -> int:
-        side = None if self._pub is None else self._pub.sides.get(DDSPublication.protocol)
+        side = None if self._pub is None else self._pub.sides.get(names.DDS)
         return 0 if side is None else side.pseudo_links()
 
     def get_delegated_dds_connections(self) -> int:
         """DDS subscribers served by the foreign writers of :meth:`delegate_dds`, not by this node."""
-        side = None if self._pub is None else self._pub.sides.get(DDSPublication.protocol)
-        if not isinstance(side, DDSPublication):
-            return 0
-        with side.lock:
-            return len(side.delegated)
+        side = None if self._pub is None else self._pub.sides.get(names.DDS)
+        return 0 if side is None else side.delegated_links()
 
-    def delegate_dds(self, source: ForeignSource, alive: ReaderAlive) -> None:
+    def delegate_dds(self, source: Callable[[], Any], alive: Callable[[str], bool]) -> None:
         """Serve this topic's micros_rt subscribers with another graph's writers when they can take them.
 
-        For a program that republishes what arrives over DDS from another ROS graph's relay (an importing
-        relay): ``source()`` names those writers now (None: none), ``alive(guid)`` says whether a reader is
+        For a program that republishes what arrives over DDS from another ROS graph's relay (a relay that
+        brings a topic in): ``source()`` names those writers now (a :class:`micros_rt.ForeignWriters`; None: none), ``alive(guid)`` says whether a reader is
         still in DDS discovery. A subscriber whose offer those writers can serve (same DDS topic and domain,
         compatible QoS) is answered with them and reads them straight, and keeps reading their successors
         (a restarted relay); any other is served by this node's own writer, which sends only while such a
@@ -266,7 +262,7 @@ class Publisher:
         subscribers that open a reader there (micros_rt's do). TCPROS subscribers are unaffected."""
         if self._pub is None:
             raise rospy.ROSException("publisher is unregistered")
-        self._pub.delegate_dds(source, alive)
+        self._pub.delegate(names.DDS, source, alive)
 
     def statistics(self) -> PublisherStatistics:
         """Counters of this topic's publication (shared by the Publishers of the topic in this node)."""

@@ -31,7 +31,7 @@ class ReaderSubscription(_Subscription):
     def __init__(self, name: str, data_class: Type[genpy.Message], open_reader: OpenReader,
                  queue_size: Optional[int], options: Optional[SubscribeQoSOptions], *, graph: str,
                  lifespan: float = math.inf) -> None:
-        super().__init__(name, data_class, queue_size, options, TransportHints().tcp(), dds=None, tag={}, graph=graph,
+        super().__init__(name, data_class, queue_size, options, TransportHints().tcp(), tag={}, graph=graph,
                          lifespan=lifespan)
         self.source = open_reader(self.depth, self.inbox.wake)
         self.pushed = (self.source,)

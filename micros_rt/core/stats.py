@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import collections
 import math
+import dataclasses
 from dataclasses import dataclass
-from typing import Deque, Dict
+from typing import Any, Deque, Dict, Mapping, Tuple
 
 __all__ = ["LatencyStats", "SubscriberStatistics", "PublisherStatistics"]
 
@@ -19,7 +20,9 @@ class SubscriberStatistics:
     ``queue_size`` are kept, as in ROS), ``dropped_expired`` (older than the publisher's
     msg_valid_period), ``dropped_filtered`` (time_filter_duration), ``dropped_out_of_order`` (stamped
     before the last one delivered, ordered_by_sending_timestamp), ``malformed`` (undecodable DDS samples).
-    ``writers``: DDS writers this subscription keeps state for right now.
+    ``writers``: DDS writers this subscription keeps state for right now. The enforced options' counters are the
+    QoS catalogue's (:func:`micros_rt.qos.options.drop_counters`); one this class has no field for (an option added
+    since) is in ``extra`` and read as an attribute all the same.
     """
 
     received: int
@@ -31,6 +34,22 @@ class SubscriberStatistics:
     deadline_missed: int
     writers: int
     dropped_out_of_order: int = 0
+    #: (counter, count) of the catalogue's counters that have no field here
+    extra: Tuple[Tuple[str, int], ...] = ()
+
+    @classmethod
+    def of(cls, counters: Mapping[str, int], **fields: Any) -> "SubscriberStatistics":
+        """``fields`` and the enforcers' ``counters`` (by the catalogue's names), those without a field in
+        :attr:`extra`."""
+        known = _FIELDS.intersection(counters)
+        return cls(**fields, **{k: counters[k] for k in known},
+                   extra=tuple((k, v) for k, v in counters.items() if k not in known))
+
+    def __getattr__(self, name: str) -> int:
+        for key, value in self.__dict__.get("extra", ()):
+            if key == name:
+                return int(value)
+        raise AttributeError(f"SubscriberStatistics has no counter {name!r}")
 
 
 @dataclass(frozen=True)
@@ -50,6 +69,9 @@ class PublisherStatistics:
     #: subscriber never took up (closed after a bound): what a flood of forged offers cost, counted
     refused_offers: int = 0
     unused_links: int = 0
+
+
+_FIELDS = frozenset(f.name for f in dataclasses.fields(SubscriberStatistics)) - {"extra"}
 
 
 class LatencyStats:

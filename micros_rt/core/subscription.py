@@ -1,23 +1,22 @@
 """A micros_rt subscription: per topic and process, the TCPROS reader (rospy's subscriber: master
-registration, stock peers), the negotiated transports' sides (shared memory, DDS:
+registration, stock peers), the negotiated transports' sides (shared memory, DDS, a plug-in's:
 :mod:`micros_rt.transports.negotiated`), the readers they and the profile's feeds (MQTT) hand messages to, and
 the delivery thread that runs the callbacks.
 
-The concerns live apart: waking (:mod:`.delivery`), exactly-once per DDS writer
-(:mod:`micros_rt.transports.dds.exactly_once`), what the subscriber enforces (:mod:`micros_rt.qos.enforcement`),
-counters and latency (:mod:`.stats`). This module joins them: samples in, callbacks out, every message either
-delivered or counted in one drop counter.
+The concerns live apart: waking (the inbox: :mod:`.delivery`, or a transport's wait set), a transport's own
+bookkeeping (its side: DDS's exactly-once per writer drains its pulled readers itself), what the subscriber
+enforces (the QoS catalogue's admissions, :mod:`micros_rt.qos.enforcement`), counters and latency (:mod:`.stats`).
+This module joins them: messages in, callbacks out, every message either delivered or counted in one drop counter.
+It names no transport but TCPROS, which every subscription has.
 """
 
 from __future__ import annotations
 
-import collections
-import logging
+import functools
 import math
-import os
 import threading
 import time
-from typing import TYPE_CHECKING, Any, Callable, Deque, Dict, List, Mapping, Optional, Set, Tuple, Type
+from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple, Type
 
 import genpy
 import rospy
@@ -25,12 +24,10 @@ import rospy
 from ..transports.tcpros import patches
 from ..transports.tcpros.reader import TcprosReader
 from . import threadprio
-from .delivery import Inbox
+from .delivery import EventInbox
 from .registry import EndpointRegistry
 from .stats import LatencyStats, SubscriberStatistics
-from ..transports.dds.exactly_once import DELIVER, HOLD, WriterState, WriterTable
-from ..transports.base import (SOURCE_ORDER, TIME_FILTER, EndpointSpec, Feed, ProfileBackend, PushInfo, PushReader,
-                               ReaderBackend, TransportReader)
+from ..transports.base import EndpointSpec, Feed, Inbox, ProfileBackend, PushReader, TransportReader
 from ..transports.negotiated import SubscriptionSide
 from ..negotiation import TCPROS, TransportHints
 from ..qos import (
@@ -38,27 +35,42 @@ from ..qos import (
     AdvertiseQoSOptions,
     DeadlineMissed,
     DeadlineMonitor,
-    SourceOrder,
     SubscribeQoSOptions,
-    TimeFilter,
     TransportPriority,
-    describe_incompatible_policy,
-    is_expired,
     is_lossless,
 )
+from ..qos import options as _catalogue
+from ..qos.enforcement import Admission, Lifespan, TimeFilter
 from ..log import nonblocking_logger
-
-if TYPE_CHECKING:
-    from ..transports.dds.backend import DDSBackend
 
 __all__ = ["Subscriber", "DeadlineMissed", "LatencyStats"]
 
 _log = nonblocking_logger("rosout.micros_rt")
 _TAKE_BATCH = 256
-_RETAKE_SECONDS = 0.005  # with a bounded queue, take new samples at least this often between callbacks
 
 #: how a node makes one negotiated transport's side of a subscription (the subscription is its host)
 SubscriptionSideFactory = Callable[["_Subscription"], SubscriptionSide]
+
+
+def _admissions(effective: SubscribeQoSOptions, lifespan: float) -> Tuple[Admission, ...]:
+    """One check per enforced option of the catalogue that has one, from this subscriber's value of it (its
+    options, and its own ``msg_valid_period``), in rank order; each counts in its entry's counter."""
+    values: Dict[str, Any] = {"msg_valid_period": lifespan}
+    out: List[Admission] = []
+    for option in _catalogue.OPTIONS:
+        if option.admission is None or option.enforcer is None or option.counter is None:
+            continue
+        if option.side == "subscribe":
+            value = getattr(effective, option.name)
+        elif option.name in values:
+            value = values[option.name]
+        else:
+            continue
+        check = option.admission(value)
+        check.enforcer, check.counter = option.enforcer, option.counter
+        out.append(check)
+    out.sort(key=lambda a: a.rank)
+    return tuple(out)
 
 
 class _Subscription:
@@ -67,19 +79,18 @@ class _Subscription:
 
     def __init__(self, topic: str, data_class: Type[genpy.Message], queue_size: Optional[int],
                  options: Optional[SubscribeQoSOptions], hints: TransportHints, *,
-                 dds: "Optional[DDSBackend]", tag: Dict[str, str], graph: str,
+                 tag: Dict[str, str], graph: str, inbox: Optional[Inbox] = None,
                  sides: Mapping[str, SubscriptionSideFactory] = {}, extra: Tuple[ProfileBackend, ...] = (),
                  lifespan: float = math.inf) -> None:
         self.topic = topic
-        #: the subscriber's own msg_valid_period (seconds): a message older than this by its source stamp is
-        #: dropped (``dropped_expired``) whatever its publisher offers; the shorter of the two applies
-        self.lifespan = lifespan
         self.data_class = data_class
         self.queue_size = queue_size
         self.options = options
         self.effective = options or SubscribeQoSOptions(ordered_by_sending_timestamp=False)
         self.hints = hints
         self.tag = tag
+        #: the node's graph id (a transport that meets other graphs' writers drops theirs)
+        self.graph = graph
         # the newest `depth` are kept, as in ROS; None: nothing dropped (rospy's queue_size=None)
         self.depth: Optional[int] = None if is_lossless(queue_size) else queue_size
         # replaced, never mutated: the delivery thread iterates it without a copy or a lock
@@ -87,33 +98,27 @@ class _Subscription:
         self.lock = threading.Lock()
         self.closed = False
         self.stats = LatencyStats()
-        self.received = self.delivered = self.dropped_queue_full = self.dropped_expired = 0
-        self.dropped_filtered = self.dropped_out_of_order = self.malformed = 0
-        self._burst_dropped = 0
-        self.queue: Deque[Tuple[bytes, Any, WriterState]] = collections.deque()
-        self.time_filter = TimeFilter(self.effective.time_filter_duration)
-        self.source_order = SourceOrder(self.effective.ordered_by_sending_timestamp)
+        self.received = self.delivered = self.dropped_queue_full = self.malformed = 0
+        self.burst_dropped = 0
+        #: every enforced option's check (the catalogue's), and the active ones, which every message passes
+        self.admissions = _admissions(self.effective, lifespan)
+        self._checks: Tuple[Admission, ...] = ()
+        self._lifespan: Optional[Lifespan] = next((a for a in self.admissions if isinstance(a, Lifespan)), None)
+        self._checks_changed()
         self.deadline = DeadlineMonitor(self.effective.deadline, start=time.monotonic())
-        self.writers = WriterTable(graph, self.depth or UNBOUNDED_QUEUE_DEPTH)
-        self.incompatible_reported: Set[int] = set()
+        self._deadline_on = self.deadline.enabled
         self._housekeeping_due = False
-        # the highest transport priority of the DDS publishers received from; the delivery thread takes it
+        # the highest transport priority of the publishers received from; the delivery thread takes it
         # on (core/threadprio.py: its nice value, the interpreter's switch interval for HIGH)
         self.priority: Optional[TransportPriority] = None
         self._thread_priority: Optional[TransportPriority] = None
         self._high_entered = False
-        #: the process's DDS back end when the subscription opens its DDS reader at once (None: not, or lazily)
-        self.dds = dds = dds if hints.allows_dds else None
-        # With shared memory, the delivery thread waits on an iceoryx2 wait set (its SHM links' listeners: one
-        # thread wake per message), and DDS readers wake it per sample from Cyclone's thread; else on Cyclone's.
-        from ..transports import shm
-
-        self.inbox = Inbox(None if dds is None or (hints.allows_shm and shm.unavailable_reason() is None)
-                           else dds.participant)
-        #: pulled readers (DDS), taken by the delivery thread; the first decodes for all
-        self.readers: Tuple[ReaderBackend, ...] = ()
-        self._duplicates = False  # two readers may see one sample (a latched reader beside the topic's)
-        self._polled_inlet: Optional[PushReader] = None  # the pushed reader of links the delivery thread polls
+        #: what the delivery thread waits on: a transport's wait set the node chose, else an Event
+        self.inbox: Inbox = inbox if inbox is not None else EventInbox()
+        #: sides with pulled readers, which the delivery thread drains (DDS)
+        self.pulled: Tuple[SubscriptionSide, ...] = ()
+        #: what a link the delivery thread polls hands each message to (its messages count as ``inlet``'s)
+        self._polled_deliver: Callable[[Any, int, Any], None] = lambda msg, source_ns, link: None
         #: the negotiated transports the hints allow, by protocol name (each its side of the subscription)
         self.sides: Dict[str, SubscriptionSide] = {
             protocol: make(self) for protocol, make in sides.items() if protocol in hints.protocols}
@@ -127,11 +132,64 @@ class _Subscription:
         # is shared by every MQTT topic of the process, so it never waits; the oldest is dropped, counted)
         self.tcp_in = PushReader(TCPROS, self.depth or UNBOUNDED_QUEUE_DEPTH, self.inbox.wake, blocking=True,
                                  links=self._tcpros_links)
-        self.pushed: Tuple[PushReader, ...] = (self.tcp_in,) + tuple(r for side in self.sides.values()
-                                                                      for r in side.pushed())
+        self._pushed: Tuple[PushReader, ...] = ()
+        self._dropping: Tuple[PushReader, ...] = ()  # pushed readers that drop when full (not TCPROS's)
+        self.pushed = (self.tcp_in,) + tuple(r for side in self.sides.values() for r in side.pushed())
         self._pushed_dropped = 0  # drops of non-blocking pushed readers already reported in a burst
         self._extra = extra
         self.feeds: Tuple[Feed, ...] = ()
+
+    # -- what every message passes ---------------------------------------------
+    @property
+    def lifespan(self) -> float:
+        """The subscriber's own msg_valid_period (seconds): a message older than this by its source stamp is
+        dropped (``dropped_expired``) whatever its publisher offers; the shorter of the two applies."""
+        return math.inf if self._lifespan is None else self._lifespan.valid
+
+    @lifespan.setter
+    def lifespan(self, valid: float) -> None:
+        if self._lifespan is not None:
+            self._lifespan.valid = valid
+            self._checks_changed()
+
+    @property
+    def time_filter(self) -> TimeFilter:
+        """The time filter's check (``time_filter_duration``)."""
+        for check in self.admissions:
+            if isinstance(check, TimeFilter):
+                return check
+        raise AttributeError("the QoS catalogue has no time filter")
+
+    def _checks_changed(self) -> None:
+        # replaced, never mutated: the delivery thread iterates it without a lock
+        self._checks = tuple(a for a in self.admissions if a.active())
+
+    def counters(self) -> Dict[str, int]:
+        """The enforced options' counters, by the catalogue's names (the deadline's included)."""
+        out: Dict[str, int] = {c: 0 for c in _catalogue.drop_counters()}
+        for check in self.admissions:
+            out[check.counter] = out.get(check.counter, 0) + check.dropped
+        out["deadline_missed"] = self.deadline.missed_total
+        return out
+
+    def __getattr__(self, name: str) -> int:
+        # an enforced option's counter by its catalogue name (``sub.dropped_filtered``)
+        if name.startswith("_") or name in ("admissions", "deadline"):
+            raise AttributeError(name)
+        counters = self.counters()
+        if name in counters:
+            return counters[name]
+        raise AttributeError(f"{type(self).__name__} has no attribute {name!r}")
+
+    @property
+    def pushed(self) -> Tuple[PushReader, ...]:
+        """The readers whose links' threads hand over messages (TCPROS, the feeds', the sides')."""
+        return self._pushed
+
+    @pushed.setter
+    def pushed(self, readers: Tuple[PushReader, ...]) -> None:
+        self._dropping = tuple(r for r in readers if not r.blocking)
+        self._pushed = readers
 
     def start(self) -> None:
         """Start delivering and register with rospy (which triggers the negotiation: the reader exists)."""
@@ -156,30 +214,30 @@ class _Subscription:
         return {} if tcpros is None else tcpros.transports()
 
     # -- the host of the negotiated sides -----------------------------------
-    def add_reader(self, reader: ReaderBackend, *, duplicate: bool) -> None:
+    def attach_reader(self, reader: Any) -> None:
         self.inbox.attach(reader)
-        self.readers = self.readers + (reader,)
-        self._duplicates = self._duplicates or duplicate
 
     def reader_wakes(self) -> bool:
-        # a delivery thread that waits on no Cyclone wait set (a reader opened later) is woken per sample
-        return self.inbox.waitset is None
+        # a delivery thread whose inbox waits on no reader condition is woken per sample
+        return not self.inbox.wakes_on_readers
+
+    def drain_me(self, side: SubscriptionSide) -> None:
+        if side not in self.pulled:
+            self.pulled = self.pulled + (side,)
 
     def matches_changed(self) -> None:
-        # Cyclone thread: a writer matched or went (lease expired, deleted): look at once, not at the
+        # a transport's thread: a writer matched or went (lease expired, deleted): look at once, not at the
         # next housekeeping round, so a dead publisher leaves the connections within the lease
         self._housekeeping_due = True
         self.inbox.wake()
 
-    def incompatible(self, policy: int) -> None:
-        # Cyclone thread: only log, never block. A ROS 2 (or foreign) writer whose QoS cannot match
-        # ours would otherwise be silence.
-        if policy not in self.incompatible_reported:
-            self.incompatible_reported.add(policy)
-            _log.warning("micros_rt: %s", describe_incompatible_policy(policy, topic=self.topic, side="subscriber"))
-
     def raise_priority(self, qos: Optional[AdvertiseQoSOptions]) -> None:
-        if qos is not None and (self.priority is None or qos.transport_priority > self.priority):
+        """A publisher of ``qos`` connected: its transport priority, and its lifespan's check."""
+        if qos is None:
+            return
+        if self._lifespan is not None and self._lifespan.publisher(qos):
+            self._checks_changed()
+        if self.priority is None or qos.transport_priority > self.priority:
             # taken on by the delivery thread, at its next wake
             self.priority = TransportPriority(qos.transport_priority)
 
@@ -190,8 +248,11 @@ class _Subscription:
         """For a side whose links the delivery thread can wait on itself (shared memory): attach ``link``, True
         when it does (its messages then go through ``inlet``'s admission); False: the link's own thread must
         hand them to ``inlet``."""
-        self._polled_inlet = inlet
-        return self.inbox.attach_shm(link)
+        self._polled_deliver = functools.partial(self._deliver_pushed, inlet)
+        return self.inbox.attach_link(link)
+
+    def pushed_pending(self) -> bool:
+        return any(r.pending() for r in self._pushed)
 
     # -- negotiation (rospy's connect threads) ----------------------------
     def offered_protocols(self, held: Tuple[str, str] = ("", "")) -> List[List[Any]]:
@@ -218,7 +279,7 @@ class _Subscription:
     # -- delivery thread ---------------------------------------------------
     def _run(self) -> None:
         next_housekeeping = time.monotonic() + 0.5
-        timeout = min(0.5, max(0.005, self.effective.deadline / 4)) if self.deadline.enabled else 0.5
+        timeout = min(0.5, max(0.005, self.effective.deadline / 4)) if self._deadline_on else 0.5
         while not self.closed:
             self.inbox.wait(timeout)
             if self.closed:
@@ -228,9 +289,9 @@ class _Subscription:
             try:
                 self._drain()
                 now = time.monotonic()
-                if self.writers.holding:
-                    self._release_held(now)
-                if self.deadline.enabled:
+                for side in self.pulled:
+                    side.tick(now)
+                if self._deadline_on and now >= self.deadline.next_due:
                     self._check_deadline(now)
                 if now >= next_housekeeping or self._housekeeping_due:
                     self._housekeeping_due = False
@@ -252,170 +313,77 @@ class _Subscription:
         _log.debug("micros_rt: topic %s: delivery thread at priority %s (nice %d)", self.topic, priority.name, nice)
 
     def _drain(self) -> None:
-        """Take what the readers have, deliver it and TCPROS messages, until both are empty."""
-        queue, pushed = self.queue, self.pushed
+        """Deliver what the sides' pulled readers, the polled links and the pushed readers have, until all are
+        empty."""
         while not self.closed:
             more = False  # a reader gave a full batch: it may hold more
-            for reader in self.readers:
-                batch = reader.take(_TAKE_BATCH)
-                if batch:
-                    more = more or len(batch) >= _TAKE_BATCH
-                    self._admit(reader, batch)
-            if queue:
-                bounded = self.depth is not None
-                last_take = time.monotonic() if bounded else 0.0
-                while queue:
-                    data, info, state = queue.popleft()
-                    self._deliver_pulled(data, info, state)
-                    if bounded and time.monotonic() - last_take > _RETAKE_SECONDS:
-                        break  # take again: the newest queue_size are what ROS delivers
-            for link in self.inbox.links:  # shared-memory links the delivery thread waits on itself
-                if link.drain(self._deliver_polled, _TAKE_BATCH) >= _TAKE_BATCH:
+            for side in self.pulled:
+                if side.drain(_TAKE_BATCH):
                     more = True
-            for inlet in pushed:
-                batch = inlet.take(_TAKE_BATCH)
-                if batch:
+            links = self.inbox.links
+            if links:  # links the delivery thread waits on itself (shared memory)
+                for link in links:
+                    if link.drain(self._polled_deliver, _TAKE_BATCH) >= _TAKE_BATCH:
+                        more = True
+            for inlet in self._pushed:
+                if inlet.queue:
+                    batch = inlet.take(_TAKE_BATCH)
                     more = more or len(batch) >= _TAKE_BATCH
                     for msg, info in batch:
-                        self._deliver_pushed(inlet, msg, info)
-            if len(pushed) > 1:
+                        self._deliver_pushed(inlet, msg, info.source_timestamp, info.publication_handle)
+            if self._dropping:
                 self._count_pushed_drops()
-            if not more and not queue:
+            if not more:
                 # what arrived meanwhile keeps the reader's condition (or the guard) raised: the next wait
                 # returns at once, so no second take just to find a reader empty (1.7 us per message)
-                if self._burst_dropped:
+                if self.burst_dropped:
                     self._report_burst()
                 return
-
-    def _admit(self, reader: ReaderBackend, batch: Any) -> None:
-        """Exactly-once and queue_size: each valid sample is queued, held or dropped (and counted)."""
-        writers, queue, depth = self.writers, self.queue, self.depth
-        two_readers = self._duplicates
-        for data, info in batch:
-            if not info.valid_data:
-                continue
-            state = writers.for_handle(reader, info.publication_handle)
-            if state is None:
-                continue
-            verdict = writers.decide(state)
-            if verdict != DELIVER:
-                if verdict == HOLD:
-                    writers.hold(state, time.monotonic(), data, info)
-                continue
-            acc = state.accepted
-            if acc is not None and not acc.conn.seen:
-                acc.conn.seen = True  # it delivered data, so it was matched (housekeeping may not have seen it)
-            if state.held:
-                self._release_held(time.monotonic())  # what it sent before the answer goes first
-            if two_readers:
-                if info.source_timestamp <= state.last_ts:
-                    continue  # the same sample through the other reader
-                state.last_ts = info.source_timestamp
-            self.received += 1
-            queue.append((data, info, state))
-            if depth is not None and len(queue) > depth:
-                queue.popleft()
-                self.dropped_queue_full += 1
-                self._burst_dropped += 1
 
     def _report_burst(self) -> None:
         _log.warning("micros_rt: topic %s: dropped %d messages because callbacks were slower than arrivals "
                      "(queue_size=%s keeps the newest, as ROS does; %d dropped in all). Use a larger queue_size, "
-                     "or queue_size=None to lose nothing.", self.topic, self._burst_dropped, self.queue_size,
+                     "or queue_size=None to lose nothing.", self.topic, self.burst_dropped, self.queue_size,
                      self.dropped_queue_full)
-        self._burst_dropped = 0
-
-    def _release_held(self, now: float) -> None:
-        for state in self.writers.releasable(now):
-            held, state.held = state.held, collections.deque()
-            for _t, data, info in held:
-                self.received += 1
-                self._deliver_pulled(data, info, state)
+        self.burst_dropped = 0
 
     def _count_pushed_drops(self) -> None:
-        dropped = sum(r.dropped for r in self.pushed)
+        dropped = 0
+        for reader in self._dropping:
+            dropped += reader.dropped
         if dropped != self._pushed_dropped:
-            self._burst_dropped += dropped - self._pushed_dropped
+            self.burst_dropped += dropped - self._pushed_dropped
             self._pushed_dropped = dropped
 
     # -- the one admission path: what the reader did not enforce, whatever the transport -------------
     def _admit_enforced(self, reader: TransportReader, source_ns: int, qos: Optional[Any], *,
                         sent_ns: int = 0) -> bool:
-        """Apply source order and the time filter (unless the reader's transport did) and lifespan (Cyclone expires
-        samples in its cache, but a sample taken can still wait behind slow callbacks; a writer whose
-        QoS is unknown, as over TCPROS, has none); count what is dropped."""
-        # first: an out-of-order message must not use up the time filter's window. By the sending time only
-        # (``sent_ns``, 0 when the link does not carry one, as TCPROS): a Header stamp is when the data was
-        # taken, and publishers of one topic legitimately send data stamped out of order (tf)
-        order = self.source_order
-        if order.enabled and sent_ns and SOURCE_ORDER not in reader.enforces and not order.admit(sent_ns):
-            self.dropped_out_of_order += 1
-            return False
-        tf = self.time_filter
-        if tf.period > 0.0 and TIME_FILTER not in reader.enforces and not tf.admit(time.time()):
-            self.dropped_filtered += 1
-            return False
-        valid = self.lifespan if qos is None else min(self.lifespan, qos.msg_valid_period)
-        if source_ns and is_expired(source_ns, time.time_ns(), valid):
-            self.dropped_expired += 1
-            return False
+        """Every active check of an enforced option the reader's transport did not apply itself, in rank order
+        (source order, time filter, lifespan); the first that refuses counts the drop."""
+        enforces = reader.enforces
+        for check in self._checks:
+            if check.enforcer in enforces:
+                continue
+            if not check.check(sent_ns, source_ns, qos):
+                check.dropped += 1
+                return False
         return True
 
-    def _deliver_pushed(self, reader: PushReader, msg: Any, info: Any) -> None:
+    admit = _admit_enforced
+
+    def _deliver_pushed(self, reader: PushReader, msg: Any, sent_ns: int, handle: Any) -> None:
         self.received += 1
-        sent_ns = info.source_timestamp
-        source_ns = sent_ns or _header_stamp(msg)
+        source_ns = sent_ns
+        if not sent_ns and getattr(msg, "_has_header", False):  # TCPROS carries no sending time: the Header's
+            stamp = msg.header.stamp
+            source_ns = max(int(stamp.secs) * 1_000_000_000 + int(stamp.nsecs), 0)
         # a link that knows its publisher's QoS (shared memory's, from the answer) has its lifespan and budget
-        qos = getattr(info.publication_handle, "qos", None)
-        if not self._admit_enforced(reader, source_ns or 0, qos, sent_ns=sent_ns):
+        qos = getattr(handle, "qos", None)
+        if self._checks and not self._admit_enforced(reader, source_ns, qos, sent_ns=sent_ns):
             return
-        self._deliver(msg, source_ns, qos.latency_budget if qos is not None else 0.0)
+        self.deliver(msg, source_ns or None, qos.latency_budget if qos is not None else 0.0)
 
-    def _deliver_polled(self, msg: Any, source_ns: int, link: Any) -> None:
-        inlet = self._polled_inlet
-        assert inlet is not None
-        self._deliver_pushed(inlet, msg, PushInfo(source_ns, link))
-
-    def _deliver_pulled(self, data: bytes, info: Any, state: WriterState) -> None:
-        qos = state.qos
-        if not self._admit_enforced(self.readers[0], info.source_timestamp, qos, sent_ns=info.source_timestamp):
-            return
-        if not state.skew.done:
-            self._check_clock_skew(state, time.time_ns() - info.source_timestamp, time.monotonic())
-        try:
-            msg = self.readers[0].decode(data)
-        except ValueError as exc:
-            self._malformed(state, exc)
-            return
-        head = msg.header if msg._has_header else msg if msg._type == "std_msgs/Header" else None
-        if head is not None:
-            # ROS 2 Header has no seq: regenerate it per publisher (DDS writer), 1, 2, ... as rospy counts
-            state.header_seq += 1
-            head.seq = state.header_seq
-        header = state.conn_header
-        if header is None:
-            # one dict per writer, shared by its messages as rospy shares one per connection; callerid is
-            # the publisher's node name, as in rospy's TCPROS header
-            acc = state.accepted
-            header = {"callerid": (acc.node or acc.conn.endpoint_id) if acc else state.guid, "topic": self.topic,
-                      "type": self.data_class._type, "md5sum": self.data_class._md5sum, "transport": "DDS"}
-            if acc is not None:
-                state.conn_header = header
-        msg._connection_header = header
-        if state.accepted is not None and state.accepted.latch:
-            state.latched = msg
-        self._deliver(msg, info.source_timestamp, qos.latency_budget if qos is not None else 0.0)
-
-    def _malformed(self, state: WriterState, exc: Exception) -> None:
-        # once per writer in words, then counted: a broken peer must not flood the log
-        state.malformed += 1
-        self.malformed += 1
-        if state.malformed == 1:
-            _log.warning("micros_rt: topic %s: dropped a malformed DDS sample from writer %s (%s); is its type "
-                         "really %s? Further malformed samples from it are counted, not logged",
-                         self.topic, state.guid, str(exc)[:200], self.data_class._type)
-
-    def _deliver(self, msg: Any, source_ts_ns: Optional[int], budget: float) -> None:
+    def deliver(self, msg: Any, source_ts_ns: Optional[int], budget: float) -> None:
         """Hand one message to the callbacks."""
         if source_ts_ns is not None:
             latency = time.time() - source_ts_ns / 1e9
@@ -423,7 +391,7 @@ class _Subscription:
                 _log.debug("micros_rt: topic %s: latency %.3f ms over the publisher's latency_budget %.3f ms "
                            "(%d misses of %d)", self.topic, latency * 1e3, budget * 1e3,
                            self.stats.budget_misses, self.stats.count)
-        if self.deadline.enabled:
+        if self._deadline_on:
             silent = self.deadline.delivered(time.monotonic())
             if silent is not None:
                 _log.warning("micros_rt: topic %s: data resumed after %.1f s of silence (deadline %g s)",
@@ -437,28 +405,6 @@ class _Subscription:
                     cb(msg, cb_args)
             except Exception:
                 _log.exception("micros_rt: topic %s: callback raised (continuing)", self.topic)
-
-    def _check_clock_skew(self, state: WriterState, age_ns: int, now: float) -> None:
-        skew = state.skew.observe(age_ns, now)
-        if skew is None:
-            return
-        acc = state.accepted
-        who = acc.pub_uri if acc else state.guid
-        node = (state.tag or {}).get("node") or (acc.node if acc else "") or "a non-micros_rt node"
-        effects = ("Subscribers ordered by sending timestamp drop its samples in favour of other publishers', "
-                   "and msg_valid_period expires them")
-        if skew < 0:
-            _log.warning("micros_rt: topic %s: the clock of publisher %s (%s, writer %s) runs %.1f s ahead of "
-                         "this node's clock (its samples arrive stamped %.1f s in the future). %s; synchronise "
-                         "the clocks (NTP/chrony)", self.topic, who, node, state.guid, -skew, -skew, effects)
-            return
-        # a sample stamped in the past is a clock behind or a sample that waited: a whole window of them
-        # (ClockSkewCheck) is more likely the clock, but a node starved of CPU for that long looks the same
-        _log.warning("micros_rt: topic %s: every sample of publisher %s (%s, writer %s) in its first %.1f s "
-                     "arrived stamped at least %.1f s in the past: its clock runs %.1f s behind this node's "
-                     "clock, or its samples waited that long on the way (this node or the network "
-                     "overloaded). %s; if the clocks differ, synchronise them (NTP/chrony)", self.topic, who,
-                     node, state.guid, state.skew.window, skew, skew, effects)
 
     def _check_deadline(self, now: float) -> None:
         silent = self.deadline.poll(now)
@@ -476,46 +422,19 @@ class _Subscription:
                 _log.exception("micros_rt: topic %s: deadline_cb raised (continuing)", self.topic)
 
     def _housekeeping(self, now: float) -> None:
-        """Drop links of DDS and shared-memory publishers that vanished (a restart then reconnects) and their
-        state."""
+        """Drop links of publishers that vanished (a restart then reconnects) and their state: the polled links'
+        and each side's."""
         for link in list(self.inbox.links):  # threaded links watch their publisher themselves
             if not link.closed and link.publisher_gone():
                 link.notify_gone()
-        if not self.readers:
-            return
-        matched: Set[str] = set()
-        for reader in self.readers:
-            matched |= reader.matched_writers()
-        for state in self.writers.accepted_states():
-            acc = state.accepted
-            if acc is None:
-                continue
-            conn = acc.conn
-            if state.guid in matched:
-                conn.seen = True
-                continue
-            if self.writers.is_delegated(conn):
-                # one of another graph's relay writers went (that relay restarted): its successor is taken
-                # as it comes; the link to the delegating publisher lasts as long as that publisher
-                if conn.seen or now - conn.created > 30.0:
-                    self.writers.forget_writer(state)
-                continue
-            if not conn.seen and now - conn.created <= 30.0:
-                continue
-            if not conn.seen:
-                _log.warning("micros_rt: topic %s: publisher %s accepted DDS but its writer was never discovered "
-                             "in 30 s; check both nodes' network (ROS_IP, CYCLONEDDS_URI)", self.topic, acc.pub_uri)
-            patches.remove_pseudo_connection(self.topic, conn, publisher=False)
-            conn.close()
-        if self.queue or any(r.pending() for r in self.pushed):
-            return  # samples of a gone writer still to deliver: prune next time
-        self.writers.prune(matched)
+        for side in self.pulled:
+            side.housekeeping(now)
 
     def replay_latched(self, callback: Callable[..., None], callback_args: Any) -> None:
         """Hand a callback added to this subscription the last message of each connected latching publisher,
-        as rospy's ``add_callback`` does (#1852), in the caller's thread as there: DDS writers' from their
-        state, TCPROS links' from rospy's connections."""
-        msgs = [s.latched for s in self.writers.accepted_states() if s.latched is not None]
+        as rospy's ``add_callback`` does (#1852), in the caller's thread as there: the sides' (DDS writers',
+        from their state), then TCPROS links' from rospy's connections."""
+        msgs = [m for side in self.sides.values() for m in side.latched()]
         for msg in msgs + patches.latched_messages(self.topic):
             try:
                 if callback_args is None:
@@ -526,13 +445,11 @@ class _Subscription:
                 _log.exception("micros_rt: topic %s: callback raised on a latched message (continuing)", self.topic)
 
     def statistics(self) -> SubscriberStatistics:
-        pushed_drops = sum(r.dropped for r in self.pushed)  # dropped before the delivery thread saw them
-        return SubscriberStatistics(
-            received=self.received + pushed_drops, delivered=self.delivered,
-            dropped_queue_full=self.dropped_queue_full + pushed_drops,
-            dropped_expired=self.dropped_expired, dropped_filtered=self.dropped_filtered,
-            dropped_out_of_order=self.dropped_out_of_order, malformed=self.malformed,
-            deadline_missed=self.deadline.missed_total, writers=len(self.writers))
+        pushed_drops = sum(r.dropped for r in self._pushed)  # dropped before the delivery thread saw them
+        return SubscriberStatistics.of(
+            self.counters(), received=self.received + pushed_drops, delivered=self.delivered,
+            dropped_queue_full=self.dropped_queue_full + pushed_drops, malformed=self.malformed,
+            writers=sum(side.kept_writers() for side in self.sides.values()))
 
     def close(self) -> None:
         """Unregister from rospy, stop the delivery thread, release readers (the registry calls this once)."""
@@ -547,7 +464,7 @@ class _Subscription:
         feeds, self.feeds = self.feeds, ()
         for feed in feeds:
             feed.close()
-        for inlet in self.pushed:
+        for inlet in self._pushed:
             inlet.close()
         self.inbox.wake()
         if self.thread.is_alive() and threading.current_thread() is not self.thread:
@@ -555,27 +472,13 @@ class _Subscription:
         if self._high_entered:
             self._high_entered = False
             threadprio.RECEIVE_PRIORITY.leave_high()
-        for state in self.writers.accepted_states():
-            if state.accepted is not None:
-                state.accepted.conn.close()
         for side in self.sides.values():
             side.close()
-        readers, self.readers = self.readers, ()
-        for reader in readers:
-            reader.close()
         if self.thread.is_alive():
             _log.warning("micros_rt: topic %s: a callback is still running; its wait set is released when it "
                          "returns", self.topic)
         else:
             self.inbox.close()
-
-
-def _header_stamp(msg: Any) -> Optional[int]:
-    if getattr(msg, "_has_header", False):
-        st = msg.header.stamp
-        ns = int(st.secs) * 1_000_000_000 + int(st.nsecs)
-        return ns if ns > 0 else None
-    return None
 
 
 class Subscriber:

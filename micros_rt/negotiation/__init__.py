@@ -2,7 +2,7 @@
 protocol-order loop. Pure: nothing here touches rospy or creates DDS entities
 (:mod:`micros_rt.transports.tcpros.patches` adapts it to rospy's ``requestTopic``)."""
 
-from .choose import Choice, NegotiatedTransport, choose_protocol, dds_transport
+from .choose import Choice, OfferJudge, choose_protocol, dds_transport
 from .decide import MAX_VERDICTS, PublicationFacts, Verdict, decide, decide_shm, remember_verdict
 from .hints import TransportHints
 from .messages import DDSAnswer, DDSOffer, DDSOpenFirst, MalformedNegotiationError, ShmAnswer, ShmOffer, is_guid
@@ -36,7 +36,7 @@ __all__ = [
     "DDSOffer",
     "DDSOpenFirst",
     "MalformedNegotiationError",
-    "NegotiatedTransport",
+    "OfferJudge",
     "PublicationFacts",
     "RateLimitedLog",
     "TransportHints",

@@ -2,7 +2,7 @@
 
 The subscriber lists protocols in its preference order; the first one this publisher can serve wins, as
 rospy's ``protocol_handlers`` loop does. Negotiated transports (shared memory and DDS, and any a plug-in registers) are registered by name
-(:class:`NegotiatedTransport`: how to read that protocol's offer, and the publication's judge); other
+(:class:`OfferJudge`: how to read that protocol's offer, and the publication's judge); other
 entries go to rospy's protocol handlers (``supports``). Malformed entries are skipped with a reason,
 never fatal.
 """
@@ -16,25 +16,26 @@ from .decide import Verdict
 from .messages import DDSAnswer, DDSOffer, MalformedNegotiationError
 from .protocol import DDS, negotiated_protocols
 
-__all__ = ["Choice", "NegotiatedTransport", "choose_protocol", "dds_transport"]
+__all__ = ["Choice", "OfferJudge", "choose_protocol", "dds_transport"]
 
 #: Judges one offer: (verdict, answer when accepted: a DDSAnswer, or DDSOpenFirst for a lazy offer).
 JudgeDDS = Callable[[DDSOffer], Tuple[Verdict, Any]]
 
 
 @dataclass(frozen=True)
-class NegotiatedTransport:
-    """A transport negotiated in ``requestTopic``: ``parse(params, source)`` reads a subscriber's offer
-    (raising :class:`MalformedNegotiationError`), ``judge(offer)`` is the publication's verdict and answer
-    (an object with ``to_xmlrpc()``, the entry sent back)."""
+class OfferJudge:
+    """How one publication reads and judges one subscriber's offer of a negotiated transport in ``requestTopic``:
+    ``parse(params, source)`` reads the offer (raising :class:`MalformedNegotiationError`), ``judge(offer)`` is the
+    publication's verdict and answer (an object with ``to_xmlrpc()``, the entry sent back). Not to be confused
+    with :class:`micros_rt.extend.NegotiatedTransport`, the transport a node offers (a name and its two sides)."""
 
     parse: Callable[[Any, str], Any]
     judge: Callable[[Any], Tuple[Verdict, Any]]
 
 
-def dds_transport(judge: JudgeDDS) -> NegotiatedTransport:
+def dds_transport(judge: JudgeDDS) -> OfferJudge:
     """DDS as a negotiated transport, judged by ``judge`` (a publication's)."""
-    return NegotiatedTransport(parse=lambda params, source: DDSOffer.from_xmlrpc(params, source=source), judge=judge)
+    return OfferJudge(parse=lambda params, source: DDSOffer.from_xmlrpc(params, source=source), judge=judge)
 
 
 @dataclass
@@ -54,7 +55,7 @@ class Choice:
         return self.answer if self.protocol == DDS else None
 
 
-def choose_protocol(protocols: object, *, negotiated: Mapping[str, NegotiatedTransport],
+def choose_protocol(protocols: object, *, negotiated: Mapping[str, OfferJudge],
                     supports: Callable[[str], bool], subscriber: str, topic: str) -> Choice:
     """Walk ``protocols`` (the subscriber's list, from XML-RPC) in order.
 

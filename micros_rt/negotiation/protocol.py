@@ -13,6 +13,7 @@ __all__ = [
     "NEGOTIATED_PROTOCOLS",
     "negotiated_protocols",
     "register_protocol",
+    "unregister_protocol",
     "MAX_FIELD_CHARS",
     "MAX_PENDING_DDS_OFFERS",
     "UNMATCHED_READER_TIMEOUT",
@@ -44,6 +45,12 @@ def register_protocol(name: str) -> None:
         raise ValueError(f"{name} is ROS 1's own protocol, not one micros_rt negotiates")
     if name not in _negotiated:
         _negotiated.append(name)
+
+
+def unregister_protocol(name: str) -> None:
+    """Forget a name :func:`register_protocol` added (a built-in one stays)."""
+    if name in _negotiated and name not in NEGOTIATED_PROTOCOLS:
+        _negotiated.remove(name)
 
 #: Longest string accepted in any field of a DDS offer or answer (names, GUIDs, graph ids, md5).
 MAX_FIELD_CHARS = 256

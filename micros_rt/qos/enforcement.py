@@ -3,16 +3,47 @@
 DDS enforces time filter and lifespan inside Cyclone for DDS links; a TCPROS link has neither, and a
 sample taken from Cyclone can still wait behind slow callbacks. The subscription applies these to
 every message right before its callbacks, whatever the transport.
+
+An enforced option's check is an :class:`Admission`: made from the option's value by its catalogue entry
+(:data:`micros_rt.qos.options.OPTIONS`, ``admission``), it says whether the option asks for anything
+(:meth:`Admission.active`), judges one message (:meth:`Admission.check`) and counts what it drops in the statistics
+field the entry names. The subscription loops over the active ones, in :attr:`Admission.rank` order, and over
+nothing else; adding an enforced option is its entry and its Admission.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
-from typing import Optional
+from typing import Any, Optional
 
-__all__ = ["TimeFilter", "SourceOrder", "DeadlineMonitor", "DeadlineMissed", "ClockSkewCheck", "CLOCK_SKEW_WARN_SECONDS",
-           "is_expired"]
+__all__ = ["Admission", "TimeFilter", "SourceOrder", "Lifespan", "DeadlineMonitor", "DeadlineMissed",
+           "ClockSkewCheck", "CLOCK_SKEW_WARN_SECONDS", "is_expired"]
+
+
+class Admission:
+    """One enforced option's check on one subscription. ``enforcer``: its name in the catalogue (what a transport
+    reader that applies it natively lists in ``enforces``); ``counter``: the statistics field of its drops;
+    ``dropped``: its drops so far (the subscription counts them)."""
+
+    __slots__ = ("enforcer", "counter", "dropped")
+    #: checks run in rank order (a cheap one that must see every message first: source order, then time filter)
+    rank = 50
+
+    def __init__(self) -> None:
+        self.enforcer = ""
+        self.counter = ""
+        self.dropped = 0
+
+    def active(self) -> bool:
+        """Whether the option asks for this check now (else the subscription skips it)."""
+        return True
+
+    def check(self, sent_ns: int, source_ns: int, qos: Any) -> bool:
+        """Whether one message passes: ``sent_ns`` its sending time when the link carries one (else 0),
+        ``source_ns`` that or its Header stamp (0: none), ``qos`` its publisher's AdvertiseQoSOptions when known."""
+        return True
 
 #: A writer whose samples arrive stamped further than this from our clock is reported (once).
 CLOCK_SKEW_WARN_SECONDS = 1.0
@@ -28,7 +59,7 @@ class DeadlineMissed:
     total_count: int
 
 
-class TimeFilter:
+class TimeFilter(Admission):
     """At most one message per ``period`` seconds (``time_filter_duration``); 0 lets everything through.
 
     >>> f = TimeFilter(1.0)
@@ -37,10 +68,24 @@ class TimeFilter:
     """
 
     __slots__ = ("period", "_last")
+    rank = 20
 
     def __init__(self, period: float) -> None:
+        super().__init__()
         self.period = period
         self._last = -math.inf
+
+    def active(self) -> bool:
+        return self.period > 0.0
+
+    def check(self, sent_ns: int, source_ns: int, qos: Any) -> bool:
+        if self.period <= 0.0:
+            return True
+        now = time.time()  # by arrival, as Cyclone's TimeBasedFilter on the reader
+        if now - self._last < self.period:
+            return False
+        self._last = now
+        return True
 
     def admit(self, now: float) -> bool:
         if self.period <= 0.0:
@@ -51,10 +96,13 @@ class TimeFilter:
         return True
 
 
-class SourceOrder:
+class SourceOrder(Admission):
     """``ordered_by_sending_timestamp``: a message stamped before the last one admitted is dropped, as a DDS
     reader ordered BY_SOURCE_TIMESTAMP drops it (one instance: every publisher of the topic together).
-    Unstamped messages (0) pass and do not move the mark; ``enabled`` False lets everything through.
+    Unstamped messages (0) pass and do not move the mark; ``enabled`` False lets everything through. As a
+    subscription's check it goes by the sending time only (a Header stamp is when the data was taken, and
+    publishers of one topic legitimately send data stamped out of order: tf), and first: an out-of-order
+    message must not use up the time filter's window.
 
     >>> o = SourceOrder(True)
     >>> [o.admit(t) for t in (10, 12, 11, 0, 12, 13)]
@@ -62,10 +110,23 @@ class SourceOrder:
     """
 
     __slots__ = ("enabled", "_last")
+    rank = 10
 
     def __init__(self, enabled: bool) -> None:
+        super().__init__()
         self.enabled = enabled
         self._last = 0
+
+    def active(self) -> bool:
+        return self.enabled
+
+    def check(self, sent_ns: int, source_ns: int, qos: Any) -> bool:
+        if not sent_ns:
+            return True
+        if sent_ns < self._last:
+            return False
+        self._last = sent_ns
+        return True
 
     def admit(self, source_ns: int) -> bool:
         if not self.enabled or not source_ns:
@@ -74,6 +135,41 @@ class SourceOrder:
             return False
         self._last = source_ns
         return True
+
+
+class Lifespan(Admission):
+    """``msg_valid_period``: a message older than the subscriber's own ``valid`` seconds, or its publisher's
+    ``msg_valid_period`` (the shorter applies), by its source stamp, is dropped. Cyclone expires samples in its
+    cache, but a sample taken can still wait behind slow callbacks; a publisher whose QoS is unknown (TCPROS) has
+    none. Active once either asks: the subscriber's own is finite, or a publisher that has one connected
+    (:meth:`publisher`).
+
+    >>> life = Lifespan(1.0)
+    >>> life.check(0, time.time_ns() - 2_000_000_000, None), life.check(0, time.time_ns(), None)
+    (False, True)
+    """
+
+    __slots__ = ("valid", "_publishers")
+    rank = 30
+
+    def __init__(self, valid: float) -> None:
+        super().__init__()
+        self.valid = valid
+        self._publishers = False
+
+    def active(self) -> bool:
+        return self._publishers or math.isfinite(self.valid)
+
+    def publisher(self, qos: Any) -> bool:
+        """A publisher of ``qos`` connected: True when that makes this check active (it was not)."""
+        if self._publishers or qos is None or not math.isfinite(qos.msg_valid_period):
+            return False
+        was, self._publishers = self.active(), True
+        return not was
+
+    def check(self, sent_ns: int, source_ns: int, qos: Any) -> bool:
+        valid = self.valid if qos is None else min(self.valid, qos.msg_valid_period)
+        return not (source_ns and is_expired(source_ns, time.time_ns(), valid))
 
 
 class DeadlineMonitor:
@@ -87,7 +183,7 @@ class DeadlineMonitor:
     (None, 0.6, None, 2.0)
     """
 
-    __slots__ = ("deadline", "_last_delivery", "_last_report", "_missing", "missed_total")
+    __slots__ = ("deadline", "_last_delivery", "_last_report", "_missing", "missed_total", "next_due")
 
     def __init__(self, deadline: float, *, start: float) -> None:
         self.deadline = deadline
@@ -95,6 +191,8 @@ class DeadlineMonitor:
         self._last_report = start
         self._missing = False
         self.missed_total = 0
+        #: the earliest time :meth:`poll` can report a miss (a caller may skip polling before it)
+        self.next_due = start + deadline
 
     @property
     def enabled(self) -> bool:
@@ -104,6 +202,7 @@ class DeadlineMonitor:
         if not self.enabled or now - self._last_report < self.deadline:
             return None
         self._last_report = now
+        self.next_due = now + self.deadline
         self._missing = True
         self.missed_total += 1
         return now - self._last_delivery
@@ -111,6 +210,7 @@ class DeadlineMonitor:
     def delivered(self, now: float) -> Optional[float]:
         silent = now - self._last_delivery
         self._last_delivery = self._last_report = now
+        self.next_due = now + self.deadline
         if self._missing:
             self._missing = False
             return silent

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, ClassVar, Mapping, Optional
 
 from micros_rt.exceptions import QoSTypeError, QoSValueError, UnsupportedQoSError
+from micros_rt.qos.enforcement import Admission, Lifespan, SourceOrder, TimeFilter
 
 __all__ = [
     "DURATION_MAX",
@@ -291,11 +292,13 @@ class QoSOption:
     ``check`` adds the option's own rule (in words). ``dds_policy`` names the DDS policy it maps to (None: not
     mapped, see :mod:`micros_rt.qos.mapping`); ``enforcer`` the check micros_rt applies itself on every
     transport (a transport reader that applies it natively lists it in ``enforces``) and ``counter`` the
-    statistics field that counts what that check drops. ``words``/``short`` describe a value for
+    statistics field that counts what that check drops; ``admission`` makes that check for one subscriber from
+    the option's value there (an :class:`~micros_rt.qos.enforcement.Admission`, which the subscription runs
+    where it is active and counts in ``counter``; None: no per-message check, as the deadline's monitor). ``words``/``short`` describe a value for
     ``micros-rt topic info`` and for ``micros-rt graph`` (None: nothing worth saying, the default).
     ``applies`` lists the bridge entries (``MCU_*``) the option has an effect on. Everything else (the option
     classes' keys, validation, ``to_dict``/``from_dict``, the CLI's words, the key lists of bridges) derives
-    from :data:`OPTIONS`; adding an option is a field, an entry here and its enforcer.
+    from :data:`OPTIONS`; adding an option is a field, an entry here and its enforcer (an Admission).
     """
 
     name: str
@@ -305,6 +308,7 @@ class QoSOption:
     dds_policy: Optional[str] = None
     enforcer: Optional[str] = None
     counter: Optional[str] = None
+    admission: Optional[Callable[[Any], Admission]] = None
     check: Optional[Callable[[Any], None]] = None
     words: Callable[[Any], Optional[str]] = lambda _v: None
     short: Callable[[Any], Optional[str]] = lambda _v: None
@@ -396,7 +400,7 @@ OPTIONS: tuple[QoSOption, ...] = (
               short=lambda v: f"budget {v:g} s" if v > 0 else None, applies=frozenset({MCU_FROM})),
     QoSOption("msg_valid_period", "advertise", "duration",
               "lifespan: a message older than this is dropped, not delivered", dds_policy="Lifespan",
-              enforcer=LIFESPAN, counter="dropped_expired", check=_no_zero_lifespan,
+              enforcer=LIFESPAN, counter="dropped_expired", admission=Lifespan, check=_no_zero_lifespan,
               words=lambda v: None if math.isinf(v) else f"valid for {_fmt_secs(v)}",
               short=lambda v: None if math.isinf(v) else f"valid {v:g} s", applies=_ALL_MCU),
     QoSOption("data_centric_update", "advertise", "bool",
@@ -414,12 +418,12 @@ OPTIONS: tuple[QoSOption, ...] = (
               check=_callable_or_none),
     QoSOption("time_filter_duration", "subscribe", "duration",
               "deliver at most one message per this many seconds (0: no filter)", dds_policy="TimeBasedFilter",
-              enforcer=TIME_FILTER, counter="dropped_filtered", check=_finite_filter,
+              enforcer=TIME_FILTER, counter="dropped_filtered", admission=TimeFilter, check=_finite_filter,
               words=lambda v: f"time filter {_fmt_secs(v)}" if v > 0 else None,
               short=lambda v: f"filter {v:g} s" if v > 0 else None, applies=_ALL_MCU),
     QoSOption("ordered_by_sending_timestamp", "subscribe", "bool",
               "True: by the publisher's timestamp, a message older than the last delivered is dropped",
-              dds_policy="DestinationOrder", enforcer=SOURCE_ORDER, counter="dropped_out_of_order",
+              dds_policy="DestinationOrder", enforcer=SOURCE_ORDER, counter="dropped_out_of_order", admission=SourceOrder,
               words=lambda v: "by source time" if v else "by arrival"),
     QoSOption("data_centric_update", "subscribe", "bool",
               "refused: ROS 1 messages have no keys", check=_no_data_centric),

@@ -26,6 +26,7 @@ itself (Cyclone: the time-based filter); the subscription's one admission path a
 from __future__ import annotations
 
 import collections
+import queue
 import importlib
 import threading
 import time
@@ -37,8 +38,8 @@ import genpy
 
 from ..qos import AdvertiseQoSOptions, SubscribeQoSOptions
 
-__all__ = ["BACKOFF_FIRST", "BACKOFF_MAX", "BackPressuredWriter", "send_with_backoff", "Backend", "EndpointSpec", "Feed", "MirrorWriter", "PROFILE_BACKENDS", "ProfileBackend", "PushInfo",
-           "PushReader", "ReaderBackend", "RemoteWriter", "Sample", "TIME_FILTER", "LIFESPAN", "SOURCE_ORDER", "TransportReader",
+__all__ = ["BACKOFF_FIRST", "BACKOFF_MAX", "BackPressuredWriter", "send_with_backoff", "Backend", "EndpointSpec", "Feed", "MirrorWriter", "PROFILE_BACKENDS", "Inbox", "ProfileBackend", "PushInfo",
+           "PushReader", "ReaderBackend", "Wakeup", "RemoteWriter", "Sample", "TIME_FILTER", "LIFESPAN", "SOURCE_ORDER", "TransportReader",
            "TransportWriter", "WriterBackend", "close_profile_backends", "profile_backends"]
 
 # Names of the subscriber QoS a reader can enforce natively (:attr:`TransportReader.enforces`): the catalogue's
@@ -198,6 +199,64 @@ class Backend(Protocol):
         """Words for ``rosnode info`` and logs (domain, interface)."""
 
 
+class Inbox(Protocol):
+    """What a subscription's delivery thread waits on: an Event (:class:`micros_rt.core.delivery.EventInbox`), or
+    a transport's native wait set, which its readers' conditions (DDS) or its links' listeners (shared memory)
+    wake. The node picks one per subscription (:func:`micros_rt.transports.builtin.inbox_for`)."""
+
+    #: links the delivery thread waits on and drains itself (``drain(deliver, n)``, ``closed``,
+    #: ``publisher_gone()``, ``notify_gone()``), by link
+    links: Dict[Any, Any]
+    #: True when a pulled reader's native condition wakes the thread (no wake per sample needed)
+    wakes_on_readers: bool
+
+    def attach(self, reader: Any) -> None:
+        """Wake on ``reader``'s native condition when this wait set can."""
+
+    def detach(self, reader: Any) -> None: ...
+
+    def attach_link(self, link: Any) -> bool:
+        """Let the delivery thread wait on ``link`` and drain it itself (True); False: the link's own thread must
+        hand its messages over."""
+
+    def wake(self) -> None: ...
+
+    def wait(self, timeout: float) -> None: ...
+
+    def close(self) -> None:
+        """Release the wait set (after the delivery thread stopped waiting on it) and the links it holds."""
+
+
+class Wakeup:
+    """A wake-up flag between threads, cheaper than ``threading.Event`` (whose set and wait are a dozen Python
+    calls on a Condition, per message when messages come one at a time): a C queue holding at most one token.
+
+    :meth:`set` after new data; :meth:`wait` returns at once when a set came since the last wait, else at the first
+    set or after ``timeout``. A set that comes while the waiter is draining is never lost: the flag is cleared
+    before the waiter looks at the data, so a set after that puts a token again."""
+
+    __slots__ = ("_tokens", "_raised")
+
+    def __init__(self) -> None:
+        self._tokens: "queue.SimpleQueue[None]" = queue.SimpleQueue()
+        self._raised = False
+
+    def set(self) -> None:
+        if not self._raised:
+            self._raised = True
+            self._tokens.put(None)
+
+    def is_set(self) -> bool:
+        return self._raised
+
+    def wait(self, timeout: Optional[float]) -> None:
+        try:
+            self._tokens.get(timeout=timeout)
+        except queue.Empty:
+            return
+        self._raised = False
+
+
 class PushInfo:
     """The ``info`` of a pushed sample (the shape of Cyclone's SampleInfo that the core reads)."""
 
@@ -231,7 +290,10 @@ class PushReader:
         self.closed = False
         self._wake = wake
         self._queue: Deque[Sample] = collections.deque()
+        #: the queue itself, for a cheap "anything there?" (the delivery thread takes only from a reader that has)
+        self.queue = self._queue
         self._space = threading.Condition()
+        self._waiting = 0  # put()s waiting for room (take() wakes them only then)
         #: link id -> protocol name of the links feeding this reader (for ``connection_transports()``)
         self.links = links
 
@@ -242,10 +304,15 @@ class PushReader:
         if depth is None:
             q.append(sample)
         elif self.blocking:
-            with self._space:
-                while len(q) >= depth and not self.closed:
-                    self._space.wait(0.5)  # back-pressure to this link only
-                q.append(sample)
+            if len(q) >= depth:
+                with self._space:
+                    self._waiting += 1  # before the check: a take() meanwhile then notifies
+                    try:
+                        while len(q) >= depth and not self.closed:
+                            self._space.wait(0.5)  # back-pressure to this link only
+                    finally:
+                        self._waiting -= 1
+            q.append(sample)
         else:
             q.append(sample)
             while len(q) > depth:
@@ -264,7 +331,7 @@ class PushReader:
                 out.append(q.popleft())
             except IndexError:
                 break
-        if out and self.blocking and self.depth is not None:
+        if out and self._waiting:
             with self._space:
                 self._space.notify_all()
         return out

@@ -19,14 +19,15 @@ negotiated transports (:data:`micros_rt.core.negotiated.TRANSPORTS`; a plug-in r
 from __future__ import annotations
 
 import abc
+import dataclasses
 import threading
-from typing import Any, Dict, List, Optional, Protocol, Tuple, Type
+from typing import Any, Callable, Dict, List, Optional, Protocol, Tuple, Type
 
-from ..negotiation import NegotiatedTransport, Verdict
+from ..negotiation import OfferJudge, Verdict
 from ..qos import AdvertiseQoSOptions, SubscribeQoSOptions
 from .base import PushReader, TransportWriter
 
-__all__ = ["PublicationHost", "PublicationSide", "SubscriptionHost", "SubscriptionSide"]
+__all__ = ["NegotiatedTransport", "PublicationHost", "PublicationSide", "SubscriptionHost", "SubscriptionSide"]
 
 
 class PublicationHost(Protocol):
@@ -37,6 +38,8 @@ class PublicationHost(Protocol):
     queue_size: Optional[int]
     latch: bool
     options: AdvertiseQoSOptions
+    #: what this node tags its endpoints with (node name, graph): a transport that carries tags carries these
+    tag: Dict[str, str]
 
     def remember(self, subscriber: str, verdict: Verdict) -> None:
         """Keep the last verdict for ``subscriber`` (its caller id), for ``micros-rt topic info``."""
@@ -63,9 +66,14 @@ class PublicationSide(abc.ABC):
         self.writer: Optional[TransportWriter] = None
 
     @abc.abstractmethod
-    def negotiated(self, subscriber: str) -> Optional[NegotiatedTransport]:
+    def negotiated(self, subscriber: str) -> Optional[OfferJudge]:
         """How to parse and judge ``subscriber``'s offer of this protocol; None: not judged here (a
         :attr:`refusal`): the subscriber's entry is skipped as a stock publisher would, with no warning."""
+
+    def open_now(self) -> bool:
+        """Open this side's writer now if it waits for a first subscriber (a lazy DDS writer, when ROS 2 appears);
+        True when it has one."""
+        return self.writer is not None
 
     def sending(self) -> bool:
         """Whether ``publish()`` sends through :attr:`writer` now (it has one, and someone to serve with it)."""
@@ -89,6 +97,15 @@ class PublicationSide(abc.ABC):
     def refused(self) -> Tuple[int, int]:
         """(offers refused although the rules matched, links closed because their subscriber never came)."""
         return 0, 0
+
+    def delegate(self, source: Callable[[], Any], alive: Callable[[str], bool]) -> None:
+        """Serve subscribers with writers of another graph when they can take them (``source()`` names them now,
+        ``alive(peer)`` says whether a subscriber's reader still exists); a transport without delegation says so."""
+        raise NotImplementedError(f"{self.protocol or type(self).__name__} links cannot be delegated")
+
+    def delegated_links(self) -> int:
+        """Subscribers served by the writers of :meth:`delegate`, not by this side's own."""
+        return 0
 
     def link_states(self) -> Optional[Dict[str, bool]]:
         """Per subscriber caller id: whether its link is matched yet (for ``micros-rt topic info``); None when
@@ -118,6 +135,11 @@ class SubscriptionHost(Protocol):
 
     def wake(self) -> None:
         """Wake the delivery thread (a link came, data may be there)."""
+
+    def poll_link(self, link: Any, inlet: PushReader) -> bool:
+        """For a side whose links the delivery thread can wait on itself (shared memory's): attach ``link``, True
+        when the delivery thread does (its messages then go through ``inlet``'s admission); False: the link's own
+        thread must hand them to ``inlet``."""
 
 
 class SubscriptionSide(abc.ABC):
@@ -157,5 +179,47 @@ class SubscriptionSide(abc.ABC):
         """Readers whose links' threads hand over messages, for the delivery thread to take from."""
         return ()
 
+    # -- a side with pulled readers (DDS), which the delivery thread drains (it asked: ``drain_me``) ------------
+    def drain(self, limit: int) -> bool:
+        """On the delivery thread: deliver what this side's readers hold (through the host's admission path and
+        callbacks), up to about ``limit`` per reader; True when more may be waiting."""
+        return False
+
+    def tick(self, now: float) -> None:
+        """On the delivery thread, after each drain: deliver what waited for a negotiation's answer."""
+
+    def housekeeping(self, now: float) -> None:
+        """On the delivery thread, about twice a second: drop links whose publisher went."""
+
+    def pending(self) -> bool:
+        """Messages taken from the readers and not yet delivered."""
+        return False
+
+    def latched(self) -> List[Any]:
+        """The last message of each latching publisher connected over this transport (for a callback added
+        later, as rospy replays them)."""
+        return []
+
+    def kept_writers(self) -> int:
+        """Publishers' writers this side keeps state for now (``statistics().writers``)."""
+        return 0
+
+    def has_reader(self) -> bool:
+        """Whether this side has a reader of its own open (``micros-rt topic info``)."""
+        return False
+
     def close(self) -> None:
         """Close the links (the delivery thread has stopped)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class NegotiatedTransport:
+    """A negotiated transport as a node offers it: its protocol name in ``requestTopic`` and the makers of its two
+    sides (what :func:`micros_rt.extend.register_negotiated_transport` takes)."""
+
+    protocol: str
+    #: ``(publication, refusal) -> side``; ``refusal``: the node's profile keeps the topic off this transport
+    #: (a verdict in words), else None
+    publication: Callable[[PublicationHost, Optional[Verdict]], PublicationSide]
+    #: ``(subscription) -> side``, made when the subscription's TransportHints allow the protocol
+    subscription: Callable[[SubscriptionHost], SubscriptionSide]

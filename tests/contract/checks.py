@@ -165,7 +165,7 @@ def check_what_the_reader_does_not_enforce_the_core_applies(pair: Pair) -> None:
 
     reader = pair.reader
     options = SubscribeQoSOptions(time_filter_duration=30.0, ordered_by_sending_timestamp=False)
-    sub = _Subscription("/contract/admission", PointStamped, 100, options, TransportHints().tcp(), dds=None,
+    sub = _Subscription("/contract/admission", PointStamped, 100, options, TransportHints().tcp(),
                         tag={}, graph="contract")
     sub.lifespan = 1.0
     try:
@@ -182,7 +182,7 @@ def check_what_the_reader_does_not_enforce_the_core_applies(pair: Pair) -> None:
         sub.close()
     # ordered_by_sending_timestamp: by the sending time the link carries, unless the reader orders itself
     ordered = _Subscription("/contract/order", PointStamped, 100, SubscribeQoSOptions(), TransportHints().tcp(),
-                            dds=None, tag={}, graph="contract")
+                            tag={}, graph="contract")
     try:
         now = time.time_ns()
         admitted = [ordered._admit_enforced(reader, t, None, sent_ns=t) for t in (now, now - 1_000_000, now + 1)]
@@ -224,7 +224,7 @@ def check_a_pushed_reader_feeds_the_core_which_drops_expired_messages(pair: Pair
     wait_until(pair.matched, 20, "the reader to hear the writer")
     _quiet(reader)
     sub = _Subscription("/contract/e2e", PointStamped, 100, SubscribeQoSOptions(ordered_by_sending_timestamp=False),
-                        TransportHints().tcp(), dds=None, tag={}, graph="contract")
+                        TransportHints().tcp(), tag={}, graph="contract")
     sub.lifespan = 2.0
     got: List[str] = []
     sub.callbacks = ((lambda m: got.append(m.header.frame_id) if m.header.frame_id != PROBE else None, None),)

@@ -96,7 +96,7 @@ def test_a_toy_shared_memory_transport_runs_end_to_end_through_publication_and_s
     # the core's own endpoints, untouched; no master: rospy registers nothing until a node starts
     sub = _Subscription("/toy/chatter", String, 10, SubscribeQoSOptions(time_filter_duration=0.2,
                                                                          ordered_by_sending_timestamp=False),
-                        TransportHints().tcp(), dds=None, tag={}, graph="g", extra=(toy,))
+                        TransportHints().tcp(), tag={}, graph="g", extra=(toy,))
     sub.callbacks = ((got.append, None),)
     sub.start()
     pub = _Publication("/toy/chatter", String, 10, False, AdvertiseQoSOptions(), tag={}, extra=(toy,))

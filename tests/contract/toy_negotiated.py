@@ -2,9 +2,9 @@
 through an in-process bus, negotiated in ``requestTopic`` exactly as shared memory and DDS are.
 
 Plugging it in is this module plus one call, ``micros_rt.extend.register_negotiated_transport(TOY_TRANSPORT)``;
-no file of micros_rt changes. Its two sides follow :mod:`micros_rt.transports.negotiated`: the publication's
-judges an offer (same process: accepted, a channel of its own; else declined in words, and the subscriber's next
-protocol is tried), keeps the links in rospy's connection lists and gives ``publish()`` one more writer; the
+no file of micros_rt changes, and it imports nothing of micros_rt but :mod:`micros_rt.extend`. Its two sides follow
+:mod:`micros_rt.transports.negotiated`: the publication's judges an offer (same process: accepted, a channel of its
+own; else declined in words, and the subscriber's next protocol is tried), keeps the links in rospy's connection lists and gives ``publish()`` one more writer; the
 subscription's offers, reads the answer and connects a channel whose messages go through the core's one
 admission path (time filter, lifespan, queue_size, statistics) like every transport's.
 """
@@ -17,13 +17,9 @@ import threading
 import time
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
-from micros_rt.extend import (NegotiatedTransport, PublicationHost, PublicationSide, SubscriptionHost,
-                              SubscriptionSide)
-from micros_rt.negotiation import MalformedNegotiationError, Verdict
-from micros_rt.negotiation.choose import NegotiatedTransport as Judged
-from micros_rt.qos import UNBOUNDED_QUEUE_DEPTH
-from micros_rt.transports.base import PushReader
-from micros_rt.transports.tcpros import patches
+from micros_rt.extend import (UNBOUNDED_QUEUE_DEPTH, MalformedNegotiationError, NegotiatedTransport, OfferJudge,
+                              PseudoLink, PublicationHost, PublicationSide, PushReader, SubscriptionHost,
+                              SubscriptionSide, Verdict, add_link, attach_link)
 
 TOY = "TOY"
 
@@ -72,12 +68,12 @@ class ToyPublication(PublicationSide):
 
     def __init__(self, host: PublicationHost, refusal: Optional[Verdict]) -> None:
         super().__init__(host, refusal=refusal)
-        self.links: Dict[str, patches.DDSConnection] = {}  # subscriber caller id -> link
+        self.links: Dict[str, PseudoLink] = {}  # subscriber caller id -> link
 
-    def negotiated(self, subscriber: str) -> Optional[Judged]:
+    def negotiated(self, subscriber: str) -> Optional[OfferJudge]:
         if self.refusal is not None:
             return None
-        return Judged(parse=_read_offer, judge=lambda pid: self._judge(pid, subscriber))
+        return OfferJudge(parse=_read_offer, judge=lambda pid: self._judge(pid, subscriber))
 
     def _judge(self, pid: int, subscriber: str) -> Tuple[Verdict, Optional[_Answer]]:
         host = self.host
@@ -87,11 +83,11 @@ class ToyPublication(PublicationSide):
             host.remember(subscriber, verdict)
             return verdict, None
         channel = f"{host.topic}#{subscriber}"
-        conn = patches.DDSConnection(host.topic, subscriber, "o", f"TOY connection on channel {channel}",
+        conn = PseudoLink(host.topic, subscriber, "o", f"TOY connection on channel {channel}",
                                     peer_guid=channel, on_close=self._closed, transport=TOY)
         old = self.links.get(subscriber)
         self.links[subscriber] = conn
-        refused = patches.attach_link(host.topic, old, conn, what=TOY, subscriber=subscriber, fallback="the next")
+        refused = attach_link(host.topic, old, conn, what=TOY, subscriber=subscriber, fallback="the next")
         if refused is not None:
             return refused, None
         verdict = Verdict(True, "toy", f"topic {host.topic}: same process")
@@ -101,7 +97,7 @@ class ToyPublication(PublicationSide):
             host.writers_changed()
         return verdict, _Answer(channel)
 
-    def _closed(self, conn: patches.DDSConnection) -> None:
+    def _closed(self, conn: PseudoLink) -> None:
         if self.links.get(conn.endpoint_id) is conn:
             del self.links[conn.endpoint_id]
 
@@ -156,15 +152,15 @@ class ToySubscription(SubscriptionSide):
             msg._connection_header = header
             self.inlet.put(msg, sent_ns)
 
-        def closed(_conn: patches.DDSConnection) -> None:
+        def closed(_conn: PseudoLink) -> None:
             with _BUS_LOCK:
                 _BUS.pop(answer, None)
 
-        conn = patches.DDSConnection(host.topic, pub_uri, "i", f"TOY connection on channel {answer}",
+        conn = PseudoLink(host.topic, pub_uri, "i", f"TOY connection on channel {answer}",
                                     peer_guid=answer, on_close=closed, transport=TOY)
         with _BUS_LOCK:
             _BUS[answer] = put
-        if not patches.add_pseudo_connection(host.topic, conn, publisher=False):
+        if not add_link(host.topic, conn, publisher=False):
             conn.close()
             return 0, "subscriber closed", 0
         host.wake()

@@ -129,7 +129,7 @@ go.set()
 for t in threads: t.join()
 during = state()
 sub.unregister()
-print(json.dumps({"during": during, "after": state(), "readers_attr": len(impl.readers)}), flush=True)
+print(json.dumps({"during": during, "after": state(), "readers_attr": len(impl.sides["DDS"].readers)}), flush=True)
 micros_rt.shutdown()
 """)
     assert report["during"]["readers"] == 2, report  # the volatile reader and ONE transient-local reader

@@ -260,7 +260,7 @@ def main() -> int:
         while dds_readers() < args.wait_dds_readers and time.monotonic() < deadline:
             time.sleep(0.02)
         if args.wait_dds_readers:
-            from micros_rt.core.runtime import dds_backend
+            from micros_rt.extend import dds_backend
 
             writer, backend = side_writer(pub, "DDS"), dds_backend()
             # the participant the topic's writer is on, and the process's (another one: a priority participant)

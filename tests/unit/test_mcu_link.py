@@ -79,7 +79,7 @@ def _subscription(options: SubscribeQoSOptions, callback: Callable[[Any], None],
     from micros_rt.core.subscription import _Subscription
     from micros_rt.negotiation import TransportHints
 
-    sub = _Subscription("/cmd", TwistStamped, 100, options, TransportHints().tcp(), dds=None, tag={}, graph="g")
+    sub = _Subscription("/cmd", TwistStamped, 100, options, TransportHints().tcp(), tag={}, graph="g")
     sub.lifespan = lifespan
     sub.callbacks = ((callback, None),)
     sub.thread.start()

@@ -13,7 +13,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import pytest
 
-from micros_rt.negotiation.choose import Choice, NegotiatedTransport, choose_protocol, dds_transport
+from micros_rt.negotiation.choose import Choice, OfferJudge, choose_protocol, dds_transport
 from micros_rt.negotiation.decide import PublicationFacts, Verdict, decide
 from micros_rt.negotiation.messages import DDSAnswer, DDSOffer, MalformedNegotiationError, is_guid
 from micros_rt.negotiation.protocol import DDS, MAX_FIELD_CHARS, MAX_PENDING_DDS_OFFERS, TCPROS
@@ -669,7 +669,7 @@ class _ToyAnswer:
         return ["SHM", {"segment": self.segment}]
 
 
-def _toy_shm(accept: bool, seen: List[Any]) -> NegotiatedTransport:
+def _toy_shm(accept: bool, seen: List[Any]) -> OfferJudge:
     """A negotiated shared-memory transport as a new back end would register it: its offer's reader and
     its publication's judge; nothing in choose_protocol knows its name."""
     def parse(params: Any, source: str) -> Any:
@@ -683,7 +683,7 @@ def _toy_shm(accept: bool, seen: List[Any]) -> NegotiatedTransport:
             return Verdict(True, "accepted", "same host"), _ToyAnswer("/dev/shm/t")
         return Verdict(False, "host", "another host: no shared memory"), None
 
-    return NegotiatedTransport(parse=parse, judge=judge)
+    return OfferJudge(parse=parse, judge=judge)
 
 
 def test_a_registered_negotiated_transport_is_chosen_in_the_subscribers_order() -> None:

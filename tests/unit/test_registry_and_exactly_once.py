@@ -11,7 +11,7 @@ import pytest
 
 from micros_rt.transports.dds import exactly_once as _writers
 from micros_rt.core.registry import EndpointRegistry
-from micros_rt.transports.tcpros.patches import DDSConnection
+from micros_rt.transports.links import PseudoLink
 from micros_rt.transports.dds.exactly_once import DELIVER, DROP, HOLD, Accepted, WriterTable
 from micros_rt.transports.base import RemoteWriter
 from micros_rt.qos import AdvertiseQoSOptions
@@ -241,7 +241,7 @@ class FakeReader:
 
 
 def accepted(guid: str) -> Accepted:
-    conn = DDSConnection("/chatter", "/listener", "i", "DDS test", peer_guid=guid)
+    conn = PseudoLink("/chatter", "/listener", "i", "DDS test", peer_guid=guid)
     return Accepted(pub_uri="http://127.0.0.1:1/", node="/talker", latch=False, conn=conn)
 
 
@@ -299,7 +299,7 @@ def test_connection_closed_keeps_negotiated_via_qos() -> None:
     table, _ = table_with({})
     acc = accepted("w")
     state = table.accept("w", acc, AdvertiseQoSOptions())
-    table.connection_closed(DDSConnection("/chatter", "/l", "i", "x", peer_guid="w"))  # another conn: ignored
+    table.connection_closed(PseudoLink("/chatter", "/l", "i", "x", peer_guid="w"))  # another conn: ignored
     assert state.accepted is acc
     table.connection_closed(acc.conn)
     assert state.accepted is None and state.negotiated  # qos from the answer remains
@@ -418,7 +418,7 @@ def test_a_delegation_delivers_that_relays_writers_known_now_and_later_and_ignor
     before = table.for_handle(reader, 1)
     assert before is not None and table.decide(before) == DROP  # another graph: not before the answer
     acc = Accepted(pub_uri="http://127.0.0.1:2/", node="/relay_b", latch=False,
-                   conn=DDSConnection("/robot_a/chatter", "http://127.0.0.1:2/", "i", "x", peer_guid="exporter"))
+                   conn=PseudoLink("/robot_a/chatter", "http://127.0.0.1:2/", "i", "x", peer_guid="exporter"))
     qos = AdvertiseQoSOptions(latency_budget=0.02)
     table.accept("exporter", acc, qos)
     table.delegate("robot_a", acc, qos)

@@ -12,7 +12,7 @@ import pytest
 from micros_rt import AdvertiseQoSOptions, SubscribeQoSOptions
 from micros_rt.negotiation import (SHM, MalformedNegotiationError, PublicationFacts, ShmAnswer, ShmOffer,
                                    TransportHints, choose_protocol, decide_shm)
-from micros_rt.negotiation.choose import NegotiatedTransport
+from micros_rt.negotiation.choose import OfferJudge
 from micros_rt.transports.shm import host_identity
 
 HOST = "0b1d/4026531840/4026531841/1000"
@@ -103,7 +103,7 @@ def test_a_declined_shm_offer_falls_to_the_next_protocol() -> None:
     def judge(o: ShmOffer) -> tuple:  # type: ignore[type-arg]
         return decide_shm(o, FACTS, host="ffff/1/2/3", unavailable=None, subscriber="/l"), None
 
-    transport = NegotiatedTransport(parse=lambda p, s: ShmOffer.from_xmlrpc(p, source=s), judge=judge)
+    transport = OfferJudge(parse=lambda p, s: ShmOffer.from_xmlrpc(p, source=s), judge=judge)
     choice = choose_protocol([offer().to_xmlrpc(), ["TCPROS"]], negotiated={SHM: transport},
                              supports=lambda n: n == "TCPROS", subscriber="/l", topic="/chatter")
     assert choice.entry == ["TCPROS"] and [v.kind for v in choice.declined] == ["shm-host"]

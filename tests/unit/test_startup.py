@@ -39,15 +39,17 @@ def test_the_first_topic_waits_for_the_dds_import_started_by_init_node(monkeypat
     # it, and met a half-initialised module (ImportError); the first topic must wait for that thread
     import threading
 
+    import micros_rt.node  # noqa: F401  (the node makes a topic wait for the DDS import)
     from micros_rt.core import runtime as _runtime
+    from micros_rt.transports.dds import process as _process
 
     importing = threading.Thread(target=time.sleep, args=(0.3,), name="slow import stand-in", daemon=True)
     monkeypatch.setattr(_runtime._node, "initialized", True)
-    monkeypatch.setattr(_runtime._node, "dds_start", importing)
+    monkeypatch.setattr(_process._state, "start", importing)
     importing.start()
     _runtime._require_node()
     assert not importing.is_alive()
-    assert _runtime._node.dds_start is None  # later topics do not join again
+    assert _process._state.start is None  # later topics do not join again
 
 
 def test_dds_backend_waits_for_the_dds_import_started_by_init_node(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -55,12 +57,13 @@ def test_dds_backend_waits_for_the_dds_import_started_by_init_node(monkeypatch: 
     # early-import thread and met a half-initialised cyclonedds module (1 of 24 relay starts in relay_hop)
     import threading
 
-    from micros_rt.core import runtime as _runtime
+    from micros_rt import node as _runtime
+    from micros_rt.transports.dds import process as _process
 
     importing = threading.Thread(target=time.sleep, args=(0.3,), name="slow import stand-in", daemon=True)
     seen: List[bool] = []
-    monkeypatch.setattr(_runtime._node, "dds_start", importing)
-    monkeypatch.setattr(_runtime, "get_participant", lambda: seen.append(importing.is_alive()))
+    monkeypatch.setattr(_process._state, "start", importing)
+    monkeypatch.setattr(_process, "get_participant", lambda: seen.append(importing.is_alive()))
     importing.start()
     assert _runtime.dds_backend() is None
     assert seen == [False]  # the participant was asked for only after the import thread had finished

@@ -310,7 +310,7 @@ def _subscription(options: Any, depth: Optional[int] = 100) -> Any:
     from micros_rt.core.subscription import _Subscription
     from micros_rt.negotiation import TransportHints
 
-    sub = _Subscription("/admission", String, depth, options, TransportHints().tcp(), dds=None, tag={}, graph="g")
+    sub = _Subscription("/admission", String, depth, options, TransportHints().tcp(), tag={}, graph="g")
     got: List[Any] = []
     sub.callbacks = ((lambda msg: got.append(msg.data), None),)
     sub.thread.start()  # the delivery thread only: no rospy registration

@@ -21,7 +21,7 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any, Deque, Dict, List, Optional, Set, Tuple
 
-from ..tcpros.patches import DDSConnection
+from ..links import PseudoLink
 from ..base import RemoteWriter
 from ...qos import AdvertiseQoSOptions, ClockSkewCheck
 
@@ -48,7 +48,7 @@ class Accepted:
     pub_uri: str
     node: str
     latch: bool
-    conn: DDSConnection
+    conn: PseudoLink
 
 
 @dataclass
@@ -145,7 +145,7 @@ class WriterTable:
     def _delegations_changed(self) -> None:
         self._delegating_nodes = {d.accepted.node for d in self.delegations.values()}
 
-    def is_delegated(self, conn: DDSConnection) -> bool:
+    def is_delegated(self, conn: PseudoLink) -> bool:
         return any(d.accepted.conn is conn for d in self.delegations.values())
 
     def hold(self, state: WriterState, now: float, data: bytes, info: Any) -> None:
@@ -165,7 +165,7 @@ class WriterTable:
             state.conn_header = None
             return state
 
-    def connection_closed(self, conn: DDSConnection) -> None:
+    def connection_closed(self, conn: PseudoLink) -> None:
         with self._lock:
             for via in [v for v, d in self.delegations.items() if d.accepted.conn is conn]:
                 del self.delegations[via]

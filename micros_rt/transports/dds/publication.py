@@ -14,12 +14,13 @@ from typing import Any, TYPE_CHECKING, Callable, Dict, Optional, Set, Tuple, Uni
 from ...exceptions import MicrosRtError
 from ...log import nonblocking_logger
 from ...negotiation import (MAX_PENDING_DDS_OFFERS, UNMATCHED_READER_TIMEOUT, DDS, DDSAnswer, DDSOffer, DDSOpenFirst,
-                            NegotiatedTransport, PublicationFacts, RateLimitedLog, Verdict, decide, dds_transport)
+                            OfferJudge, PublicationFacts, RateLimitedLog, Verdict, decide, dds_transport)
 from ...qos import AdvertiseQoSOptions
 from ..base import EndpointSpec
 from ..negotiated import PublicationHost, PublicationSide
 from ..tcpros import patches
 from ..tcpros.patches import short
+from ..links import PseudoLink, add_link, remove_link, attach_link
 
 if TYPE_CHECKING:
     from .backend import DDSBackend, DDSTopicWriter
@@ -65,9 +66,9 @@ class DDSPublication(PublicationSide):
         self._lazy = lazy
         self._opening = threading.Lock()
         self.dds: "Optional[DDSTopicWriter]" = None
-        self.connections: Dict[str, patches.DDSConnection] = {}  # subscriber caller id -> DDS link
+        self.connections: Dict[str, PseudoLink] = {}  # subscriber caller id -> DDS link
         # links dropped because discovery had not matched their reader in time, by reader GUID (bounded)
-        self._expired: "collections.OrderedDict[str, patches.DDSConnection]" = collections.OrderedDict()
+        self._expired: "collections.OrderedDict[str, PseudoLink]" = collections.OrderedDict()
         # delegate(): where the foreign writers are, which reader GUIDs are alive, and the subscribers
         # (caller ids) served by them, not by this publication's own DDS writer
         self._foreign: Optional[Tuple[ForeignSource, ReaderAlive]] = None
@@ -104,6 +105,9 @@ class DDSPublication(PublicationSide):
                 self._replay_latched(replayed)  # a publish() between the two went to the writers before this one
             return self.dds is not None
 
+    def open_now(self) -> bool:
+        return self.ensure_writer()
+
     def _replay_latched(self, done: Any) -> Any:
         """A latched topic's last message, published before this writer existed (ROS 2 appeared later, under
         ``auto``), into the writer's history, where a late ROS 2 subscriber (transient_local) finds it, as a late
@@ -129,6 +133,10 @@ class DDSPublication(PublicationSide):
         self._foreign = (source, alive)
         self.host.writers_changed()
 
+    def delegated_links(self) -> int:
+        with self.lock:
+            return len(self.delegated)
+
     # -- negotiation (XML-RPC threads) -------------------------------------
     def facts(self) -> PublicationFacts:
         dds, host = self.dds, self.host
@@ -140,7 +148,7 @@ class DDSPublication(PublicationSide):
             type_name=dds.dds_type.type_name if dds else "", md5=host.data_class._md5sum,
             options=host.options, latch=host.latch, pending=pending)
 
-    def negotiated(self, subscriber: str) -> Optional[NegotiatedTransport]:
+    def negotiated(self, subscriber: str) -> Optional[OfferJudge]:
         if self.refusal is not None:
             self.host.remember(subscriber, self.refusal)
             return None
@@ -186,7 +194,7 @@ class DDSPublication(PublicationSide):
             info = (f"DDS connection on topic {foreign.topic} to reader {offer.reader}, served straight by "
                     f"the writers of graph {foreign.via}'s relay (now {foreign.writer}, priority "
                     f"{foreign.options.transport_priority.name}); none of it passes through this node")
-        conn = patches.DDSConnection(host.topic, subscriber, "o", info, peer_guid=offer.reader,
+        conn = PseudoLink(host.topic, subscriber, "o", info, peer_guid=offer.reader,
                                     on_close=self._connection_closed)
         # a message written before the reader matched would not reach it: rospy's has_connection waits for that
         conn.ready = lambda: conn.seen or conn.peer_guid in self._reached([conn], dds)
@@ -199,7 +207,7 @@ class DDSPublication(PublicationSide):
                 self.delegated.add(subscriber)
             dds.want(True)  # a subscriber served over DDS now: write (housekeeping keeps deciding)
         host.writers_changed()
-        refused = patches.attach_link(host.topic, old, conn, what="DDS", subscriber=short(subscriber),
+        refused = attach_link(host.topic, old, conn, what="DDS", subscriber=short(subscriber),
                                       fallback="TCPROS")
         if refused is not None:
             return refused, None
@@ -210,7 +218,7 @@ class DDSPublication(PublicationSide):
         return verdict, DDSAnswer(writer=dds.guid, participant=dds.participant.guid,
                                   latch=host.latch, qos=host.options, node=patches.caller_id())
 
-    def _connection_closed(self, conn: patches.DDSConnection) -> None:
+    def _connection_closed(self, conn: PseudoLink) -> None:
         with self.lock:
             if self.connections.get(conn.endpoint_id) is conn:
                 del self.connections[conn.endpoint_id]
@@ -218,7 +226,7 @@ class DDSPublication(PublicationSide):
         self.host.writers_changed()
 
     # -- links ---------------------------------------------------------------
-    def _reached(self, conns: "list[patches.DDSConnection]", dds: "DDSTopicWriter") -> Set[str]:
+    def _reached(self, conns: "list[PseudoLink]", dds: "DDSTopicWriter") -> Set[str]:
         """Reader GUIDs among ``conns`` that are there now: matched by our writer, or, for subscribers
         served by foreign writers, alive in DDS discovery."""
         matched = dds.matched_peers()
@@ -294,19 +302,19 @@ class DDSPublication(PublicationSide):
                     self._expired.popitem(last=False)
             else:
                 continue
-            patches.remove_pseudo_connection(topic, conn, publisher=True)
+            remove_link(topic, conn, publisher=True)
             conn.close()
         # a real subscriber on a slow or lossy network can be discovered after the bound: take it back
         for guid in [g for g in self._expired if g in matched]:
             old = self._expired.pop(guid)
             if old.endpoint_id in self.connections:
                 continue
-            late = patches.DDSConnection(topic, old.endpoint_id, "o", old.info, peer_guid=guid,
+            late = PseudoLink(topic, old.endpoint_id, "o", old.info, peer_guid=guid,
                                         on_close=self._connection_closed)
             late.seen = True
             with self.lock:
                 self.connections[old.endpoint_id] = late
-            if patches.add_pseudo_connection(topic, late, publisher=True):
+            if add_link(topic, late, publisher=True):
                 _log.warning("micros_rt: topic %s: DDS subscriber %s was discovered late; connected again",
                              topic, short(old.endpoint_id))
             else:

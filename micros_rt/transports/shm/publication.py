@@ -11,11 +11,12 @@ from typing import TYPE_CHECKING, Dict, Optional, Tuple
 
 from ...exceptions import MicrosRtError
 from ...log import nonblocking_logger
-from ...negotiation import (SHM, NegotiatedTransport, PublicationFacts, ShmAnswer, ShmOffer, Verdict, decide_shm)
+from ...negotiation import (SHM, OfferJudge, PublicationFacts, ShmAnswer, ShmOffer, Verdict, decide_shm)
 from ...qos import is_lossless
 from ..negotiated import PublicationHost, PublicationSide
 from ..tcpros import patches
 from ..tcpros.patches import short
+from ..links import PseudoLink, remove_link, attach_link
 from .host import ATTACH_TIMEOUT, host_identity, unavailable_reason
 from .vetting import vetting
 
@@ -42,14 +43,14 @@ class ShmPublication(PublicationSide):
         self.lock = threading.Lock()
         #: made when a first subscriber chooses SHM
         self.shm: "Optional[ShmWriter]" = None
-        self.links: Dict[str, patches.DDSConnection] = {}  # subscriber caller id -> SHM link
+        self.links: Dict[str, PseudoLink] = {}  # subscriber caller id -> SHM link
         #: offers refused although the rules matched: a live link of the caller, too many pending, not vetted
         self.refused_offers = 0
 
-    def negotiated(self, subscriber: str) -> Optional[NegotiatedTransport]:
+    def negotiated(self, subscriber: str) -> Optional[OfferJudge]:
         if self.refusal is not None:
             return None
-        return NegotiatedTransport(parse=lambda params, source: ShmOffer.from_xmlrpc(params, source=source),
+        return OfferJudge(parse=lambda params, source: ShmOffer.from_xmlrpc(params, source=source),
                                    judge=lambda offer: self.judge(offer, subscriber))
 
     def judge(self, offer: ShmOffer, subscriber: str) -> Tuple[Verdict, Optional[ShmAnswer]]:
@@ -81,13 +82,13 @@ class ShmPublication(PublicationSide):
         info = (f"SHM connection on channel {channel.name} to {who} ("
                 f"{'lossless' if is_lossless(host.queue_size) else f'newest {host.queue_size} kept'}, "
                 f"priority {host.options.transport_priority.name})")
-        conn = patches.DDSConnection(host.topic, subscriber, "o", info, peer_guid=channel.name,
+        conn = PseudoLink(host.topic, subscriber, "o", info, peer_guid=channel.name,
                                     on_close=self._connection_closed, transport=SHM)
         conn.ready = channel.attached  # a message sent before the subscriber's port attached would not reach it
         with self.lock:
             old = self.links.get(subscriber)
             self.links[subscriber] = conn
-        refused = patches.attach_link(host.topic, old, conn, what="SHM", subscriber=who, fallback="the next protocol")
+        refused = attach_link(host.topic, old, conn, what="SHM", subscriber=who, fallback="the next protocol")
         if refused is not None:
             return refused, None
         return verdict, self._answer(channel.name)
@@ -145,7 +146,7 @@ class ShmPublication(PublicationSide):
             host.writers_changed()
         return self.shm
 
-    def _connection_closed(self, conn: patches.DDSConnection) -> None:
+    def _connection_closed(self, conn: PseudoLink) -> None:
         with self.lock:
             if self.links.get(conn.endpoint_id) is conn:
                 del self.links[conn.endpoint_id]
@@ -160,7 +161,7 @@ class ShmPublication(PublicationSide):
             conn = self.links.get(channel.subscriber)
         if conn is not None and conn.peer_guid == channel.name:
             _log.debug("micros_rt: topic %s: SHM subscriber %s is gone", self.host.topic, short(channel.subscriber))
-            patches.remove_pseudo_connection(self.host.topic, conn, publisher=True)
+            remove_link(self.host.topic, conn, publisher=True)
             conn.close()
 
     # -- links ---------------------------------------------------------------

@@ -15,6 +15,7 @@ from ...qos import UNBOUNDED_QUEUE_DEPTH
 from ..base import PushReader
 from ..negotiated import SubscriptionHost, SubscriptionSide
 from ..tcpros import patches
+from ..links import PseudoLink, add_link, remove_link
 from .host import host_identity, process_alive, unavailable_reason
 
 if TYPE_CHECKING:
@@ -68,7 +69,7 @@ class ShmSubscription(SubscriptionSide):
         node = answer.node or pub_uri
         header = {"callerid": node, "topic": host.topic, "type": host.data_class._type,
                   "md5sum": host.data_class._md5sum, "transport": SHM}
-        conn = patches.DDSConnection(host.topic, pub_uri, "i", f"SHM connection on channel {answer.channel} from "
+        conn = PseudoLink(host.topic, pub_uri, "i", f"SHM connection on channel {answer.channel} from "
                                     f"{node}", peer_guid=answer.channel, on_close=self._connection_closed,
                                     transport=SHM, callerid_pub=node)
         put: Callable[[Any, int, Any], None] = self.inlet.put
@@ -94,14 +95,14 @@ class ShmSubscription(SubscriptionSide):
         if not self._poll(link, self.inlet):
             link.start_thread()  # the delivery thread waits on Cyclone's wait set: the link wakes it
         host.raise_priority(answer.qos)
-        if not patches.add_pseudo_connection(host.topic, conn, publisher=False):
+        if not add_link(host.topic, conn, publisher=False):
             conn.close()
             return 0, "subscriber closed", 0
         _log.debug("micros_rt: topic %s: receiving from %s over shared memory", host.topic, pub_uri)
         host.wake()
         return 1, f"Connected topic[{host.topic}] over SHM", 0
 
-    def _connection_closed(self, conn: patches.DDSConnection) -> None:
+    def _connection_closed(self, conn: PseudoLink) -> None:
         with self.host.lock:
             link = self.links.get(conn.endpoint_id)
             if link is not None and link.channel == conn.peer_guid:
@@ -111,7 +112,7 @@ class ShmSubscription(SubscriptionSide):
         if link is not None:
             link.close()
 
-    def _link_gone(self, conn: patches.DDSConnection, link: "Optional[ShmLink]" = None) -> None:
+    def _link_gone(self, conn: PseudoLink, link: "Optional[ShmLink]" = None) -> None:
         """The publisher's end went (it unregistered, its process died, or it closed this subscriber's channel:
         /dev/shm full, a forged offer in our name on old publishers): drop the connection; while the publisher's
         process still runs, ask it for a link again at once, as rospy's TCPROS subscriber reconnects (a
@@ -119,7 +120,7 @@ class ShmSubscription(SubscriptionSide):
         if self.host.closed or conn.done:
             return
         _log.debug("micros_rt: topic %s: SHM publisher %s is gone", self.host.topic, conn.endpoint_id)
-        patches.remove_pseudo_connection(self.host.topic, conn, publisher=False)
+        remove_link(self.host.topic, conn, publisher=False)
         conn.close()
         if link is None or not process_alive(link.peer_pid) or link.peer_pid == 0:
             return

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import itertools
 import select
 import socket
 import urllib.parse
@@ -41,8 +40,8 @@ import rospy.impl.registration
 import rospy.names
 import rospy.topics
 import rosgraph
-from ...negotiation import (DDS, SHM, TCPROS, DDSOpenFirst, MalformedNegotiationError, RateLimitedLog, Verdict)
-from ...negotiation import NegotiatedTransport, choose_protocol
+from ...negotiation import (DDS, TCPROS, DDSOpenFirst, MalformedNegotiationError, RateLimitedLog)
+from ...negotiation import OfferJudge, choose_protocol
 from rospy.impl.tcpros_pubsub import QueuedConnection
 from rospy.impl.registration import (
     RegManager,
@@ -59,14 +58,12 @@ if TYPE_CHECKING:
     from ..negotiated import SubscriptionSide
 
 __all__ = [
-    "DDSConnection",
     "MasterWatch",
     "PublicationHook",
     "SubscriptionHook",
     "install",
     "caller_id",
     "add_pseudo_connection",
-    "attach_link",
     "add_node_api_method",
     "prompt_registration_poll",
     "bus_info",
@@ -77,7 +74,7 @@ __all__ = [
     "ROSPY_SUBSCRIBER",
     "ROSPY_SERVICE",
     "ROSPY_SERVICE_PROXY",
-    "dds_connections",
+    "topic_connections",
     "latched_messages",
     "set_publisher_tcp_nodelay",
     "topic_impl",
@@ -85,13 +82,17 @@ __all__ = [
 
 _log = nonblocking_logger("rosout.micros_rt.negotiation")
 
-_ids = itertools.count(100000)
+
+
+def _is_pseudo(conn: Any) -> bool:
+    """A negotiated transport's link (:class:`micros_rt.transports.links.PseudoLink`): no socket, writes nothing."""
+    return bool(getattr(conn, "pseudo_link", False))
 
 
 class PublicationHook(Protocol):
     """What the publisher side of the negotiation asks a micros_rt publication."""
 
-    def negotiated_transports(self, subscriber: str) -> Dict[str, NegotiatedTransport]:
+    def negotiated_transports(self, subscriber: str) -> Dict[str, OfferJudge]:
         """The transports this publication negotiates with ``subscriber``, by protocol name (DDS)."""
 
     def on_tcpros_connection(self, conn: Any, sock: Any) -> None:
@@ -128,75 +129,11 @@ def caller_id() -> str:
     return str(rospy.names.get_caller_id())
 
 
-class DDSConnection:
-    """A connection in rospy's bookkeeping whose data flows over DDS, or shared memory (``transport="SHM"``).
-
-    It has no socket (``fileno()`` is None) and writes nothing: the DDS writer
-    carries the data once for every DDS reader, however many of these exist.
-    """
-
-    transport_type = "DDS"
-    #: rospy's connection interface: ``Subscriber.add_callback`` replays each connection's ``latch`` (#1852).
-    #: A second rospy Subscriber of a topic made while DDS links are being added read it and raised
-    #: AttributeError (a 30-node graph lost a node to it). The latched DDS message is replayed by the
-    #: subscription itself (``_Subscription.replay_latched``), from its writer's state.
-    latch = None
-
-    def __init__(self, topic: str, endpoint_id: str, direction: str, info: str, peer_guid: str = "",
-                 on_close: Optional[Callable[["DDSConnection"], None]] = None, *, transport: str = DDS,
-                 callerid_pub: str = "") -> None:
-        self.id = next(_ids)
-        self.transport_type = transport
-        self.peer_guid = peer_guid  # the DDS reader (publisher side) or writer (subscriber side)
-        self.seen = False  # has DDS discovery matched the peer yet?
-        self.created = time.monotonic()
-        self.name = topic
-        self.endpoint_id = endpoint_id
-        self.direction = direction  # 'i' inbound (subscriber side) / 'o' outbound
-        self.info = info
-        self.done = False
-        self.cleanup_cb: Optional[Callable[[Any], None]] = None
-        self.stat_bytes = 0
-        self.stat_num_msg = 0
-        # rospy's connection interface: an inbound TCPROS connection's ``callerid_pub`` is the publisher's node name
-        # (from its connection header), ``endpoint_id`` its URI. actionlib's wait_for_server compares the result and
-        # feedback connections' callerid_pub with the server's node name: a URI there kept it waiting forever.
-        self.callerid_pub = callerid_pub or endpoint_id
-        #: whether a message published now reaches the peer (an outbound link: the subscriber attached or matched);
-        #: what rospy's ``has_connection`` reads (:func:`_publisher_has_connection`)
-        self.ready: Callable[[], bool] = lambda: True
-        self._on_close = on_close
-
-    def fileno(self) -> None:
-        return None
-
-    def get_transport_info(self) -> str:
-        return self.info
-
-    def set_cleanup_callback(self, cb: Callable[[Any], None]) -> None:
-        self.cleanup_cb = cb
-
-    def write_data(self, data: bytes) -> bool:
-        return True
-
-    def close(self) -> None:
-        if self.done:
-            return
-        self.done = True
-        if self._on_close is not None:
-            self._on_close(self)
-        if self.cleanup_cb is not None:
-            try:
-                self.cleanup_cb(self)
-            except Exception:  # rospy's own cleanup; never break our close
-                _log.debug("cleanup callback failed", exc_info=True)
-
-
 def _publisher_has_connection(self: Any, endpoint_id: str) -> bool:
     """rospy's ``_TopicImpl.has_connection`` for publishers: a subscriber's link counts once a message published
     now reaches it. A TCPROS link enters rospy's list after its handshake, when the subscriber reads; a shared-memory
     or DDS link enters it when the publisher answers ``requestTopic``, before the subscriber has attached or
-    matched (:attr:`DDSConnection.ready`). actionlib's ``wait_for_server`` asks this of the goal publisher: on a
+    matched (:attr:`micros_rt.transports.links.PseudoLink.ready`). actionlib's ``wait_for_server`` asks this of the goal publisher: on a
     loaded host its first goal went out before the server's subscriber attached, was lost, and the goal stayed
     PENDING (3 of 10 runs of an actionlib client and server under ``micros-rt run``; 0 of 10 with this)."""
     for c in self.connections:  # rospy replaces the list, never mutates it: no lock needed (as rospy's own)
@@ -206,7 +143,7 @@ def _publisher_has_connection(self: Any, endpoint_id: str) -> bool:
     return False
 
 
-def add_pseudo_connection(topic: str, conn: DDSConnection, *, publisher: bool) -> bool:
+def add_pseudo_connection(topic: str, conn: Any, *, publisher: bool) -> bool:
     """Put ``conn`` into rospy's connection list of ``topic``.
 
     On the publisher side the base ``_TopicImpl.add_connection`` is used on purpose:
@@ -220,25 +157,11 @@ def add_pseudo_connection(topic: str, conn: DDSConnection, *, publisher: bool) -
     return bool(rospy.topics._TopicImpl.add_connection(impl, conn))
 
 
-def remove_pseudo_connection(topic: str, conn: DDSConnection, *, publisher: bool) -> None:
+def remove_pseudo_connection(topic: str, conn: Any, *, publisher: bool) -> None:
     tm = get_topic_manager()
     impl = tm.get_publisher_impl(topic) if publisher else tm.get_subscriber_impl(topic)
     if impl is not None and conn in impl.connections:
         impl.remove_connection(conn)
-
-
-def attach_link(topic: str, old: Optional[DDSConnection], conn: DDSConnection, *, what: str, subscriber: str,
-                fallback: str) -> Optional[Verdict]:
-    """Put a subscriber's new link (DDS, SHM) into rospy's publisher connection list of ``topic`` in place of
-    ``old``; a Verdict in words when rospy has no publisher left to attach it to (the link is closed then)."""
-    if old is not None:
-        remove_pseudo_connection(topic, old, publisher=True)
-        old.close()
-    if add_pseudo_connection(topic, conn, publisher=True):
-        return None
-    conn.close()
-    return Verdict(False, "closing", f"topic {topic}: no rospy publisher to attach the {what} link of "
-                                     f"{subscriber} to (unregistered); using {fallback}")
 
 
 #: rospy's own endpoint classes, taken before anything can replace them: ``micros-rt run`` puts
@@ -331,10 +254,10 @@ def latched_messages(topic: str) -> List[Any]:
     return [] if impl is None else [c.latch for c in list(impl.connections) if getattr(c, "latch", None) is not None]
 
 
-def dds_connections(topic: str, *, publisher: bool) -> List[DDSConnection]:
-    """The DDS pseudo-connections of ``topic`` in rospy's connection list."""
+def topic_connections(topic: str, *, publisher: bool) -> List[Any]:
+    """rospy's connection list of ``topic`` (a copy; empty when rospy has no such endpoint)."""
     impl = topic_impl(topic, publisher=publisher)
-    return [] if impl is None else [c for c in list(impl.connections) if isinstance(c, DDSConnection)]
+    return [] if impl is None else list(impl.connections)
 
 
 def bus_info(topic: str, *, publisher: bool) -> List[Tuple[str, str, str]]:
@@ -429,7 +352,7 @@ def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
             return -1, f"No subscriber for topic [{topic}]", 0
         already = f"_connect_topic[{topic}]: subscriber already connected to publisher [{pub_uri}]"
         existing = next((c for c in list(sub.connections) if c.endpoint_id == pub_uri), None)
-        if existing is not None and not isinstance(existing, DDSConnection):
+        if existing is not None and not _is_pseudo(existing):
             return 1, already, 0
         # An existing DDS or SHM link is asked again: the publisher may have unregistered and advertised the
         # topic anew (same node, same URI, a new DDS writer or SHM channel) faster than the old one was seen to
@@ -599,7 +522,7 @@ def _wrapped_publisher_add_connection(original: Callable[..., Any]) -> Callable[
     # QueuedConnection); micros_rt publications mark the socket with their transport priority.
     def add_connection(self: Any, c: Any) -> Any:
         hook = _find_publication(getattr(self, "resolved_name", ""))
-        if hook is not None and not isinstance(c, DDSConnection):  # a negotiated transport's link is no socket
+        if hook is not None and not _is_pseudo(c):  # a negotiated transport's link is no socket
             try:
                 hook.on_tcpros_connection(c, transport_socket(c))
             except Exception:
