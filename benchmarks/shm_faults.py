@@ -129,7 +129,7 @@ def sigint(env: Dict[str, str], runs: int, hints: str = "") -> Dict[str, Any]:
 
 
 def forged(env: Dict[str, str], master: str) -> Dict[str, Any]:
-    from micros_rt.negotiation import ShmOffer
+    from micros_rt.transports.shm.offer import ShmOffer
     from micros_rt.qos import SubscribeQoSOptions
     from micros_rt.transports.shm.host import host_identity
     from std_msgs.msg import String
@@ -174,7 +174,7 @@ def forged(env: Dict[str, str], master: str) -> Dict[str, Any]:
 
 
 def victim(env: Dict[str, str], master: str) -> Dict[str, Any]:
-    from micros_rt.negotiation import ShmOffer
+    from micros_rt.transports.shm.offer import ShmOffer
     from micros_rt.qos import SubscribeQoSOptions
     from micros_rt.transports.shm.host import host_identity
     from std_msgs.msg import String

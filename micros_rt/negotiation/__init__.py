@@ -1,11 +1,13 @@
-"""Protocol negotiation: TransportHints, the typed DDS offer/answer, the publisher's decision and the
-protocol-order loop. Pure: nothing here touches rospy or creates DDS entities
-(:mod:`micros_rt.transports.tcpros.patches` adapts it to rospy's ``requestTopic``)."""
+"""Protocol negotiation, generic: TransportHints, the protocol names, the offer/answer error and field readers,
+the verdict, the judge interface and the protocol-order loop. Each transport's offer, answer and decision live in
+its own package (:mod:`micros_rt.transports.dds.offer`, :mod:`micros_rt.transports.shm.offer`). Pure: nothing
+here touches rospy or creates DDS entities (:mod:`micros_rt.transports.tcpros.patches` adapts it to rospy's
+``requestTopic``)."""
 
-from .choose import Choice, OfferJudge, choose_protocol, dds_transport
-from .decide import MAX_VERDICTS, PublicationFacts, Verdict, decide, decide_shm, remember_verdict
+from .choose import Choice, OfferJudge, choose_protocol
+from .decide import MAX_VERDICTS, PublicationFacts, Verdict, qos_mismatch, remember_verdict
 from .hints import TransportHints
-from .messages import DDSAnswer, DDSOffer, DDSOpenFirst, MalformedNegotiationError, ShmAnswer, ShmOffer, is_guid
+from .messages import INT32, MalformedNegotiationError, read_bool, read_qos, read_str, read_struct, short
 from .protocol import (
     DDS,
     DEFAULT_PROTOCOLS,
@@ -21,20 +23,15 @@ from ..ratelimit import RateLimitedLog
 __all__ = [
     "DDS",
     "DEFAULT_PROTOCOLS",
+    "INT32",
     "NEGOTIATED_PROTOCOLS",
     "SHM",
-    "ShmAnswer",
-    "ShmOffer",
-    "decide_shm",
     "MAX_FIELD_CHARS",
     "MAX_PENDING_DDS_OFFERS",
     "MAX_VERDICTS",
     "TCPROS",
     "UNMATCHED_READER_TIMEOUT",
     "Choice",
-    "DDSAnswer",
-    "DDSOffer",
-    "DDSOpenFirst",
     "MalformedNegotiationError",
     "OfferJudge",
     "PublicationFacts",
@@ -42,8 +39,11 @@ __all__ = [
     "TransportHints",
     "Verdict",
     "choose_protocol",
-    "decide",
-    "dds_transport",
-    "is_guid",
+    "qos_mismatch",
+    "read_bool",
+    "read_qos",
+    "read_str",
+    "read_struct",
     "remember_verdict",
+    "short",
 ]

@@ -1,8 +1,9 @@
 """The protocol-order loop of ``requestTopic`` (publisher side), independent of rospy.
 
 The subscriber lists protocols in its preference order; the first one this publisher can serve wins, as
-rospy's ``protocol_handlers`` loop does. Negotiated transports (shared memory and DDS, and any a plug-in registers) are registered by name
-(:class:`OfferJudge`: how to read that protocol's offer, and the publication's judge); other
+rospy's ``protocol_handlers`` loop does. Negotiated transports (shared memory and DDS, and any a plug-in
+registers) are registered by name (:class:`OfferJudge`: how to read that protocol's offer, and the publication's
+judge; each transport's offer and judge live in its own package); other
 entries go to rospy's protocol handlers (``supports``). Malformed entries are skipped with a reason,
 never fatal.
 """
@@ -13,13 +14,10 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, List, Mapping, Optional, Tuple
 
 from .decide import Verdict
-from .messages import DDSAnswer, DDSOffer, MalformedNegotiationError
-from .protocol import DDS, negotiated_protocols
+from .messages import MalformedNegotiationError
+from .protocol import negotiated_protocols
 
-__all__ = ["Choice", "OfferJudge", "choose_protocol", "dds_transport"]
-
-#: Judges one offer: (verdict, answer when accepted: a DDSAnswer, or DDSOpenFirst for a lazy offer).
-JudgeDDS = Callable[[DDSOffer], Tuple[Verdict, Any]]
+__all__ = ["Choice", "OfferJudge", "choose_protocol"]
 
 
 @dataclass(frozen=True)
@@ -33,11 +31,6 @@ class OfferJudge:
     judge: Callable[[Any], Tuple[Verdict, Any]]
 
 
-def dds_transport(judge: JudgeDDS) -> OfferJudge:
-    """DDS as a negotiated transport, judged by ``judge`` (a publication's)."""
-    return OfferJudge(parse=lambda params, source: DDSOffer.from_xmlrpc(params, source=source), judge=judge)
-
-
 @dataclass
 class Choice:
     """What ``requestTopic`` answers: a negotiated transport's answer, a rospy protocol entry, or nothing."""
@@ -49,10 +42,9 @@ class Choice:
     #: Why a negotiated transport (or an entry) was not used, in words, with a stable kind for counting repeats.
     declined: List[Verdict] = field(default_factory=list)
 
-    @property
-    def dds(self) -> Optional[DDSAnswer]:
-        """The DDS answer when DDS was chosen."""
-        return self.answer if self.protocol == DDS else None
+    def answer_for(self, protocol: str) -> Any:
+        """The answer when ``protocol`` was chosen, else None."""
+        return self.answer if self.protocol == protocol else None
 
 
 def choose_protocol(protocols: object, *, negotiated: Mapping[str, OfferJudge],

@@ -170,6 +170,12 @@ class SubscriptionSide(abc.ABC):
     def connect(self, pub_uri: str, answer: Any) -> Tuple[int, str, int]:
         """Make the link the answer asks for; rospy's ``_connect_topic`` result (1: connected)."""
 
+    def asks_open_first(self, entry: List[Any]) -> bool:
+        """Whether the publisher's answer ``entry`` (``[protocol, params]``) asks for this transport's reader
+        before it answers (a lazy DDS offer's answer): the subscription then calls :meth:`open_first` and asks
+        again."""
+        return False
+
     def open_first(self) -> bool:
         """A publisher asked for this transport's reader before it answers (a lazy DDS offer): open it; True
         when there is one."""

@@ -110,7 +110,7 @@ def test_two_latched_publishers_connecting_at_once_make_one_latched_reader(ros_m
     report = run_script(ros_master, """
 import uuid
 from std_msgs.msg import String
-from micros_rt.negotiation import DDSAnswer
+from micros_rt.transports.dds.offer import DDSAnswer
 from micros_rt.qos import AdvertiseQoSOptions
 micros_rt.init_node("latch_race")
 nh = micros_rt.NodeHandle()

@@ -68,7 +68,7 @@ def test_a_node_publishing_in_a_tight_loop_over_shm_stops_within_2_s(ros_master:
 
 def forged_offer(pid: int = 0) -> List[Any]:
     """A well-formed SHM protocol entry, as a subscriber of this host and user sends it, naming ``pid``."""
-    from micros_rt.negotiation import ShmOffer
+    from micros_rt.transports.shm.offer import ShmOffer
     from micros_rt.qos import SubscribeQoSOptions
     from micros_rt.transports.shm.host import host_identity
     from std_msgs.msg import String

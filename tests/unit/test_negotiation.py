@@ -13,9 +13,10 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import pytest
 
-from micros_rt.negotiation.choose import Choice, OfferJudge, choose_protocol, dds_transport
-from micros_rt.negotiation.decide import PublicationFacts, Verdict, decide
-from micros_rt.negotiation.messages import DDSAnswer, DDSOffer, MalformedNegotiationError, is_guid
+from micros_rt.negotiation.choose import Choice, OfferJudge, choose_protocol
+from micros_rt.negotiation.decide import PublicationFacts, Verdict
+from micros_rt.negotiation.messages import MalformedNegotiationError
+from micros_rt.transports.dds.offer import DDSAnswer, DDSOffer, dds_transport, decide, is_guid
 from micros_rt.negotiation.protocol import DDS, MAX_FIELD_CHARS, MAX_PENDING_DDS_OFFERS, TCPROS
 from micros_rt.ratelimit import RateLimitedLog
 from micros_rt.qos import AdvertiseQoSOptions, SubscribeQoSOptions
@@ -456,28 +457,28 @@ TCP_ENTRY: List[Any] = [TCPROS]
 def test_choose_dds_first() -> None:
     judge = Judge()
     choice = choose([DDS_ENTRY, TCP_ENTRY], judge)
-    assert choice.dds == judge.answer and choice.entry is None and choice.declined == []
+    assert choice.answer_for(DDS) == judge.answer and choice.entry is None and choice.declined == []
     assert judge.seen == [make_offer()]
 
 
 def test_choose_tcpros_first_honoured() -> None:
     judge = Judge()
     choice = choose([TCP_ENTRY, DDS_ENTRY], judge)
-    assert choice.entry == TCP_ENTRY and choice.dds is None
+    assert choice.entry == TCP_ENTRY and choice.answer_for(DDS) is None
     assert judge.seen == []  # never judged: the subscriber preferred TCPROS
 
 
 def test_choose_declined_dds_falls_through_to_tcpros() -> None:
     judge = Judge(accept=False)
     choice = choose([DDS_ENTRY, TCP_ENTRY], judge)
-    assert choice.dds is None and choice.entry == TCP_ENTRY
+    assert choice.answer_for(DDS) is None and choice.entry == TCP_ENTRY
     assert [v.kind for v in choice.declined] == ["domain"]
 
 
 def test_choose_over_the_wire() -> None:
     judge = Judge()
     choice = choose(wire([DDS_ENTRY, TCP_ENTRY]), judge)
-    assert choice.dds is not None and judge.seen == [make_offer()]
+    assert choice.answer_for(DDS) is not None and judge.seen == [make_offer()]
 
 
 def test_choose_accepted_verdict_without_answer_is_not_dds() -> None:
@@ -487,13 +488,13 @@ def test_choose_accepted_verdict_without_answer_is_not_dds() -> None:
     choice = choose_protocol([DDS_ENTRY, TCP_ENTRY], negotiated={DDS: dds_transport(judge)}, supports=tcpros_only,
                              subscriber=SUB,
                              topic="/chatter")
-    assert choice.dds is None and choice.entry == TCP_ENTRY
+    assert choice.answer_for(DDS) is None and choice.entry == TCP_ENTRY
 
 
 @pytest.mark.parametrize("protocols", [None, "TCPROS", {"TCPROS": 1}, ("TCPROS",), 5])
 def test_choose_protocols_not_a_list(protocols: object) -> None:
     choice = choose(protocols, Judge())
-    assert choice.dds is None and choice.entry is None
+    assert choice.answer_for(DDS) is None and choice.entry is None
     assert [v.kind for v in choice.declined] == ["malformed"]
     assert SUB in choice.declined[0].reason and "/chatter" in choice.declined[0].reason
 
@@ -518,7 +519,7 @@ def test_choose_skips_malformed_entries() -> None:
 def test_choose_malformed_dds_offer_falls_through(entry: List[Any], field: str) -> None:
     judge = Judge()
     choice = choose([entry, TCP_ENTRY], judge)
-    assert choice.entry == TCP_ENTRY and choice.dds is None
+    assert choice.entry == TCP_ENTRY and choice.answer_for(DDS) is None
     assert [v.kind for v in choice.declined] == [f"malformed:{field}"]
     assert SUB in choice.declined[0].reason
     assert len(choice.declined[0].reason) < 1000
@@ -531,7 +532,7 @@ def test_choose_thousand_entries_bounded() -> None:
     start = time.perf_counter()
     choice = choose(protocols, judge)
     assert time.perf_counter() - start < 0.5
-    assert choice.dds is None and choice.entry is None
+    assert choice.answer_for(DDS) is None and choice.entry is None
     # the loop looks at a bounded prefix: neither judge calls nor verdicts grow with the list
     assert 0 < len(judge.seen) <= 16 and len(choice.declined) <= 16
 
@@ -543,7 +544,7 @@ def test_choose_thousand_malformed_entries_bounded() -> None:
 
 def test_choose_without_judge_skips_dds_silently() -> None:
     choice = choose([DDS_ENTRY, TCP_ENTRY], None)
-    assert choice.entry == TCP_ENTRY and choice.dds is None and choice.declined == []
+    assert choice.entry == TCP_ENTRY and choice.answer_for(DDS) is None and choice.declined == []
     # even a malformed DDS entry: a stock node would not look at it
     choice = choose([[DDS, "garbage"], TCP_ENTRY], None)
     assert choice.entry == TCP_ENTRY and choice.declined == []
@@ -553,9 +554,9 @@ def test_choose_nothing_supported() -> None:
     choice = choose([["UDPROS", "x"], ["SHM"]], Judge(), supports=lambda name: False)
     assert choice == Choice()
     choice = choose([], Judge())
-    assert choice.dds is None and choice.entry is None and choice.declined == []
+    assert choice.answer_for(DDS) is None and choice.entry is None and choice.declined == []
     choice = choose([DDS_ENTRY], Judge(accept=False))
-    assert choice.dds is None and choice.entry is None and len(choice.declined) == 1
+    assert choice.answer_for(DDS) is None and choice.entry is None and len(choice.declined) == 1
 
 
 def test_choose_supports_other_protocols() -> None:
@@ -693,11 +694,11 @@ def test_a_registered_negotiated_transport_is_chosen_in_the_subscribers_order() 
     offers = [["SHM", {"host": "here"}], DDS_ENTRY, TCP_ENTRY]
     choice = choose_protocol(offers, negotiated=negotiated, supports=tcpros_only, subscriber=SUB, topic="/t")
     assert choice.protocol == "SHM" and choice.answer.to_xmlrpc() == ["SHM", {"segment": "/dev/shm/t"}]
-    assert choice.dds is None and judge.seen == []
+    assert choice.answer_for(DDS) is None and judge.seen == []
     # declined with a reason: the next protocol in the subscriber's order, DDS
     choice = choose_protocol([["SHM", {"host": "there"}], DDS_ENTRY], negotiated=negotiated, supports=tcpros_only,
                              subscriber=SUB, topic="/t")
-    assert choice.protocol == DDS and choice.dds is judge.answer
+    assert choice.protocol == DDS and choice.answer_for(DDS) is judge.answer
     assert [v.kind for v in choice.declined] == ["host"]
     # malformed: skipped with its field named; a publication without the transport skips it silently
     choice = choose_protocol([["SHM", 7], TCP_ENTRY], negotiated=negotiated, supports=tcpros_only, subscriber=SUB,

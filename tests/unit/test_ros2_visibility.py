@@ -7,7 +7,8 @@ import pytest
 from micros_rt import AdvertiseQoSOptions, SubscribeQoSOptions
 from micros_rt.transports.dds.process import ros2_mode, ros2_visible
 from micros_rt.exceptions import ProfileError
-from micros_rt.negotiation import DDSOffer, DDSOpenFirst, PublicationFacts, decide
+from micros_rt.negotiation import PublicationFacts
+from micros_rt.transports.dds.offer import DDSOffer, DDSOpenFirst, decide
 from micros_rt.qos import QoSProfile
 
 

@@ -107,7 +107,8 @@ def test_a_directory_of_another_user_is_named_as_a_permission_problem(tmp_path: 
 
 
 def test_a_node_keeping_its_shared_memory_elsewhere_is_declined_in_words() -> None:
-    from micros_rt.negotiation import PublicationFacts, ShmOffer, decide_shm
+    from micros_rt.negotiation import PublicationFacts
+    from micros_rt.transports.shm.offer import ShmOffer, decide_shm
     from micros_rt.qos import AdvertiseQoSOptions, SubscribeQoSOptions
 
     facts = PublicationFacts("/chatter", "", None, "std_msgs/String", "992c", AdvertiseQoSOptions(), latch=False)

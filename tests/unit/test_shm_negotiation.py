@@ -10,8 +10,8 @@ import time
 import pytest
 
 from micros_rt import AdvertiseQoSOptions, SubscribeQoSOptions
-from micros_rt.negotiation import (SHM, MalformedNegotiationError, PublicationFacts, ShmAnswer, ShmOffer,
-                                   TransportHints, choose_protocol, decide_shm)
+from micros_rt.negotiation import SHM, MalformedNegotiationError, PublicationFacts, TransportHints, choose_protocol
+from micros_rt.transports.shm.offer import ShmAnswer, ShmOffer, decide_shm
 from micros_rt.negotiation.choose import OfferJudge
 from micros_rt.transports.shm import host_identity
 

@@ -16,12 +16,13 @@ from typing import TYPE_CHECKING, Any, Callable, Deque, Dict, List, Optional, Pr
 
 from ...exceptions import MicrosRtError
 from ...log import nonblocking_logger
-from ...negotiation import DDS, DDSAnswer, DDSOffer
+from ...negotiation import DDS
 from ...qos import UNBOUNDED_QUEUE_DEPTH, describe_incompatible_policy
 from ..base import EndpointSpec, TransportReader
 from ..negotiated import SubscriptionHost, SubscriptionSide
 from ..links import PseudoLink, add_link, remove_link
 from .exactly_once import DELIVER, HOLD, Accepted, WriterState, WriterTable
+from .offer import DDSAnswer, DDSOffer, DDSOpenFirst
 
 if TYPE_CHECKING:
     from .backend import DDSBackend, DDSTopicReader
@@ -140,6 +141,9 @@ class DDSSubscription(SubscriptionSide):
 
     def peer_of(self, answer: Any) -> str:
         return str(answer.writer)
+
+    def asks_open_first(self, entry: List[Any]) -> bool:
+        return DDSOpenFirst.is_one(entry)
 
     def open_first(self) -> bool:
         """With ROS 2 visibility off: open the DDS reader now (a publisher would take DDS; rospy's connect

@@ -11,13 +11,14 @@ from typing import TYPE_CHECKING, Dict, Optional, Tuple
 
 from ...exceptions import MicrosRtError
 from ...log import nonblocking_logger
-from ...negotiation import (SHM, OfferJudge, PublicationFacts, ShmAnswer, ShmOffer, Verdict, decide_shm)
+from ...negotiation import SHM, OfferJudge, PublicationFacts, Verdict
 from ...qos import is_lossless
 from ..negotiated import PublicationHost, PublicationSide
 from ..tcpros import patches
 from ..tcpros.patches import short
 from ..links import PseudoLink, remove_link, attach_link
 from .host import ATTACH_TIMEOUT, host_identity, unavailable_reason
+from .offer import ShmAnswer, ShmOffer, decide_shm
 from .vetting import vetting
 
 if TYPE_CHECKING:

@@ -10,13 +10,14 @@ from typing import TYPE_CHECKING, Any, Callable, Dict, List, Optional, Tuple
 
 from ...exceptions import MicrosRtError
 from ...log import nonblocking_logger
-from ...negotiation import SHM, ShmAnswer, ShmOffer
+from ...negotiation import SHM
 from ...qos import UNBOUNDED_QUEUE_DEPTH
 from ..base import PushReader
 from ..negotiated import SubscriptionHost, SubscriptionSide
 from ..tcpros import patches
 from ..links import PseudoLink, add_link, remove_link
 from .host import host_identity, process_alive, unavailable_reason
+from .offer import ShmAnswer, ShmOffer
 
 if TYPE_CHECKING:
     from .channel import ShmLink

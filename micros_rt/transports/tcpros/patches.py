@@ -5,12 +5,14 @@ micros_rt plugs into ROS 1's protocol negotiation (``requestTopic``) on both
 sides:
 
 * publisher side: ``ROSHandler.requestTopic`` is wrapped; for a micros_rt
-  publication the 'DDS' entries a subscriber offers are judged by micros_rt
-  (accepted, or declined with a logged reason so the next protocol, TCPROS, is
-  tried); for everything else they are removed and rospy decides as usual.
+  publication the entries of negotiated transports ('SHM', 'DDS') a subscriber
+  offers are judged by the publication's sides (accepted, or declined with a
+  logged reason so the next protocol, TCPROS, is tried); for everything else
+  they are removed and rospy decides as usual.
 * subscriber side: ``ROSHandler._connect_topic`` is wrapped; for a micros_rt
   subscription the protocol list follows the subscription's TransportHints and
-  a DDS answer creates a DDS pseudo-connection instead of a socket; and
+  a negotiated transport's answer creates a pseudo-connection instead of a
+  socket (its side reads the answer and connects); and
   ``RegManager.publisher_update`` no longer lets a stale publisher list erase a
   newer one (:func:`_merging_publisher_update`).
 
@@ -40,7 +42,7 @@ import rospy.impl.registration
 import rospy.names
 import rospy.topics
 import rosgraph
-from ...negotiation import (DDS, TCPROS, DDSOpenFirst, MalformedNegotiationError, RateLimitedLog)
+from ...negotiation import TCPROS, MalformedNegotiationError, RateLimitedLog
 from ...negotiation import OfferJudge, choose_protocol
 from rospy.impl.tcpros_pubsub import QueuedConnection
 from rospy.impl.registration import (
@@ -110,7 +112,8 @@ class SubscriptionHook(Protocol):
         """The negotiated transports' sides, by protocol name: how to read an answer and connect."""
 
     def open_first(self, protocol: str) -> bool:
-        """Open what a lazy offer left out (a publisher answered DDSOpenFirst); True when it is there now."""
+        """Open what a lazy offer of ``protocol`` left out (a publisher answered "open first": DDS's reader);
+        True when it is there now."""
 
 
 _find_publication: Callable[[str], Optional[PublicationHook]] = lambda topic: None
@@ -338,6 +341,15 @@ class _OneAtATime:
 _connecting = _OneAtATime()
 
 
+def _asks_open_first(hook: SubscriptionHook, result: Any) -> str:
+    """The protocol whose side reads the publisher's answer ``result`` as "open your reader first, then ask again"
+    (a lazy DDS offer's answer), "" when it is an answer of another kind."""
+    if not isinstance(result, list) or not result or not isinstance(result[0], str):
+        return ""
+    side = hook.negotiated_sides().get(result[0])
+    return result[0] if side is not None and side.asks_open_first(result) else ""
+
+
 def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
     def _connect_topic(self: Any, topic: str, pub_uri: str) -> Any:
         with _connecting.turn(topic, pub_uri):
@@ -362,14 +374,15 @@ def _wrapped_connect_topic(original: Callable[..., Any]) -> Callable[..., Any]:
         if not protocols:
             return 0, "ERROR: no protocol allowed by the TransportHints", 0
         code, msg, result = _request_topic(pub_uri, topic, protocols)
-        if code > 0 and DDSOpenFirst.is_one(result):
-            # the publisher would take DDS and this subscription has no DDS reader yet (ROS 2 visibility off):
-            # open it and ask again; without one, ask for the rest
-            hook.open_first(DDS)
+        first = _asks_open_first(hook, result) if code > 0 else ""
+        if first:
+            # the publisher would take this transport (DDS) and this subscription has no reader of it yet (ROS 2
+            # visibility off): open it and ask again; without one, ask for the rest
+            hook.open_first(first)
             protocols = hook.offered_protocols(held)
             code, msg, result = _request_topic(pub_uri, topic, protocols)
-            if code > 0 and DDSOpenFirst.is_one(result):
-                return 0, "DDS reader could not be opened", 0
+            if code > 0 and _asks_open_first(hook, result):
+                return 0, f"{first} reader could not be opened", 0
         if code <= 0:
             offered = [p[0] for p in protocols]
             if TCPROS not in offered:
