@@ -14,9 +14,7 @@ from .protocol import (
     NEGOTIATED_PROTOCOLS,
     SHM,
     MAX_FIELD_CHARS,
-    MAX_PENDING_DDS_OFFERS,
     TCPROS,
-    UNMATCHED_READER_TIMEOUT,
 )
 from ..ratelimit import RateLimitedLog
 
@@ -27,10 +25,8 @@ __all__ = [
     "NEGOTIATED_PROTOCOLS",
     "SHM",
     "MAX_FIELD_CHARS",
-    "MAX_PENDING_DDS_OFFERS",
     "MAX_VERDICTS",
     "TCPROS",
-    "UNMATCHED_READER_TIMEOUT",
     "Choice",
     "MalformedNegotiationError",
     "OfferJudge",

@@ -15,8 +15,6 @@ __all__ = [
     "register_protocol",
     "unregister_protocol",
     "MAX_FIELD_CHARS",
-    "MAX_PENDING_DDS_OFFERS",
-    "UNMATCHED_READER_TIMEOUT",
 ]
 
 DDS = "DDS"
@@ -52,10 +50,6 @@ def unregister_protocol(name: str) -> None:
     if name in _negotiated and name not in NEGOTIATED_PROTOCOLS:
         _negotiated.remove(name)
 
-#: Longest string accepted in any field of a DDS offer or answer (names, GUIDs, graph ids, md5).
+
+#: Longest string accepted in any field of an offer or answer (names, GUIDs, graph ids, md5).
 MAX_FIELD_CHARS = 256
-#: Accepted DDS offers whose reader DDS discovery has not matched yet, per publication. More are
-#: declined (the subscriber falls back to TCPROS): a flood of fake offers must not grow the node.
-MAX_PENDING_DDS_OFFERS = 64
-#: Seconds an accepted DDS offer may wait for discovery to match its reader before it is dropped.
-UNMATCHED_READER_TIMEOUT = 5.0

@@ -18,7 +18,7 @@ from typing import Any, Callable, Dict, List
 import pytest
 
 import harness
-import micros_rt.negotiation
+import micros_rt.transports.dds.offer
 from helpers import logs, mrt
 
 pytestmark = pytest.mark.env(**harness.DDS_BETWEEN_NODES)
@@ -26,8 +26,8 @@ pytestmark = pytest.mark.env(**harness.DDS_BETWEEN_NODES)
 PROBE = str(harness.PEERS_DIR / "mrt_probe.py")
 STRING_MD5 = "992ce8a1687cec8c8bd883ec73ca41d1"
 STRING_DDS = "std_msgs::msg::dds_::String_"
-UNMATCHED_READER_TIMEOUT = micros_rt.negotiation.UNMATCHED_READER_TIMEOUT
-MAX_PENDING = micros_rt.negotiation.MAX_PENDING_DDS_OFFERS
+UNMATCHED_READER_TIMEOUT = micros_rt.transports.dds.offer.UNMATCHED_READER_TIMEOUT
+MAX_PENDING = micros_rt.transports.dds.offer.MAX_PENDING_DDS_OFFERS
 
 
 def probe(*args: str) -> List[str]:

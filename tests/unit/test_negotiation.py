@@ -16,8 +16,8 @@ import pytest
 from micros_rt.negotiation.choose import Choice, OfferJudge, choose_protocol
 from micros_rt.negotiation.decide import PublicationFacts, Verdict
 from micros_rt.negotiation.messages import MalformedNegotiationError
-from micros_rt.transports.dds.offer import DDSAnswer, DDSOffer, dds_transport, decide, is_guid
-from micros_rt.negotiation.protocol import DDS, MAX_FIELD_CHARS, MAX_PENDING_DDS_OFFERS, TCPROS
+from micros_rt.transports.dds.offer import MAX_PENDING_DDS_OFFERS, DDSAnswer, DDSOffer, dds_transport, decide, is_guid
+from micros_rt.negotiation.protocol import DDS, MAX_FIELD_CHARS, TCPROS
 from micros_rt.ratelimit import RateLimitedLog
 from micros_rt.qos import AdvertiseQoSOptions, SubscribeQoSOptions
 from micros_rt.qos.options import TransportPriority

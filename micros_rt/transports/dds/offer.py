@@ -19,12 +19,18 @@ import re
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Mapping, Tuple
 
-from ...negotiation import (DDS, MAX_PENDING_DDS_OFFERS, INT32, MalformedNegotiationError, OfferJudge,
-                            PublicationFacts, Verdict, qos_mismatch, read_bool, read_qos, read_str, read_struct,
+from ...negotiation import (DDS, INT32, MalformedNegotiationError, OfferJudge, PublicationFacts, Verdict, qos_mismatch, read_bool, read_qos, read_str, read_struct,
                             short)
 from ...qos import AdvertiseQoSOptions, SubscribeQoSOptions
 
-__all__ = ["DDSAnswer", "DDSOffer", "DDSOpenFirst", "decide", "dds_transport", "is_guid"]
+__all__ = ["MAX_PENDING_DDS_OFFERS", "UNMATCHED_READER_TIMEOUT", "DDSAnswer", "DDSOffer", "DDSOpenFirst", "decide",
+           "dds_transport", "is_guid"]
+
+#: Accepted DDS offers whose reader DDS discovery has not matched yet, per publication. More are
+#: declined (the subscriber falls back to TCPROS): a flood of fake offers must not grow the node.
+MAX_PENDING_DDS_OFFERS = 64
+#: Seconds an accepted DDS offer may wait for discovery to match its reader before it is dropped.
+UNMATCHED_READER_TIMEOUT = 5.0
 
 _GUID = re.compile(r"^[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}$")
 #: a resolved (global) ROS name as rosgraph.names.is_legal_name accepts them, without a trailing slash

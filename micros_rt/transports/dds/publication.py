@@ -13,15 +13,15 @@ from typing import Any, TYPE_CHECKING, Callable, Dict, Optional, Set, Tuple, Uni
 
 from ...exceptions import MicrosRtError
 from ...log import nonblocking_logger
-from ...negotiation import (MAX_PENDING_DDS_OFFERS, UNMATCHED_READER_TIMEOUT, DDS, OfferJudge, PublicationFacts,
-                            RateLimitedLog, Verdict)
+from ...negotiation import DDS, OfferJudge, PublicationFacts, RateLimitedLog, Verdict
 from ...qos import AdvertiseQoSOptions
 from ..base import EndpointSpec
 from ..negotiated import PublicationHost, PublicationSide
 from ..tcpros import patches
 from ..tcpros.patches import short
 from ..links import PseudoLink, add_link, remove_link, attach_link
-from .offer import DDSAnswer, DDSOffer, DDSOpenFirst, decide, dds_transport
+from .offer import (MAX_PENDING_DDS_OFFERS, UNMATCHED_READER_TIMEOUT, DDSAnswer, DDSOffer, DDSOpenFirst, decide,
+                    dds_transport)
 
 if TYPE_CHECKING:
     from .backend import DDSBackend, DDSTopicWriter
