@@ -534,10 +534,18 @@ def role_graph(a, tr, msgs):
     n, i = a.nodes, a.index
     others = [(i + k) % n for k in range(1, min(3, n - 1) + 1)]
     heard = set()
+    last = {}  # j -> the last sequence number heard from node j
+    count = {"lost": 0, "recv": 0}
 
     def mk(j):
         def cb(m):
             heard.add(j)
+            seq = msgs.seq(m)
+            before = last.get(j)
+            if before is not None and seq > before + 1:
+                count["lost"] += seq - before - 1  # every message missing once node j was heard
+            last[j] = seq
+            count["recv"] += 1
         return cb
 
     pub = tr.pub(f"{a.topic}_{i}")
@@ -557,8 +565,11 @@ def role_graph(a, tr, msgs):
             service = rospy.Service(f"{a.topic}_trigger", Trigger, answer)
         emit("service", ros2_error=getattr(service, "ros2_error", None))
     deadline = time.monotonic() + a.timeout
-    seq, nxt, told = 0, time.monotonic(), False
+    seq, nxt, told, asked = 0, time.monotonic(), False, 0
     while not STOP.is_set() and time.monotonic() < deadline:
+        if len(CMDS) > asked:  # "STATS": what this node heard and lost so far
+            asked = len(CMDS)
+            emit("stats", recv=count["recv"], lost=count["lost"])
         now = time.monotonic()
         if now >= nxt:
             seq += 1

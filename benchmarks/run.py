@@ -10,6 +10,8 @@ Transports (each endpoint its own process; see CONFIG for the configuration of e
                     visibility auto (no ROS 2 node on the benchmark's domain: one DDS participant, the watcher's)
   micros_rt_shm_ros2   the same with ROS 2 visibility on (MICROS_RT_ROS2=on): a participant per node, what auto
                     becomes once a ROS 2 node is on the domain
+  micros_rt_shm_rclpy  the same (auto), and an idle rclpy node joins the scale graph's DDS domain once the graph
+                    runs and leaves after the measurement (scale figure only: the switch both ways is measured too)
   micros_rt_shm_local  the same with ROS 2 visibility off (MICROS_RT_ROS2=off): DDS only where a peer needs it
   micros_rt_dds     micros_rt NodeHandle, DDS link (.venv/bin/python, micros_rt's own loopback Cyclone config)
   micros_rt_dds_budget  micros_rt DDS with latency_budget=1 ms on the publisher (write batching), throughput only
@@ -49,6 +51,7 @@ PY = {
     "micros_rt_shm_ros2": str(REPO / ".venv/bin/python"),
     "micros_rt_shm_service": str(REPO / ".venv/bin/python"),
     "rospy_tcpros_service": "/usr/bin/python3",
+    "micros_rt_shm_rclpy": str(REPO / ".venv/bin/python"),
     "micros_rt_shm_local": str(REPO / ".venv/bin/python"),
     "micros_rt_dds": str(REPO / ".venv/bin/python"),
     "micros_rt_dds_budget": str(REPO / ".venv/bin/python"),
@@ -57,7 +60,7 @@ PY = {
     "cyclonedds_python": str(REPO / ".venv/bin/python"),
     "rclpy_fastdds": str(REPO / ".venv-ros2/bin/python"),
 }
-IMPL = {"micros_rt_shm": "mrt_shm", "micros_rt_shm_ros2": "mrt_shm", "micros_rt_shm_service": "mrt_shm",
+IMPL = {"micros_rt_shm": "mrt_shm", "micros_rt_shm_ros2": "mrt_shm", "micros_rt_shm_rclpy": "mrt_shm", "micros_rt_shm_service": "mrt_shm",
         "rospy_tcpros_service": "rospy", "micros_rt_shm_local": "mrt_shm", "micros_rt_dds": "mrt_dds", "micros_rt_dds_budget": "mrt_budget", "micros_rt_tcpros": "mrt_tcpros", "rospy_tcpros": "rospy",
         "cyclonedds_python": "cyclone", "rclpy_fastdds": "rclpy"}
 TRANSPORTS = tuple(PY)
@@ -73,6 +76,9 @@ CONFIG = {
                           "reader per topic from its start (what auto becomes once a ROS 2 node is on the domain)",
     "micros_rt_shm_service": "as micros_rt_shm (the defaults), and node 0 of the scale graph offers a std_srvs/Trigger "
                              "(advertise_service: served to ROS 1 and, through the ROS 2 helper, to ROS 2)",
+    "micros_rt_shm_rclpy": "as micros_rt_shm (the defaults), and once the scale graph runs an idle rclpy node (a "
+                           "subscription of a topic nobody publishes) joins its DDS domain; CPU and PSS are measured "
+                           "with it there, then it leaves",
     "rospy_tcpros_service": "as rospy_tcpros, and node 0 of the scale graph offers a std_srvs/Trigger (rospy.Service)",
     "micros_rt_shm_local": "as micros_rt_shm, with MICROS_RT_ROS2=off: no DDS participant until a peer on another "
                            "host needs one; the delivery thread waits on the shared-memory links itself",
@@ -486,6 +492,10 @@ class Bench:
             connect_s = last - t0
             pids = with_children([p.p.pid for p in procs]) + (
                 [self.master.pid] if t.startswith(("micros", "rospy")) else [])
+            switch = {}
+            if t == "micros_rt_shm_rclpy":
+                ros2 = self.ros2_joins(procs, pids, n)
+                switch = ros2.result
             time.sleep(1.0)
             c0, w0 = sum(cpu_ticks(x) for x in pids), time.monotonic()
             time.sleep(self.P["scale_steady"])
@@ -493,10 +503,19 @@ class Bench:
             cpu_pct = (c1 - c0) / os.sysconf("SC_CLK_TCK") / (w1 - w0) * 100
             pss = [pss_mb(p.p.pid) for p in procs]
             pss = statistics.fmean([x for x in pss if x is not None])
+            if t == "micros_rt_shm_rclpy":
+                switch.update(ros2.leave())
         finally:
+            if t == "micros_rt_shm_rclpy" and "ros2" in locals():
+                ros2.stop()
             for p in procs:
                 p.stop(grace=1.0)
-        return {f"scale{n}_connect_s": connect_s, f"scale{n}_cpu_pct": cpu_pct, f"scale{n}_pss_MB": pss}
+        return {f"scale{n}_connect_s": connect_s, f"scale{n}_cpu_pct": cpu_pct, f"scale{n}_pss_MB": pss, **switch}
+
+    def ros2_joins(self, procs, pids, n):
+        """An idle rclpy node joins the scale graph's DDS domain (micros_rt_shm_rclpy): CPU per second from its
+        start, until the graph's CPU is back within 20 % of its level before (the switch)."""
+        return Ros2Joins(self, procs, pids, n)
 
     def stop(self):
         kill_all()
@@ -505,6 +524,58 @@ class Bench:
             self.master.wait(3)
         except (ProcessLookupError, subprocess.TimeoutExpired, PermissionError):
             self.master.kill()
+
+
+class Ros2Joins:
+    """The switch of a scale graph when an idle rclpy node joins its DDS domain and when it leaves: the graph's CPU
+    in 1 s windows (the rclpy node's own not counted), how long until it is back within 20 % of the steady level,
+    and the messages the graph's nodes lost meanwhile."""
+
+    WINDOWS = 12
+
+    def __init__(self, bench, procs, pids, n):
+        self.procs, self.pids, self.n = procs, pids, n
+        before = self._windows(3)
+        self.base = statistics.median(before)
+        env = dict(bench.env("rclpy_fastdds"), ROS_DOMAIN_ID=str(bench.domain))  # the graph's domain, not its own
+        bench.n += 1
+        self.node = Proc("rclpy_fastdds", "listener", ["--topic", bench.topic("idle"), "--kind", "bytes", "--size", 64,
+                                                       "--timeout", 600], env, bench.logdir, f"{bench.n:03d}_rclpy_idle")
+        self.node.wait_ev("ready", 60)
+        joined = self._windows(self.WINDOWS)
+        self.result = {f"scale{n}_join_cpu_pct_per_s": joined, f"scale{n}_before_cpu_pct": self.base,
+                       f"scale{n}_join_settled_s": self._settled(joined)}
+
+    def _windows(self, k):
+        out = []
+        for _ in range(k):
+            c0, w0 = sum(cpu_ticks(x) for x in self.pids), time.monotonic()
+            time.sleep(1.0)
+            c1, w1 = sum(cpu_ticks(x) for x in self.pids), time.monotonic()
+            out.append(round((c1 - c0) / os.sysconf("SC_CLK_TCK") / (w1 - w0) * 100, 1))
+        return out
+
+    def _settled(self, windows):
+        """Seconds until the graph's CPU stays within 20 % (and 3 points) of its level with the node there."""
+        level = statistics.median(windows[-4:])
+        for i in range(len(windows)):
+            if all(abs(w - level) <= max(0.2 * level, 3.0) for w in windows[i:]):
+                return i
+        return len(windows)
+
+    def leave(self):
+        self.stop()
+        left = self._windows(self.WINDOWS)
+        for p in self.procs:
+            p.send("STATS")
+        stats = [p.wait_ev("stats", 30) for p in self.procs]
+        return {f"scale{self.n}_leave_cpu_pct_per_s": left, f"scale{self.n}_leave_settled_s": self._settled(left),
+                f"scale{self.n}_switch_lost": sum(s["lost"] for s in stats),
+                f"scale{self.n}_switch_recv": sum(s["recv"] for s in stats)}
+
+    def stop(self):
+        if self.node.p.poll() is None:
+            self.node.stop(grace=1.0)
 
 
 #: Figures whose messages are large (over glibc's 128 KiB mmap threshold) each get their own pair of
@@ -658,8 +729,8 @@ def verdict(fig, figs, t):
 
 def table(figs, spread, transports, md=False):
     names = sorted({f for t in transports for f, v in figs.get(t, {}).items()
-                    if not isinstance(v, dict) and not f.endswith("_sent")}, key=_fig_order)
-    short = {"micros_rt_shm": "mrt SHM", "micros_rt_shm_ros2": "mrt SHM ROS2 on", "micros_rt_shm_local": "mrt SHM local", "micros_rt_dds": "mrt DDS", "micros_rt_dds_budget": "mrt budget", "micros_rt_tcpros": "mrt TCPROS", "rospy_tcpros": "rospy",
+                    if not isinstance(v, (dict, list)) and not f.endswith("_sent")}, key=_fig_order)
+    short = {"micros_rt_shm": "mrt SHM", "micros_rt_shm_ros2": "mrt SHM ROS2 on", "micros_rt_shm_rclpy": "mrt SHM +rclpy", "micros_rt_shm_local": "mrt SHM local", "micros_rt_dds": "mrt DDS", "micros_rt_dds_budget": "mrt budget", "micros_rt_tcpros": "mrt TCPROS", "rospy_tcpros": "rospy",
              "cyclonedds_python": "cyclone-py", "rclpy_fastdds": "rclpy"}
     cols = [t for t in transports]
     head = ["figure"] + [short[t] for t in cols]
@@ -710,7 +781,7 @@ def _fig_order(f):
 
 #: one colour per stack in every plot (stock rospy red, micros_rt's DDS blue, SHM orange, its TCPROS grey;
 #: cross_host.py and constrained_link.py use the same for the stacks they share)
-COLOURS = {"micros_rt_shm": "#ff7f0e", "micros_rt_shm_ros2": "#8c564b", "micros_rt_shm_service": "#e377c2",
+COLOURS = {"micros_rt_shm": "#ff7f0e", "micros_rt_shm_ros2": "#8c564b", "micros_rt_shm_rclpy": "#bcbd22", "micros_rt_shm_service": "#e377c2",
            "rospy_tcpros_service": "#ff9896", "micros_rt_shm_local": "#ffbb78", "micros_rt_dds": "#1f77b4",
            "micros_rt_dds_budget": "#17becf", "micros_rt_tcpros": "#7f7f7f", "rospy_tcpros": "#d62728",
            "cyclonedds_python": "#2ca02c", "rclpy_fastdds": "#9467bd"}

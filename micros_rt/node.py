@@ -29,6 +29,8 @@ from .transports.builtin import builtin_transports, inbox_for
 from .transports.negotiated import PublicationSide
 from .core.runtime import _graph_id, _log, _node, _require_node
 from .transports.dds import process as dds_process
+from .transports.dds.host_gateway import WAKE as ros2_wake
+from .core.ros2_presence import endpoint_descriptions
 from .core.reader_subscription import OpenReader, ReaderSubscription
 from .core.registry import EndpointRegistry
 from .core.subscription import DeadlineMissed, Subscriber, _Subscription
@@ -84,7 +86,6 @@ def init_node(name: str, argv: Optional[List[str]] = None, anonymous: bool = Fal
     _introspection.install(lambda: _node)
     profile = _profile(qos_profile)
     _tune_malloc()
-    dds_process.note_ros2_at_start(profile)
     dds_process.start_early(profile)
     with patches.prompt_registration_poll():
         rospy.init_node(name, argv=argv, anonymous=anonymous, **kwargs)
@@ -155,11 +156,15 @@ def _housekeeping_loop() -> None:
             except Exception:
                 _log.exception("micros_rt: topic %s: publisher housekeeping failed (will retry)", p.topic)
         try:
-            if not rospy.is_shutdown() and dds_process.watch_ros2(_node.profile):
+            if not rospy.is_shutdown() and dds_process.watch_ros2(
+                    _node.profile, patches.caller_id(),
+                    lambda: endpoint_descriptions(_node.publications.all(), _node.subscriptions.all())):
                 _open_dds_sides()
         except Exception:
             _log.exception("micros_rt: watching the DDS domain for ROS 2 nodes failed (will retry)")
-        time.sleep(0.5)
+        time.sleep(0.1)
+        if ros2_wake.wait(0.4):  # the host's ROS 2 gateway (this node watching): an endpoint appeared on DDS
+            ros2_wake.clear()
 
 
 class NodeInfo(NamedTuple):

@@ -147,7 +147,8 @@ DISABLE_SHM: Setting[bool] = Setting(
 ROS2: Setting[Optional[str]] = Setting(
     "MICROS_RT_ROS2", "on, off or auto", "the profile's `ros2:`, else auto",
     "whether topics are ROS 2 topics too: on (a DDS writer and reader with every topic), off (DDS only where "
-    "a peer needs it), auto (as off until a ROS 2 node is seen on the domain)", _mode, None)
+    "a peer needs it), auto (as off; while a ROS 2 node is on the domain the host's watcher announces the nodes to "
+    "ROS 2, and a node whose topic a ROS 2 node uses becomes as on)", _mode, None)
 DISABLE_ROS2_SERVICES: Setting[bool] = Setting(
     "MICROS_RT_DISABLE_ROS2_SERVICES", _SWITCH, "off",
     "on: services and actions stay ROS 1 only (no rclpy helper process)", _switch, False)

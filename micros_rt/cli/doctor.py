@@ -365,7 +365,8 @@ def check_ros2_visibility(env: Mapping[str, str]) -> Check:
         return Check("ROS 2 visibility", OK, "on (MICROS_RT_ROS2): every node has a DDS participant and its topics "
                                              "are ROS 2 topics from its start")
     from ..transports.dds.participant import domain_id_from_env
-    from ..transports.dds.watch import watch_paths, watcher_pid
+    from ..transports.dds.host_gateway import read_visible
+    from ..transports.dds.watch import gateway_paths, watch_paths, watcher_pid
 
     try:
         domain = domain_id_from_env(env)
@@ -379,7 +380,10 @@ def check_ros2_visibility(env: Mapping[str, str]) -> Check:
             seen = len(f.read().split())
     except OSError:
         seen = 0
-    now = (f"ROS 2 seen: {seen} participant(s) that are not micros_rt, so the nodes' topics are ROS 2 topics" if seen
+    visible = len(read_visible(gateway_paths(domain)[1]))
+    now = (f"ROS 2 seen: {seen} participant(s) that are not micros_rt, so the watcher announces this host's nodes to "
+           f"ROS 2; {visible} node(s) with a ROS 2 peer of their topics have DDS writers and readers of their own"
+           if seen
            else "no ROS 2 node seen, so nodes make no DDS participant of their own (one node, the watcher, has one)")
     return Check("ROS 2 visibility", OK, f"auto: {now}; DDS domain {domain} {watching} (MICROS_RT_ROS2=on/off or "
                                          f"ros2: true/false in a profile fix it)")

@@ -1,7 +1,8 @@
 """ROS 2 visibility ``auto``, the default: micros_rt nodes of one host make no DDS participant of their own while
-nothing but micros_rt is on the DDS domain (one node, the host's watcher, has one with no topics), and their
-topics become ROS 2 topics once an rclpy node appears, whichever starts first; the watcher's death hands the
-watch to another node.
+nothing but micros_rt is on the DDS domain (one node, the host's watcher, has one with no topics); while ROS 2 is
+there, the watcher is the host's one presence in ROS 2's graph (every node and endpoint, named as the node's), and a
+node's topics become ROS 2 topics of its own once a ROS 2 endpoint is on one of them, whichever starts first; the
+watcher's death hands the watch to another node.
 
 The rest of the suite runs with visibility on (tests/harness.py, dds_env); these tests set ``auto`` and use
 a DDS domain of their own, so no ROS 2 peer of another test (or its lingering discovery data) is seen here.
@@ -89,8 +90,8 @@ def test_no_ros2_one_participant_then_an_rclpy_node_hears_and_is_heard(auto_env:
     """In both environments users have: CYCLONEDDS_URI set (as ROS 2 users set it) and unset (micros_rt's rule)."""
     if not cyclonedds_uri:
         auto_env.pop("CYCLONEDDS_URI", None)
-    talker = spawn(mrt("talk", "--topic", "/auto/out", "--count", 100000, "--rate", 20, "--duration", 90),
-                   env=auto_env, name="mrt_talker")
+    talker = spawn(mrt("talk", "--topic", "/auto/out", "--count", 100000, "--rate", 20, "--duration", 90,
+                       "--node-name", "mrt_talker_auto"), env=auto_env, name="mrt_talker")
     near = spawn(mrt("listen", "--topic", "/auto/out", "--duration", 90, "--node-name", "near"), env=auto_env, name="mrt_listener")
     far = spawn(mrt("listen", "--topic", "/auto/in", "--duration", 90, "--node-name", "far"), env=auto_env, name="mrt_ros2_listener")
     nodes = [talker, near, far]
@@ -101,8 +102,21 @@ def test_no_ros2_one_participant_then_an_rclpy_node_hears_and_is_heard(auto_env:
     # one node of the three watches the domain; the others have no participant
     wait_until(lambda: sum(watchers(p) for p in nodes) == 1, T, "one node watching the DDS domain")
     near.wait_for_count("recv", 40, T)
-    assert with_participant(nodes) == [p.name for p in nodes if watchers(p)], \
-        [(p.name, udp_sockets(p.proc.pid)) for p in nodes]
+    watcher = [p.name for p in nodes if watchers(p)]
+    assert with_participant(nodes) == watcher, [(p.name, udp_sockets(p.proc.pid)) for p in nodes]
+
+    # a ROS 2 node with no endpoint on these topics (rclpy's graph calls): the host's one presence shows it every
+    # node and endpoint, with their QoS, and no node makes a participant for it (before: all three did)
+    info = spawn(ros2("info", "--topic", "/auto/out", "--wait", T, "--min-publishers", 1, "--min-subscriptions", 1,
+                      "--wait-node", "mrt_talker_auto,near", "--duration", 30), env=auto_env, name="rclpy_info")
+    graph = info.wait_for("info", T + 10)
+    assert [(p["node_name"], p["qos"]["reliability"], p["qos"]["durability"]) for p in graph["publishers"]] == \
+        [("mrt_talker_auto", "reliable", "volatile")], graph
+    assert [s["node_name"] for s in graph["subscriptions"]] == ["near"], graph
+    assert {("/", n) for n in ("mrt_talker_auto", "near", "far")} <= {tuple(n) for n in graph["nodes"]}, graph
+    count = len(near.events("recv"))
+    near.wait_for_count("recv", count + 20, T)  # a second more: every node's housekeeping ran twice
+    assert with_participant(nodes) == watcher, [(p.name, udp_sockets(p.proc.pid)) for p in nodes]
 
     # an rclpy node appears: it hears the micros_rt talker, and its talker reaches the micros_rt listener
     listener = spawn(ros2("listen", "--topic", "/auto/out", "--count", 5, "--duration", 60),
@@ -117,7 +131,11 @@ def test_no_ros2_one_participant_then_an_rclpy_node_hears_and_is_heard(auto_env:
           f"it was ready; a micros_rt listener heard an rclpy talker {got['_rx'] - talker_ready['_rx']:.2f} s after "
           f"that was ready")
     assert got["transport"] == "DDS", got
-    wait_until(lambda: len(with_participant(nodes)) == 3, T, "every micros_rt node with a participant")
+    # only the nodes a ROS 2 endpoint exchanges data with make DDS entities (and the watcher has its participant)
+    assert set(with_participant(nodes)) == {"mrt_talker", "mrt_ros2_listener", *watcher}, \
+        [(p.name, udp_sockets(p.proc.pid)) for p in nodes]
+    heard_data = [int(str(e["data"]).split()[-1]) for e in listener.wait_for_count("recv", 5, T)]
+    assert heard_data == list(range(heard_data[0], heard_data[0] + 5)), heard_data  # none lost once heard
 
     # the local subscriber keeps its shared-memory link and gets every message once
     count = len(near.events("recv"))

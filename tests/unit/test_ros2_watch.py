@@ -40,3 +40,29 @@ def test_one_watcher_at_a_time_and_the_next_takes_over() -> None:
         first.close()
         second.close()
         os.unlink(first.lock_path)
+
+
+def test_a_node_description_reads_back_as_written_and_the_visible_file_names_nodes_by_pid(tmp_path: "os.PathLike[str]"
+                                                                                        ) -> None:
+    from micros_rt.transports.dds.host_gateway import (EndpointDescription, NodeDescription, named_visible,
+                                                       read_visible, remove_description, write_description)
+
+    prefix = os.path.join(str(tmp_path), "d.node")
+    ends = [EndpointDescription("pub", "/a", "std_msgs/String", "992ce8a1687cec8c8bd883ec73ca41d1", "string data\n",
+                                None, True, {"transport_priority": "HIGH"}, {"graph": "g", "node": "/n"}),
+            EndpointDescription("sub", "/b", "std_msgs/String", "992ce8a1687cec8c8bd883ec73ca41d1", "string data\n",
+                                10, False, None, {"graph": "g", "node": "/n"})]
+    write_description(prefix, "/ns/n", ends)
+    with open(f"{prefix}{os.getpid()}.json") as f:
+        desc = NodeDescription.parse(f.read())
+    assert (desc.pid, desc.node, list(desc.endpoints)) == (os.getpid(), "/ns/n", ends)
+    assert len(set(desc.keys())) == 2
+    remove_description(prefix)
+    assert not os.path.exists(f"{prefix}{os.getpid()}.json")
+
+    visible = os.path.join(str(tmp_path), "d.visible")
+    assert read_visible(visible) == {} and not named_visible(visible, "/ns/n")
+    with open(visible, "w") as f:
+        f.write(f"{os.getpid()} /ns/n\n1 /other\nbroken\n")
+    assert read_visible(visible) == {os.getpid(): "/ns/n", 1: "/other"}
+    assert named_visible(visible, "/ns/n") and not named_visible(visible, "/ns/m")

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import threading
 import uuid
-from typing import Any, Dict, Iterable, List, NamedTuple, Optional, Tuple
+from typing import Any, Callable, Dict, Iterable, List, NamedTuple, Optional, Tuple
 
 from ...cyclone import import_cyclonedds
 from ...exceptions import TransportError
@@ -79,11 +79,13 @@ class Discovery:
     """What the participant ``dp`` (a Cyclone DomainParticipant) has discovered. Thread-safe. ``kinds`` opens those
     built-in readers now ("participants", "writers", "readers"); the others open on first use."""
 
-    def __init__(self, dp: Any, kinds: Iterable[str] = ()) -> None:
+    def __init__(self, dp: Any, kinds: Iterable[str] = (), *, on_change: Optional[Callable[[], None]] = None) -> None:
         import_cyclonedds()
         self._dp = dp
         self._lock = threading.Lock()
         self._readers: Dict[str, Tuple[Any, Any]] = {}
+        self._on_change = on_change  # called (on Cyclone's thread) when discovery brings something
+        self._followed: Dict[str, Dict[str, Tuple[str, str]]] = {}
         for kind in kinds:
             self._reader(kind)
 
@@ -98,7 +100,14 @@ class Discovery:
             topic = {"participants": BuiltinTopicDcpsParticipant, "writers": BuiltinTopicDcpsPublication,
                      "readers": BuiltinTopicDcpsSubscription}[kind]
             try:
-                reader = BuiltinDataReader(self._dp, topic)
+                if self._on_change is None:
+                    reader = BuiltinDataReader(self._dp, topic)
+                else:
+                    from cyclonedds.core import Listener
+
+                    wake = self._on_change
+                    reader = BuiltinDataReader(self._dp, topic, listener=Listener(  # type: ignore[no-untyped-call]
+                        on_data_available=lambda _r: wake()))
                 # alive now: a deleted endpoint's sample stays in the reader, its instance disposed
                 found = (reader, ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Alive))
             except DDSException as exc:
@@ -132,6 +141,37 @@ class Discovery:
     def readers(self, dds_topic: Optional[str] = None) -> List[DiscoveredEndpoint]:
         """The readers alive (of ``dds_topic`` only, when given)."""
         return self._endpoints("readers", dds_topic)
+
+    def followed_topics(self, kind: str) -> Dict[str, Tuple[str, str]]:
+        """The writers (``kind="writers"``) or readers alive: GUID -> (participant GUID, DDS topic), kept up to date
+        from what discovery brought since the last call. It *takes* the samples (each is deserialised once, not on
+        every call: the host's ROS 2 gateway asks on every tick beside hundreds of endpoints), so a Discovery whose
+        kind is followed answers :meth:`writers`/:meth:`readers` of that kind with what came since."""
+        import_cyclonedds()
+        from cyclonedds.core import DDSException, InstanceState
+
+        with self._lock:
+            reader, _alive = self._reader(kind)
+            known = self._followed.setdefault(kind, {})
+            try:
+                for e in reader.take(N=_READ_MAX):
+                    info = e.sample_info
+                    if info.instance_state == InstanceState.Alive and info.valid_data:
+                        known[str(e.key)] = (str(e.participant_key), str(e.topic_name))
+                    else:
+                        known.pop(str(e.key), None)
+            except DDSException as exc:
+                _log.debug("micros_rt: reading DDS discovery (%s): %s", kind, exc)
+            return dict(known)
+
+    def close(self) -> None:
+        """Delete the built-in readers now (not with the participant)."""
+        from .participant import delete_entity
+
+        with self._lock:
+            readers, self._readers = list(self._readers.values()), {}
+        for reader, _alive in readers:
+            delete_entity(reader)
 
     def _endpoints(self, kind: str, dds_topic: Optional[str]) -> List[DiscoveredEndpoint]:
         import_cyclonedds()

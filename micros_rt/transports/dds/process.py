@@ -5,9 +5,8 @@ participant), and the node's part in watching the domain for ROS 2 (``auto``). T
 
 from __future__ import annotations
 
-import os
 import threading
-from typing import TYPE_CHECKING, Any, Callable, Dict, Optional
+from typing import TYPE_CHECKING, Any, Callable, Dict, List, Optional
 
 from ... import settings
 from ...cyclone import import_cyclonedds
@@ -17,9 +16,10 @@ from .participant import get_participant
 
 if TYPE_CHECKING:
     from .backend import DDSBackend
+    from .host_gateway import EndpointDescription
     from .watch import Ros2Watch
 
-__all__ = ["AUTO", "OFF", "ON", "backend", "close", "info", "note_ros2_at_start", "ros2_mode", "ros2_visible",
+__all__ = ["AUTO", "OFF", "ON", "backend", "close", "info", "ros2_mode", "ros2_visible",
            "start_early", "wait_started", "watch_ros2"]
 
 _log = nonblocking_logger("rosout.micros_rt")
@@ -50,8 +50,9 @@ def ros2_mode(profile: Any = None) -> str:
     (true: on, false: off), else auto.
 
     - on: a DDS participant, writers and readers made with each topic, as an rclpy node's.
-    - auto: as off until something other than micros_rt is on the DDS domain (a ROS 2 node or tool, seen by the
-      host's watcher, :mod:`micros_rt.transports.dds.watch`), then as on.
+    - auto: as off; while something other than micros_rt is on the DDS domain (a ROS 2 node or tool, seen by the
+      host's watcher, :mod:`micros_rt.transports.dds.watch`), the watcher announces the host's nodes to ROS 2, and
+      a node becomes as on once a ROS 2 endpoint is on one of its topics (:mod:`.host_gateway`).
     - off: DDS entities only when a peer needs them (a micros_rt node on another host, a relay)."""
     try:
         mode = settings.ROS2.get()
@@ -73,26 +74,10 @@ def ros2_visible(profile: Any = None) -> bool:
     return mode == ON or (mode == AUTO and _state.ros2_seen)
 
 
-def note_ros2_at_start(profile: Any) -> None:
-    """With ``auto`` visibility, at ``init_node``: a node started while ROS 2 is there is visible from its first
-    topic (the host's watcher left its marker); becoming the watcher waits for the first housekeeping tick."""
-    if ros2_mode(profile) != AUTO or _disabled():
-        return
-    from .participant import domain_id_from_env
-    from .watch import watch_paths
-
-    try:
-        seen = os.path.exists(watch_paths(domain_id_from_env())[1])
-    except MicrosRtError:
-        return
-    if seen:
-        with _state.lock:
-            _state.ros2_seen = True
-
-
-def watch_ros2(profile: Any) -> bool:
-    """With ``auto`` visibility, a housekeeping tick: take part in watching the DDS domain for ROS 2; True once,
-    on the tick ROS 2 is first seen (the caller opens the topics' DDS sides)."""
+def watch_ros2(profile: Any, node: str, endpoints: "Callable[[], List[EndpointDescription]]") -> bool:
+    """With ``auto`` visibility, a housekeeping tick: tell the host's ROS 2 gateway this node's ``endpoints``, take
+    part in watching the DDS domain for ROS 2; True once, on the tick the gateway first names this node (a ROS 2
+    endpoint is on one of its topics: the caller opens the topics' DDS sides)."""
     if _disabled() or ros2_mode(profile) != AUTO:
         return False
     watch = _state.watch
@@ -104,7 +89,8 @@ def watch_ros2(profile: Any) -> bool:
             watch = _state.watch = Ros2Watch(domain_id_from_env(), get_participant)
         except MicrosRtError:
             return False  # a bad ROS_DOMAIN_ID: the first DDS use says so
-    seen = watch.poll()
+    watch.describe(node, endpoints())
+    seen = watch.poll()  # the host's gateway named this node: a ROS 2 endpoint exchanges data with it
     if seen and not _state.ros2_seen:
         with _state.lock:
             _state.ros2_seen = True

@@ -105,7 +105,8 @@ def register_message_classes(classes: Dict[str, Type[genpy.Message]]) -> None:
 def _msg_class(ros_type: str) -> Type[genpy.Message]:
     if ros_type == "Header":
         ros_type = _HEADER
-    cls: Optional[Type[genpy.Message]] = roslib.message.get_message_class(ros_type) or _runtime_classes.get(ros_type)
+    # run-time classes first: roslib looks for a package that is not installed for ~0.7 s on every call
+    cls: Optional[Type[genpy.Message]] = _runtime_classes.get(ros_type) or roslib.message.get_message_class(ros_type)
     if cls is None:
         raise TypeMappingError(f"cannot load the ROS message class {ros_type!r}: is its package installed?")
     return cls

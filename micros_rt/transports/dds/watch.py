@@ -8,11 +8,14 @@ the next node to try takes over). The watcher starts its process's participant, 
 participants it discovers (:mod:`micros_rt.transports.dds.discovery`). micros_rt participants say so in their user data
 (:data:`PARTICIPANT_USER_DATA`); any other participant alive means ROS 2 is there, and the watcher creates the
 marker file :attr:`Ros2Watch.marker` (the foreign participants' GUIDs in it) and removes it once they are gone.
-Every node looks for the marker on its housekeeping tick (0.5 s) and then makes its writers and readers, as a
-node with ROS 2 visibility on does from its start, and stays so.
+
+While ROS 2 is there, the watcher is also the host's one DDS presence for ROS 2's graph
+(:mod:`.host_gateway`): it stands in for the nodes no ROS 2 endpoint exchanges data with, and names in the
+*visible* file (:func:`gateway_paths`) the nodes that one does; only those make their DDS writers and readers,
+each on its next housekeeping tick, and stay so.
 
 What it costs a robot with no ROS 2 node: one participant (the watcher's) instead of one per node; each other
-node one ``stat`` and one non-blocking ``flock`` per tick.
+node one ``stat`` and one non-blocking ``flock`` per tick, and a description file written when its topics change.
 """
 
 from __future__ import annotations
@@ -22,14 +25,16 @@ import fcntl
 import os
 import tempfile
 import time
-from typing import Callable, FrozenSet, Optional, Set
+from typing import Callable, FrozenSet, List, Optional, Set, Tuple
 
 from ...exceptions import TransportError
 from ...log import nonblocking_logger
 from .discovery import Discovery
+from .host_gateway import EndpointDescription, HostGateway, named_visible, remove_description, write_description
 from .participant import HELPER_ENCLAVE, PARTICIPANT_USER_DATA, DDSParticipant
 
-__all__ = ["PARTICIPANT_USER_DATA", "Ros2Watch", "is_micros_rt_participant", "watch_paths", "watcher_pid"]
+__all__ = ["PARTICIPANT_USER_DATA", "Ros2Watch", "gateway_paths", "is_micros_rt_participant", "watch_paths",
+           "watcher_pid"]
 
 _log = nonblocking_logger("rosout.micros_rt.dds")
 
@@ -59,11 +64,22 @@ def _netns() -> str:
         return "host"
 
 
+def _stem(domain: int) -> str:
+    base = "/dev/shm" if os.access("/dev/shm", os.W_OK) else tempfile.gettempdir()
+    return os.path.join(base, f"micros_rt_ros2_u{os.getuid()}_n{_netns()}_d{domain}")
+
+
 def watch_paths(domain: int) -> tuple[str, str]:
     """The lock file and the marker of this host (network namespace), user and DDS ``domain``."""
-    base = "/dev/shm" if os.access("/dev/shm", os.W_OK) else tempfile.gettempdir()
-    stem = os.path.join(base, f"micros_rt_ros2_u{os.getuid()}_n{_netns()}_d{domain}")
+    stem = _stem(domain)
     return stem + ".lock", stem + ".seen"
+
+
+def gateway_paths(domain: int) -> Tuple[str, str]:
+    """The prefix of the nodes' description files and the *visible* file of the host's gateway
+    (:mod:`.host_gateway`)."""
+    stem = _stem(domain)
+    return stem + ".node", stem + ".visible"
 
 
 def watcher_pid(lock_path: str) -> Optional[int]:
@@ -92,7 +108,12 @@ class Ros2Watch:
     def __init__(self, domain: int, participant: Callable[[], Optional[DDSParticipant]]) -> None:
         self.domain = domain
         self.lock_path, self.marker = watch_paths(domain)
+        self.nodes_prefix, self.visible_path = gateway_paths(domain)
         self._participant = participant
+        self.gateway: Optional[HostGateway] = None
+        self._visible_stat: Optional[Tuple[int, int, int]] = None
+        self._named = False
+        self._described: Optional[List[EndpointDescription]] = None
         self._fd: Optional[int] = None
         self._reader: Optional[Discovery] = None
         self._since = 0.0              # when this node became the watcher
@@ -105,12 +126,43 @@ class Ros2Watch:
         return self._reader is not None
 
     def poll(self) -> bool:
-        """True once ROS 2 is on the domain (the marker is there, or this watcher sees it); a cheap call."""
+        """True once the host's gateway named this node: a ROS 2 endpoint exchanges data with it (a cheap call:
+        a ``stat`` of the visible file, read when it changed)."""
         if self._reader is None and not self.failed and self._take_lock():
             self._start_watching()
         if self._reader is not None:
             self._look()
-        return os.path.exists(self.marker)
+        if not self._named:
+            try:
+                st = os.stat(self.visible_path)
+                now: Optional[Tuple[int, int, int]] = (st.st_ino, st.st_mtime_ns, st.st_size)  # a new file each write
+            except OSError:
+                now = None
+            if now is not None and now != self._visible_stat:
+                self._named = named_visible(self.visible_path, self._node)
+            self._visible_stat = now
+        return self._named
+
+    _node = ""
+
+    def describe(self, node: str, endpoints: List[EndpointDescription]) -> None:
+        """Tell the host's gateway this node's endpoints (written only when they changed; not once it is visible
+        itself, when its own participant announces them)."""
+        self._node = node
+        if self._named:
+            if self._described is not None:
+                remove_description(self.nodes_prefix)
+                self._described = None
+            return
+        if endpoints == self._described:
+            return
+        try:
+            write_description(self.nodes_prefix, node, endpoints)
+            self._described = list(endpoints)
+        except OSError as exc:
+            self._described = list(endpoints)  # said once per change, not per tick
+            _log.warning("micros_rt: cannot describe this node's topics to the host's ROS 2 gateway (%s): ROS 2 "
+                         "tools will not list them until a ROS 2 node uses one", exc)
 
     def foreign(self) -> FrozenSet[str]:
         """GUIDs of the participants that are not micros_rt's, as this watcher saw them last (empty elsewhere)."""
@@ -163,13 +215,37 @@ class Ros2Watch:
         if foreign != self._foreign:
             if foreign - self._foreign:
                 _log.info("micros_rt: %d DDS participant(s) that are not micros_rt on domain %d (ROS 2 nodes or "
-                          "tools): this host's micros_rt nodes make their topics ROS 2 topics", len(foreign),
+                          "tools): this host's micros_rt nodes are announced to ROS 2, and make their topics ROS 2 "
+                          "topics once a ROS 2 node uses one", len(foreign),
                           self.domain)
             self._foreign = frozenset(foreign)
         if foreign:
             self._write_marker(foreign)
+            self._serve(self._foreign)
         elif time.monotonic() - self._since > TAKEOVER_GRACE:
             self._remove_marker()
+            self._close_gateway()
+
+    def _serve(self, foreign: FrozenSet[str]) -> None:
+        """ROS 2 is here: this watcher is the host's presence in its graph (:mod:`.host_gateway`)."""
+        if self.gateway is None:
+            participant = self._participant()
+            if participant is None:
+                return
+            try:
+                self.gateway = HostGateway(participant, self.nodes_prefix, self.visible_path)
+            except Exception as exc:  # Cyclone refused an entity: nodes stay off ROS 2's graph until next tick
+                _log.warning("micros_rt: cannot start the host's ROS 2 gateway on domain %d (%s); will retry",
+                             self.domain, exc)
+                return
+            _log.info("micros_rt: this node is the host's ROS 2 gateway on DDS domain %d: it announces this host's "
+                      "micros_rt nodes to ROS 2", self.domain)
+        self.gateway.update(foreign)
+
+    def _close_gateway(self) -> None:
+        gateway, self.gateway = self.gateway, None
+        if gateway is not None:
+            gateway.close()
 
     def _write_marker(self, foreign: "set[str]") -> None:
         text = "".join(sorted(g + "\n" for g in foreign))
@@ -203,5 +279,9 @@ class Ros2Watch:
 
     def close(self) -> None:
         """Stop watching (at shutdown; the next node to try takes over). The marker stays for the next watcher."""
+        self._close_gateway()
+        if self._described is not None:
+            remove_description(self.nodes_prefix)
+            self._described = None
         self._reader = None  # its readers are deleted with the participant
         self._release()
