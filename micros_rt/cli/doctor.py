@@ -365,8 +365,7 @@ def check_ros2_visibility(env: Mapping[str, str]) -> Check:
         return Check("ROS 2 visibility", OK, "on (MICROS_RT_ROS2): every node has a DDS participant and its topics "
                                              "are ROS 2 topics from its start")
     from ..transports.dds.participant import domain_id_from_env
-    from ..transports.dds.host_gateway import read_visible
-    from ..transports.dds.watch import gateway_paths, watch_paths, watcher_pid
+    from ..transports.dds.watch import gateway_paths, read_visible, watch_paths, watcher_pid
 
     try:
         domain = domain_id_from_env(env)

@@ -30,11 +30,12 @@ from typing import Callable, FrozenSet, List, Optional, Set, Tuple
 from ...exceptions import TransportError
 from ...log import nonblocking_logger
 from .discovery import Discovery
-from .host_gateway import EndpointDescription, HostGateway, named_visible, remove_description, write_description
+from .host_gateway import (EndpointDescription, HostGateway, named_visible, read_visible, remove_description,
+                           write_description)
 from .participant import HELPER_ENCLAVE, PARTICIPANT_USER_DATA, DDSParticipant
 
-__all__ = ["PARTICIPANT_USER_DATA", "Ros2Watch", "gateway_paths", "is_micros_rt_participant", "watch_paths",
-           "watcher_pid"]
+__all__ = ["PARTICIPANT_USER_DATA", "Ros2Watch", "gateway_paths", "is_micros_rt_participant", "read_visible",
+           "watch_paths", "watcher_pid"]
 
 _log = nonblocking_logger("rosout.micros_rt.dds")
 
