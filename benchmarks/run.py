@@ -505,6 +505,11 @@ class Bench:
             pss = statistics.fmean([x for x in pss if x is not None])
             if t == "micros_rt_shm_rclpy":
                 switch.update(ros2.leave())
+            else:  # the same count without a ROS 2 node, for comparison: what the graph lost since it connected
+                for p in procs:
+                    p.send("STATS")
+                stats = [p.wait_ev("stats", 30) for p in procs]
+                switch[f"scale{n}_lost"] = sum(s["lost"] for s in stats)
         finally:
             if t == "micros_rt_shm_rclpy" and "ros2" in locals():
                 ros2.stop()
