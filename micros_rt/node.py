@@ -29,8 +29,7 @@ from .transports.builtin import builtin_transports, inbox_for
 from .transports.negotiated import PublicationSide
 from .core.runtime import _graph_id, _log, _node, _require_node
 from .transports.dds import process as dds_process
-from .transports.dds.host_gateway import WAKE as ros2_wake
-from .core.ros2_presence import endpoint_descriptions
+from .transports.dds.host_gateway import WAKE as ros2_wake, endpoint_descriptions
 from .core.reader_subscription import OpenReader, ReaderSubscription
 from .core.registry import EndpointRegistry
 from .core.subscription import DeadlineMissed, Subscriber, _Subscription

@@ -29,13 +29,14 @@ import os
 import threading
 import time
 import uuid
-from typing import Any, Dict, FrozenSet, List, Mapping, NamedTuple, Optional, Set, Tuple
+from typing import Any, Dict, FrozenSet, List, Mapping, NamedTuple, Optional, Sequence, Set, Tuple
 
 from ...cyclone import import_cyclonedds
 from ...log import nonblocking_logger
+from ...negotiation.protocol import DDS
 
-__all__ = ["PROXY_PARTITION", "WAKE", "EndpointDescription", "HostGateway", "NodeDescription", "named_visible",
-           "read_visible", "remove_description", "write_description"]
+__all__ = ["PROXY_PARTITION", "WAKE", "EndpointDescription", "HostGateway", "NodeDescription", "endpoint_descriptions",
+           "named_visible", "read_visible", "remove_description", "write_description"]
 
 _log = nonblocking_logger("rosout.micros_rt.dds")
 
@@ -122,6 +123,38 @@ def read_visible(path: str) -> Dict[int, str]:
 
 def named_visible(path: str, node: str) -> bool:
     return read_visible(path).get(os.getpid()) == node
+
+
+_last_described: Tuple[Tuple[int, ...], List[EndpointDescription]] = ((), [])
+
+
+def endpoint_descriptions(pubs: Sequence[Any], subs: Sequence[Any]) -> List[EndpointDescription]:
+    """A node's publications and subscriptions (the core's, from its registries) as its description tells the
+    gateway: each that would be a ROS 2 endpoint (a DDS side the node's profile does not refuse), in a stable order;
+    made again only when the node's endpoints changed (this runs on every housekeeping tick)."""
+    global _last_described
+    key = (*(id(p) for p in pubs), *(id(s) for s in subs), *(int(p.closed) for p in pubs),
+           *(int(s.closed) for s in subs))
+    if key == _last_described[0]:
+        return _last_described[1]
+    out: List[EndpointDescription] = []
+    for pub in pubs:
+        side = pub.sides.get(DDS)
+        if side is None or side.refusal is not None or pub.closed:
+            continue
+        cls = pub.data_class
+        out.append(EndpointDescription("pub", pub.topic, cls._type, cls._md5sum, str(getattr(cls, "_full_text", "")),
+                                       pub.queue_size, bool(pub.latch), pub.options.to_dict(), dict(pub.tag)))
+    for sub in subs:
+        if sub.sides.get(DDS) is None or sub.closed:
+            continue
+        cls = sub.data_class
+        out.append(EndpointDescription("sub", sub.topic, cls._type, cls._md5sum, str(getattr(cls, "_full_text", "")),
+                                       sub.queue_size, False, None if sub.options is None else sub.options.to_dict(),
+                                       dict(sub.tag)))
+    out.sort(key=lambda e: (e.kind, e.topic))
+    _last_described = (key, out)
+    return out
 
 
 def _alive(pid: int) -> bool:
