@@ -45,7 +45,8 @@ def test_one_watcher_at_a_time_and_the_next_takes_over() -> None:
 def test_a_node_description_reads_back_as_written_and_the_visible_file_names_nodes_by_pid(tmp_path: "os.PathLike[str]"
                                                                                         ) -> None:
     from micros_rt.transports.dds.host_gateway import (EndpointDescription, NodeDescription, named_visible,
-                                                       read_visible, remove_description, write_description)
+                                                       prune_descriptions, read_visible, remove_description,
+                                                       write_description)
 
     prefix = os.path.join(str(tmp_path), "d.node")
     ends = [EndpointDescription("pub", "/a", "std_msgs/String", "992ce8a1687cec8c8bd883ec73ca41d1", "string data\n",
@@ -57,6 +58,10 @@ def test_a_node_description_reads_back_as_written_and_the_visible_file_names_nod
         desc = NodeDescription.parse(f.read())
     assert (desc.pid, desc.node, list(desc.endpoints)) == (os.getpid(), "/ns/n", ends)
     assert len(set(desc.keys())) == 2
+    with open(f"{prefix}999999999.json", "w") as f:  # a pid no process has: a node killed
+        f.write("{}")
+    prune_descriptions(prefix)
+    assert sorted(os.listdir(str(tmp_path))) == [f"d.node{os.getpid()}.json"]  # the live one stays
     remove_description(prefix)
     assert not os.path.exists(f"{prefix}{os.getpid()}.json")
 

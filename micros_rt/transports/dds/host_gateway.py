@@ -36,7 +36,7 @@ from ...log import nonblocking_logger
 from ...negotiation.protocol import DDS
 
 __all__ = ["PROXY_PARTITION", "WAKE", "EndpointDescription", "HostGateway", "NodeDescription", "endpoint_descriptions",
-           "named_visible", "read_visible", "remove_description", "write_description"]
+           "named_visible", "prune_descriptions", "read_visible", "remove_description", "write_description"]
 
 _log = nonblocking_logger("rosout.micros_rt.dds")
 
@@ -104,6 +104,22 @@ def remove_description(prefix: str) -> None:
         os.unlink(_description_path(prefix, os.getpid()))
     except OSError:
         pass
+
+
+def prune_descriptions(prefix: str) -> None:
+    """Remove the description files of processes that are gone (killed: a node that shuts down removes its own)."""
+    directory, base = os.path.split(prefix)
+    try:
+        names = [n for n in os.listdir(directory) if n.startswith(base) and n.endswith(".json")]
+    except OSError:
+        return
+    for name in names:
+        stem = name[len(base):-len(".json")]
+        if stem.isdigit() and not _alive(int(stem)):
+            try:
+                os.unlink(os.path.join(directory, name))
+            except OSError:
+                pass
 
 
 def read_visible(path: str) -> Dict[int, str]:

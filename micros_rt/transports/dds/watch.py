@@ -30,8 +30,8 @@ from typing import Callable, FrozenSet, List, Optional, Set, Tuple
 from ...exceptions import TransportError
 from ...log import nonblocking_logger
 from .discovery import Discovery
-from .host_gateway import (EndpointDescription, HostGateway, named_visible, read_visible, remove_description,
-                           write_description)
+from .host_gateway import (EndpointDescription, HostGateway, named_visible, prune_descriptions, read_visible,
+                           remove_description, write_description)
 from .participant import HELPER_ENCLAVE, PARTICIPANT_USER_DATA, DDSParticipant
 
 __all__ = ["PARTICIPANT_USER_DATA", "Ros2Watch", "gateway_paths", "is_micros_rt_participant", "read_visible",
@@ -197,6 +197,7 @@ class Ros2Watch:
             _log.warning("micros_rt: cannot watch DDS domain %d for ROS 2 nodes (%s)", self.domain, exc)
             return
         self._since = time.monotonic()
+        prune_descriptions(self.nodes_prefix)  # of nodes killed since the last watcher started
         _log.info("micros_rt: this node watches DDS domain %d for ROS 2 nodes on this host (%s)", self.domain,
                   self.lock_path)
 
