@@ -47,6 +47,16 @@ class DdsEndpoint:
     type_name: str        # DDS type name, e.g. std_msgs::msg::dds_::String_
     writer: bool
     tag: Optional[Dict[str, str]]  # micros_rt's USER_DATA tag; None: not a micros_rt endpoint
+    #: its QoS as discovery carries it: reliable (else best effort) and transient_local (else volatile); None when
+    #: not announced
+    reliable: Optional[bool] = None
+    transient_local: Optional[bool] = None
+
+    def qos_text(self) -> str:
+        """``reliable, volatile``-style words, as ``ros2 topic info -v`` names the two policies."""
+        words = ["?" if self.reliable is None else "reliable" if self.reliable else "best effort",
+                 "?" if self.transient_local is None else "transient_local" if self.transient_local else "volatile"]
+        return ", ".join(words)
 
 
 @dataclass
@@ -79,6 +89,13 @@ class DdsView:
     nodes: List[Ros2Node] = field(default_factory=list)
     #: participants with a ``ros_discovery_info`` writer whose announcement had not come (their nodes unnamed)
     unnamed: Set[str] = field(default_factory=set)
+    #: participants of micros_rt's own rclpy helpers (services and actions toward ROS 2: ROS 2 enclave
+    #: ``/micros_rt`` in their user data), whose nodes are ``<ROS 1 node>_services``/``_actions``
+    helpers: Set[str] = field(default_factory=set)
+
+    def owners(self) -> Dict[str, Ros2Node]:
+        """Endpoint GUID -> the ROS 2 node that announced it."""
+        return {guid: node for node in self.nodes for guid in node.readers + node.writers}
 
 
 def ros2_type_name(dds_type: str) -> str:
@@ -94,12 +111,20 @@ def ros2_type_name(dds_type: str) -> str:
     return dds_type
 
 
+def _is_helper(user_data: Optional[bytes]) -> bool:
+    """Whether a participant's user data is one of micros_rt's rclpy helpers' (not a micros_rt node's)."""
+    from ..transports.dds.watch import is_micros_rt_participant
+
+    return is_micros_rt_participant(user_data) and b"micros_rt=1;" not in bytes(user_data or b"")
+
+
 def discover(wait: float = DEFAULT_WAIT, env: Mapping[str, str] = os.environ, *, names: bool = True,
-             names_wait: float = NAMES_WAIT) -> DdsView:
+             names_wait: float = NAMES_WAIT, name_topics: Optional[Set[str]] = None) -> DdsView:
     """Join ``ROS_DOMAIN_ID`` with micros_rt's Cyclone configuration for ``wait`` seconds and return what it
     saw; with ``names``, then up to ``names_wait`` seconds more until every participant that announces its
-    nodes on ``ros_discovery_info`` has been heard. Never raises for a DDS that cannot start: the view then says
-    why (``available`` False)."""
+    nodes on ``ros_discovery_info`` has been heard (only those with a reader or writer of one of the DDS topics
+    ``name_topics`` when given). Never raises for a DDS that cannot start: the view then says why (``available``
+    False)."""
     if settings.DISABLE_DDS.get(env):
         return DdsView(False, "DDS is disabled (MICROS_RT_DISABLE_DDS is set)")
     try:
@@ -128,18 +153,26 @@ def discover(wait: float = DEFAULT_WAIT, env: Mapping[str, str] = os.environ, *,
             if not names:
                 break
             announcing = {e.participant for e in discovery.writers(announcements.topic) if e.participant != own}
+            if name_topics is not None:
+                announcing &= {e.participant for e in discovery.writers() + discovery.readers()
+                               if e.topic in name_topics}
             view.unnamed = announcing - set(announcements.announced())
             if not view.unnamed or time.monotonic() >= deadline:
                 break
             time.sleep(0.1)
         view.wait = round(time.monotonic() - start, 2)
 
-        view.participants = {p.guid for p in discovery.participants()} - {own}
+        found_participants = discovery.participants()
+        view.participants = {p.guid for p in found_participants} - {own}
+        view.helpers = {p.guid for p in found_participants if _is_helper(p.user_data)} - {own}
         for found, is_writer in ((discovery.writers(), True), (discovery.readers(), False)):
             for ep in found:
                 if ep.participant == own:
                     continue
-                view.endpoints.append(DdsEndpoint(ep.guid, ep.participant, ep.topic, ep.type_name, is_writer, ep.tag))
+                view.endpoints.append(DdsEndpoint(
+                    ep.guid, ep.participant, ep.topic, ep.type_name, is_writer, ep.tag,
+                    ep.reliability == "Reliable" if ep.reliability else None,
+                    ep.durability in ("TransientLocal", "Transient", "Persistent") if ep.durability else None))
         for node in announcements.nodes():
             if node.participant not in view.participants:
                 continue  # a participant that has left since it wrote

@@ -243,11 +243,12 @@ def _describe(report: NodeReport, qos: Optional[Dict[str, Any]], *, publisher: b
     kind = report.kind
     if kind == MICROS_RT and report.info is None:
         return f"micros_rt node whose QoS is unknown ({report.error})"
-    if kind == STOCK or (kind == MICROS_RT and qos is None):
+    if kind == STOCK:
         return "stock ROS endpoint (TCPROS only, no micros_rt QoS)"
     if kind == UNREACHABLE:
         return "unreachable (its node does not answer)"
-    assert qos is not None
+    if qos is None:  # rospy's own endpoint in a micros_rt process (actionlib's, a relay's action)
+        return "rospy endpoint of a micros_rt node (TCPROS only, no micros_rt QoS)"
     return describe_publisher_qos(qos) if publisher else describe_subscriber_qos(qos)
 
 
@@ -386,10 +387,11 @@ def _tcpros_reason(pub: NodeReport, sub: NodeReport, topic: str) -> Tuple[str, O
     for node in (pub, sub):
         if node.kind == MICROS_RT and node.info is None:
             return f"unknown: micros_rt node {node.name} did not say ({node.error})", None
-    if pub.kind != MICROS_RT or pub.publication(topic) is None:
-        return "the publisher is a stock ROS node (TCPROS only)", None
-    if sub.kind != MICROS_RT or sub.subscription(topic) is None:
-        return "the subscriber is a stock ROS node (TCPROS only)", None
+    for node, side, ep in ((pub, "publisher", pub.publication(topic)), (sub, "subscriber", sub.subscription(topic))):
+        if node.kind != MICROS_RT:
+            return f"the {side} is a stock ROS node (TCPROS only)", None
+        if ep is None:
+            return f"the {side} is rospy's own endpoint in a micros_rt node (actionlib's, say: TCPROS only)", None
     publication = pub.publication(topic) or {}
     verdict = (publication.get("verdicts") or {}).get(sub.name)
     if isinstance(verdict, dict) and not verdict.get("accepted"):

@@ -4,18 +4,23 @@ topic uses (``info``), and its latency (``latency``)."""
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import importlib
 import json
 import logging
 import math
+import os
 import sys
 import time
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 from . import CommandError
 from ._args import ArgumentParser, dispatch
-from ._bothgraph import list_main
-from ._graphinfo import Master, resolve_topic, snapshot
+from ._bothgraph import BOTH, ROS1, ROS2, Both, Ros1View, list_main
+from ._bothinfo import MICROS_RT as MICROS_RT_EP
+from ._bothinfo import RELAY, carriage, dds_endpoints, dds_links, dds_topic, endpoint_words
+from ._ddsgraph import DEFAULT_WAIT, NAMES_WAIT, discover
+from ._graphinfo import GraphSnapshot, Master, NodeReport, probe_all, resolve_topic, snapshot
 
 __all__ = ["main", "format_info", "info_data", "latency_report", "format_latency"]
 
@@ -26,7 +31,8 @@ def main(argv: List[str]) -> int:
     return dispatch("micros-rt topic", intro, {
         "list": (lambda rest: list_main("micros-rt topic list", "topics", rest),
                  "list ROS 1 topics (master) and ROS 2 topics (DDS discovery), each marked ROS 1, ROS 2 or ROS 1+2"),
-        "info": (info_main, "print every link of a topic: protocol, both sides' QoS, priority, why not DDS"),
+        "info": (info_main, "print a topic of ROS 1, ROS 2 or both: its nodes, every link (protocol, QoS, why not "
+                            "DDS) and what a relay carries of it between the two"),
         "latency": (latency_main, "measure a topic's rate, latency, drops, deadline and budget misses"),
     }, argv)
 
@@ -35,47 +41,131 @@ def main(argv: List[str]) -> int:
 
 def info_main(argv: List[str]) -> int:
     parser = ArgumentParser(
-        prog="micros-rt topic info", usage="%(prog)s [--json] /topic",
-        description="Print the publishers and subscribers of a topic and every publisher->subscriber link: "
-                    "its protocol (DDS or TCPROS), both sides' QoS, the transport priority and, for a TCPROS "
-                    "link between two micros_rt nodes, why DDS was declined (the negotiation's verdict).")
+        prog="micros-rt topic info", usage="%(prog)s [--json] [--wait SEC] /topic",
+        description="Print a topic of ROS 1, ROS 2 or both: its ROS 1 publishers and subscribers (the master) and "
+                    "every publisher->subscriber link with its protocol (SHM, DDS or TCPROS), both sides' QoS, the "
+                    "transport priority and, between two micros_rt nodes, why DDS was declined; its ROS 2 readers "
+                    "and writers (DDS discovery on ROS_DOMAIN_ID for --wait seconds) and their DDS links; and what a "
+                    "micros-rt relay carries of it between ROS 1 and ROS 2.")
     parser.add_argument("topic", help="topic name, e.g. /chatter")
     parser.add_argument("--json", action="store_true", help="print JSON (for scripts) instead of text")
+    parser.add_argument("--wait", type=float, default=DEFAULT_WAIT, metavar="SEC",
+                        help=f"seconds of DDS discovery (default {DEFAULT_WAIT:g}); naming the ROS 2 nodes of the topic "
+                             f"takes up to {NAMES_WAIT:g} s more")
     args = parser.parse_args(argv)
-    data = info_data(Master(), resolve_topic(args.topic))
+    if args.wait < 0:
+        raise CommandError("--wait must not be negative", code=2)
+    data = info_data(Master(), resolve_topic(args.topic), wait=args.wait)
     print(json.dumps(data, indent=2) if args.json else format_info(data))
+    for note in data["notes"]:
+        print(f"micros-rt topic info: note: {note}", file=sys.stderr)
     return 0
 
 
-def info_data(master: Master, topic: str) -> Dict[str, Any]:
-    """What ``topic info`` shows, as plain data (also its ``--json`` output)."""
-    snap = snapshot(master, [topic])
-    if topic not in snap.types and topic not in snap.publishers and topic not in snap.subscribers:
-        raise CommandError(f"unknown topic {topic} (no node publishes or subscribes to it; see rostopic list)")
-    return {
-        "topic": topic,
-        "type": snap.types.get(topic, "unknown"),
-        "publishers": [snap.endpoint(n, topic, publisher=True) for n in sorted(snap.publishers.get(topic, []))],
-        "subscribers": [snap.endpoint(n, topic, publisher=False) for n in sorted(snap.subscribers.get(topic, []))],
-        "links": [link.to_dict() for link in snap.links],
+def _ros1_side(master: Master, topic: str) -> Tuple[Optional[GraphSnapshot], str, str]:
+    """(the master's snapshot of ``topic`` or None, its run_id, why None)."""
+    try:
+        snap = snapshot(master, [topic])
+    except CommandError as exc:
+        return None, "", str(exc)
+    try:
+        run_id = str(master.call("getParam", "/run_id"))
+    except CommandError:
+        run_id = ""
+    return snap, run_id, ""
+
+
+def info_data(master: Master, topic: str, *, wait: float = DEFAULT_WAIT,
+              env: Mapping[str, str] = os.environ) -> Dict[str, Any]:
+    """What ``topic info`` shows, as plain data (also its ``--json`` output): the master's side and DDS discovery's,
+    asked at once."""
+    with concurrent.futures.ThreadPoolExecutor(max_workers=1) as pool:
+        ros1 = pool.submit(_ros1_side, master, topic)
+        view = discover(wait, env, name_topics={dds_topic(topic)})
+        snap, run_id, ros1_note = ros1.result()
+    both = Both(Ros1View(snap is not None, ros1_note, uri=master.uri, run_id=run_id), view)
+    endpoints = dds_endpoints(view, topic, both.ours) if view.available else []
+    in_master = snap is not None and (topic in snap.types or topic in snap.publishers or topic in snap.subscribers)
+    if not in_master and not endpoints:
+        where = [] if snap is None else ["the ROS 1 master"]
+        where += [f"DDS discovery ({view.wait:g} s on domain {view.domain})"] if view.available else []
+        notes = " ".join(n + "." for n in both.notes())
+        raise CommandError(f"unknown topic {topic} (no publisher or subscriber of it in {' or '.join(where) or 'either graph'}"
+                           f"; see micros-rt topic list){' ' + notes if notes else ''}")
+    reports: Dict[str, NodeReport] = dict(snap.nodes) if snap is not None else {}
+    relays = sorted({e["node"] for e in endpoints if e["kind"] == RELAY} - set(reports))
+    if relays and snap is not None:  # a relay that carries the topic under another name in ROS 1: ask it too
+        reports.update(probe_all(master, relays))
+    carried = carriage(reports, topic)
+    for c in carried:  # where it comes from and where it goes, on the ROS 2 side of this name
+        if c["ros2"] == topic:
+            ends = [e["node"] for e in endpoints if e["kind"] != RELAY and e["writer"] == (c["direction"] == "from ROS 2")]
+            c["ros2_nodes"] = sorted(set(ends))
+            if ends:
+                c["description"] += (f"; written in ROS 2 by {', '.join(sorted(set(ends)))}" if c["direction"] ==
+                                     "from ROS 2" else f"; read in ROS 2 by {', '.join(sorted(set(ends)))}")
+    on_ros1 = in_master or any(e["kind"] in (MICROS_RT_EP, RELAY) for e in endpoints)
+    side = (ROS1 if not endpoints else BOTH if on_ros1 else ROS2)
+    data: Dict[str, Any] = {
+        "topic": topic, "side": side,
+        "type": (snap.types.get(topic) if snap is not None else None) or "unknown",
+        "ros2_types": sorted({e["type"] for e in endpoints}),
+        "publishers": [], "subscribers": [], "links": [],
+        "ros2_writers": [e for e in endpoints if e["writer"]], "ros2_readers": [e for e in endpoints if not e["writer"]],
+        "dds_links": dds_links(endpoints), "carried": carried, "notes": both.notes(),
+        "dds": {"domain": view.domain, "wait": view.wait} if view.available else None,
     }
+    if in_master and snap is not None:
+        data["publishers"] = [snap.endpoint(n, topic, publisher=True) for n in sorted(snap.publishers.get(topic, []))]
+        data["subscribers"] = [snap.endpoint(n, topic, publisher=False)
+                               for n in sorted(snap.subscribers.get(topic, []))]
+        data["links"] = [link.to_dict() for link in snap.links]
+        for ep in data["publishers"] + data["subscribers"]:
+            ways = [c["description"] for c in carried if c["relay"] == ep["node"]]
+            if ways:
+                ep["ros2_carriage"] = ways
+    return data
 
 
 def format_info(data: Dict[str, Any]) -> str:
-    """The text form of :func:`info_data` (rostopic info's layout, plus the links)."""
-    lines = [f"Type: {data['type']}", ""]
+    """The text form of :func:`info_data` (rostopic info's layout, plus the links, the ROS 2 side and what relays
+    carry between the two)."""
+    data = {"side": ROS1, "ros2_types": [], "ros2_writers": [], "ros2_readers": [], "dds_links": [], "carried": [],
+            "dds": None, **data}   # a ROS 1 view alone (no DDS side asked) prints as rostopic info's layout
+    ros2_type = ", ".join(data["ros2_types"])
+    if data["side"] == ROS2:
+        lines = [f"Type: {ros2_type} (ROS 2)", "Side: ROS 2 only (not in the ROS 1 master)", ""]
+    else:
+        lines = [f"Type: {data['type']}" + (f" (ROS 2: {ros2_type})" if ros2_type else ""),
+                 f"Side: {data['side']}", ""]
     sides = {}
     for title, key in (("Publishers", "publishers"), ("Subscribers", "subscribers")):
+        if data["side"] == ROS2:
+            break
         lines.append(f"{title}:" if data[key] else f"{title}: None")
         for ep in data[key]:
             sides[(key, ep["node"])] = ep["description"]
             lines.append(f" * {ep['node']} ({ep['uri'] or 'unknown URI'})  [{ep['kind']}] {ep['description']}")
             if ep.get("relay"):
                 lines.append(f"     {ep['relay']['description']}")
+            for words in ep.get("ros2_carriage", []):
+                lines.append(f"     {words}")
             if ep.get("paced"):
                 lines.append(f"     {ep['paced']['description']}")
         lines.append("")
-    lines.append("Links:" if data["links"] else "Links: None")
+    if data["dds"] is not None and (data["ros2_writers"] or data["ros2_readers"] or data["side"] != ROS1):
+        lines.append(f"ROS 2 side (DDS {dds_topic(data['topic'])}, domain {data['dds']['domain']}):")
+        for title, key in (("writers", "ros2_writers"), ("readers", "ros2_readers")):
+            lines.append(f" {title}:" if data[key] else f" {title}: None")
+            for ep in data[key]:
+                lines.append(f" * {ep['node']}  {endpoint_words(ep, data['carried'])}")
+        lines.append("")
+    if data["carried"] and not all(any(c["description"] in ep.get("ros2_carriage", []) for ep in data["publishers"]
+                                       + data["subscribers"]) for c in data["carried"]):
+        lines.append("Carried between ROS 1 and ROS 2:")
+        lines += [f" * {c['description']}" for c in data["carried"]]
+        lines.append("")
+    lines.append("Links:" if data["links"] or data["dds_links"] else "Links: None")
     for link in data["links"]:
         prio = link["transport_priority"] or "n/a (stock publisher)"
         state = "" if link["matched"] is not False else " (DDS discovery not matched yet)"
@@ -89,7 +179,11 @@ def format_info(data: Dict[str, Any]) -> str:
             lines.append(f"     {label}: {link['reason']}")
         for marking in link.get("relayed", []):
             lines.append(f"     {marking['summary']}")
-    return "\n".join(lines)
+    for link in data["dds_links"]:
+        state = "" if link["matched"] else f" not matched: {link['reason']}"
+        lines.append(f" * {link['publisher']} ({link['publisher_kind']}) -> {link['subscriber']} "
+                     f"({link['subscriber_kind']}): DDS{state}")
+    return "\n".join(lines).rstrip("\n")
 
 
 # --------------------------------------------------------------------------- latency
