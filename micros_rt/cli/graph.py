@@ -312,7 +312,8 @@ def to_dot(snap: GraphSnapshot, *, include_all: bool = False, ros2: Optional[Ros
                          f"color={_q(OTHER_COLOUR)}];")
     lines += ["  subgraph cluster_legend {", '    label="links"; fontsize=9; color="#cccccc";',
               '    node [shape=plaintext, fontsize=9];']
-    legend = dict(PROTOCOL_COLOURS, **({"relay (between graphs, or ROS 1 and ROS 2)": RELAY_COLOUR} if relays else {}))
+    carrier = "relay (between graphs)" if ros2 is None else "relay (between graphs, or ROS 1 and ROS 2)"
+    legend = dict(PROTOCOL_COLOURS, **({carrier: RELAY_COLOUR} if relays else {}))
     for i, (proto, colour) in enumerate(legend.items()):
         lines.append(f'    "legend_{i}a" [label=""]; "legend_{i}b" [label={_q(proto)}, fontcolor={_q(colour)}];')
         lines.append(f'    "legend_{i}a" -> "legend_{i}b" [color={_q(colour)}, penwidth=2];')
