@@ -29,6 +29,9 @@ SUBCOMMANDS: dict[str, Tuple[str, str]] = {
     "topic": ("micros_rt.cli.topic", "list ROS 1 and ROS 2 topics (list), show a topic's links (info), measure its "
               "latency (latency)"),
     "node": ("micros_rt.cli.node", "list ROS 1 and ROS 2 nodes together (list)"),
+    "service": ("micros_rt.cli.service", "list ROS 1 and ROS 2 services together, with types and sides (list)"),
+    "action": ("micros_rt.cli.action", "list ROS 1 (actionlib) and ROS 2 actions together, with types and sides "
+               "(list)"),
     "graph": ("micros_rt.cli.graph", "draw the live graph, links coloured by protocol (--png, --dot)"),
     "doctor": ("micros_rt.cli.doctor", "check the master, network, DDS and profile set-up"),
     "profile": ("micros_rt.cli.profile", "check a YAML QoS profile (and what it matches on a live graph)"),

@@ -30,7 +30,8 @@ from . import CommandError
 from ._ddsgraph import DdsView, Ros2Node, discover, ros2_type_name
 from ._graphinfo import MICROS_RT, Master, probe_node
 
-__all__ = ["Both", "NodeRow", "TopicRow", "collect", "format_nodes", "format_topics", "node_rows", "topic_rows"]
+__all__ = ["Both", "NodeRow", "TopicRow", "collect", "format_nodes", "format_topics", "helper_owners", "node_rows",
+           "topic_rows"]
 
 ROS1, ROS2, BOTH = "ROS 1", "ROS 2", "ROS 1+2"
 DDS_TOPIC_PREFIX = "rt/"
@@ -134,6 +135,19 @@ def collect(wait: float, env: Mapping[str, str] = os.environ, *, names: bool = T
     if not both.ros1.available and not both.dds.available:
         raise CommandError(f"neither graph can be read: {both.ros1.note}; and {both.dds.note}")
     return both
+
+
+def helper_owners(both: Both) -> Dict[str, str]:
+    """ROS 2 node name of a micros_rt node's rclpy helper (``/relay_robot_services``, ``/relay_robot_actions``) ->
+    the ROS 1 node it serves for (``/relay_robot``)."""
+    from ..services.gateway import _ros2_node_name
+
+    owners = {}
+    for node in both.ros1.nodes():
+        stem = _ros2_node_name(node)[: -len("_services")]
+        for suffix in ("_services", "_actions"):
+            owners[f"/{stem}{suffix}"] = node
+    return owners
 
 
 # --------------------------------------------------------------------------- topics
@@ -342,8 +356,13 @@ def node_rows(both: Both, *, include_hidden: bool = False, probe: bool = False) 
         for (name, _side), r in rows.items():
             if name in reports and r.side != ROS2:
                 r.ros1_kind = reports[name].kind
+    helped = helper_owners(both)
     for r in rows.values():
         r.detail = _node_detail(r)
+        if r.side == ROS2 and r.participants and set(r.participants) <= both.dds.helpers:
+            owner = helped.get(r.node)
+            r.detail = (f"micros_rt's rclpy helper{' of ' + owner if owner else ''}: its services and actions toward "
+                        f"ROS 2 (a DDS participant of its own, ROS 2 enclave /micros_rt)")
     return sorted(rows.values(), key=lambda r: (r.node, r.side))
 
 

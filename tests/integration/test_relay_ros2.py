@@ -265,3 +265,69 @@ def test_services_of_a_ros2_only_type_both_ways(setup: Setup) -> None:
     for direction, name in (("import", "/r2_basic"), ("export", "/ros1_basic")):
         entry = setup.ros2_entry(direction, name, lambda e: e.get("calls", 0) >= 1)
         assert entry["failed"] == 0 and entry["type"] == "test_msgs/BasicTypes", entry
+
+
+def _tools_at_once(env: Dict[str, str], *commands: List[str]) -> List["subprocess.CompletedProcess[str]"]:
+    """Run ``micros-rt`` commands side by side (each mostly waits on DDS discovery); their results in order."""
+    procs = [subprocess.Popen([CLI, *argv], env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for argv in commands]
+    done = []
+    for argv, proc in zip(commands, procs):
+        try:
+            out, err = proc.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            for p in procs:
+                p.kill()
+            raise AssertionError(f"micros-rt {' '.join(argv)} did not finish in 60 s") from None
+        assert proc.returncode == 0 and "Traceback" not in err, (argv, proc.returncode, out, err)
+        done.append(subprocess.CompletedProcess(argv, proc.returncode, out, err))
+    return done
+
+
+def test_the_tools_see_both_worlds_and_what_the_relay_carries(setup: Setup) -> None:
+    # issue 43, deliverable 4: topic info of either world, service list across both, graph with ROS 2 nodes
+    setup.ros2_entry("export", "/chatter", lambda e: e.get("sent", 0) >= 1)
+    setup.ros2_entry("import", "/ros2_chatter", lambda e: e.get("published", 0) >= 1)
+    setup.ros2_entry("import", "/ros2_trigger", lambda e: e.get("kind") == "service")
+    setup.ros2_entry("export", "/set_flag", lambda e: e.get("kind") == "service")
+    rclpy_node = f"/ros2_relay_peer_{setup.ros2.events('ready')[0]['pid']}"
+    stock_node = f"/stock_relay_peer_{setup.stock.events('ready')[0]['pid']}"
+    out, into, only2, services, dot = _tools_at_once(
+        dict(setup.master.env), ["topic", "info", "--json", "/chatter"], ["topic", "info", "/ros2_chatter"],
+        ["topic", "info", "/parameter_events"], ["service", "list", "--json"], ["graph", "--dot"])
+    # /chatter: a stock ROS 1 publisher; the relay carries it to ROS 2, where the rclpy node reads the relay's writer
+    data = json.loads(out.stdout)
+    assert data["side"] == "ROS 1+2" and data["ros2_types"] == ["std_msgs/msg/String"], data
+    relay = [ep for ep in data["subscribers"] if ep["node"] == "/relay_robot"][0]
+    assert relay["ros2_carriage"][0].startswith("carried to ROS 2 as /chatter by relay node /relay_robot: sent "), relay
+    assert relay["ros2_carriage"][0].endswith(f"; read in ROS 2 by {rclpy_node}"), relay
+    assert [(w["node"], w["kind"]) for w in data["ros2_writers"]] == [("/relay_robot", "relay")], data["ros2_writers"]
+    assert [(r["node"], r["kind"], r["qos"]) for r in data["ros2_readers"]] == [(rclpy_node, "ROS 2", "reliable, volatile")]
+    assert [(l["publisher"], l["subscriber"], l["matched"]) for l in data["dds_links"]] == [
+        ("/relay_robot", rclpy_node, True)], data["dds_links"]
+    # /ros2_chatter: where it comes from (the rclpy writer), and the relay publishing it in ROS 1 for the stock node
+    text = into.stdout
+    assert "Side: ROS 1+2" in text, text
+    assert (f"carried from ROS 2 (its /ros2_chatter) into ROS 1 by relay node /relay_robot: published" in text
+            and f"; written in ROS 2 by {rclpy_node}" in text), text
+    assert f" * {rclpy_node}  [ROS 2] std_msgs/msg/String; reliable, volatile" in text, text
+    assert f" * /relay_robot -> {stock_node}: TCPROS" in text, text
+    # a topic only ROS 2 nodes have: described, not "unknown topic"
+    assert only2.stdout.startswith("Type: rcl_interfaces/msg/ParameterEvent (ROS 2)\nSide: ROS 2 only"), only2.stdout
+    assert f" * {rclpy_node}  [ROS 2] rcl_interfaces/msg/ParameterEvent" in only2.stdout, only2.stdout
+    # services of both worlds, with types, sides and the relay's carriage
+    rows = {s["name"]: s for s in json.loads(services.stdout)["services"]}
+    assert (rows["/set_flag"]["side"], rows["/set_flag"]["ros1_type"], rows["/set_flag"]["ros1_servers"],
+            rows["/set_flag"]["ros2_servers"]) == ("ROS 1+2", "std_srvs/SetBool", [stock_node],
+                                                   ["/relay_robot (relay, its ROS 2 helper)"]), rows["/set_flag"]
+    assert rows["/set_flag"]["carried"] == ["relay /relay_robot: ROS 1 /set_flag -> ROS 2 /set_flag"], rows["/set_flag"]
+    assert (rows["/ros2_trigger"]["side"], rows["/ros2_trigger"]["ros1_type"], rows["/ros2_trigger"]["ros1_servers"],
+            rows["/ros2_trigger"]["ros2_servers"]) == ("ROS 1+2", "std_srvs/Trigger", ["/relay_robot (relay)"],
+                                                       [rclpy_node]), rows["/ros2_trigger"]
+    assert not [n for n in rows if n.endswith(("/get_loggers", "/set_parameters"))], sorted(rows)  # node plumbing: -a
+    # the graph: the rclpy node drawn, the DDS link from the relay's writer to it, the relay's carriage both ways
+    assert f'"r2:{rclpy_node}" [label="{rclpy_node}\\nROS 2 node"' in dot.stdout, dot.stdout
+    assert f'"t:/chatter" -> "r2:{rclpy_node}" [label="DDS from /relay_robot"' in dot.stdout, dot.stdout
+    assert '"n:/relay_robot" -> "t:/chatter" [label="relay to ROS 2\\n(ROS 1 /chatter)"' in dot.stdout, dot.stdout
+    assert '"t:/ros2_chatter" -> "n:/relay_robot" [label="relay from ROS 2\\n' in dot.stdout, dot.stdout
+    assert f'"r2:{rclpy_node}" -> "r2service:/ros2_trigger" [label="server"' in dot.stdout, dot.stdout
