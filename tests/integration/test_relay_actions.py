@@ -109,7 +109,21 @@ def test_actions_both_ways(setup: Setup, spawn: Any) -> None:
     # ActionClient drops a feedback message it takes after the result, so a starved client could miss the last one)
     ros1_client = spawn([harness.STOCK_PYTHON, PEER1, "call", "--plan",
                          json.dumps([{**step, "name": R2} for step in plan])], env, name="stock_action_client")
+    # meanwhile, `micros-rt action list` (issue 43): both actions, their types and servers on each side
+    listing = subprocess.Popen([CLI, "action", "list", "--json"], env=env, stdin=subprocess.DEVNULL,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     ros1_client.wait_for("done", T)
+    out, err = listing.communicate(timeout=60)
+    assert listing.returncode == 0 and "Traceback" not in err, (listing.returncode, out, err)
+    rows = {a["name"]: a for a in json.loads(out)["actions"]}
+    fib = ("test_msgs/FibonacciAction", "test_msgs/action/Fibonacci")
+    assert (rows[R1]["side"], rows[R1]["ros1_type"], rows[R1]["ros2_type"], rows[R1]["ros2_servers"],
+            rows[R1]["carried"]) == ("ROS 1+2", *fib, ["/relay_robot (relay, its ROS 2 helper)"],
+                                     [f"relay /relay_robot: ROS 1 {R1} -> ROS 2 {R1}"]), rows[R1]
+    assert [s.startswith(f"/stock_action_server_{r1.pid}_") for s in rows[R1]["ros1_servers"]] == [True], rows[R1]
+    assert (rows[R2]["side"], rows[R2]["ros1_servers"], rows[R2]["carried"]) == (
+        "ROS 1+2", ["/relay_robot (relay)"], [f"relay /relay_robot: ROS 2 {R2} -> ROS 1 {R2}"]), rows[R2]
+    assert len(rows[R2]["ros2_servers"]) == 1 and rows[R2]["ros2_servers"][0].startswith("/ros2_action_serve"), rows[R2]
     # goal, every one of the 100 feedback messages in order, and the result, both ways
     said = [e["line"] for e in setup.peers["relay"].events("_raw") if "action" in e.get("line", "")]
     said += [e for e in (setup.peers["relay"].events("stats") or [{}])[-1].get("ros2", []) if e.get("kind") == "action"]
