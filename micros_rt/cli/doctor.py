@@ -393,26 +393,29 @@ def check_ros2_helper(env: Mapping[str, str]) -> Check:
     from ..services.gateway import ros2_python
 
     name = "ROS 2 helper"
+    needs = ("services and actions toward ROS 2 (advertise_service, service_client, offer_action_to_ros2, "
+             "offer_ros2_action, a relay's ros2: services and actions)")
     if _value(settings.DISABLE_ROS2_SERVICES, env):
-        return Check(name, SKIP, "MICROS_RT_DISABLE_ROS2_SERVICES is set: services and actions stay ROS 1 only")
+        return Check(name, SKIP, f"MICROS_RT_DISABLE_ROS2_SERVICES is set: no {needs}; topics reach ROS 2 without it")
     given = settings.ROS2_PYTHON.get(env)
     python = ros2_python(dict(env))
     if python is None:
-        return Check(name, SKIP, "no ROS 2 Python found (MICROS_RT_ROS2_PYTHON unset, no .venv-ros2): services and "
-                                 "actions are served to ROS 1 only; topics reach ROS 2 without it")
+        return Check(name, SKIP, f"no ROS 2 Python found (MICROS_RT_ROS2_PYTHON unset, no .venv-ros2): no {needs}, "
+                                 f"they are served to ROS 1 only; topics reach ROS 2 without it")
     try:
         cp = subprocess.run([python, "-c", "import rclpy, rclpy.action"], capture_output=True, text=True, timeout=60,
                             stdin=subprocess.DEVNULL)
     except (OSError, subprocess.TimeoutExpired) as exc:
-        return Check(name, FAIL, f"{python} cannot run ({exc}): services and actions are served to ROS 1 only",
+        return Check(name, FAIL, f"{python} cannot run ({exc}): no {needs}, they are served to ROS 1 only",
                      "point MICROS_RT_ROS2_PYTHON at the python of an installation with rclpy (e.g. "
                      ".venv-ros2/bin/python), or unset it" if given else "reinstall .venv-ros2 (scripts/setup.sh)")
     if cp.returncode != 0:
         why = (cp.stderr.strip().splitlines() or ["no output"])[-1]
-        return Check(name, FAIL, f"{python} cannot import rclpy ({why}): services and actions are served to ROS 1 only",
+        return Check(name, FAIL, f"{python} cannot import rclpy ({why}): no {needs}, they are served to ROS 1 "
+                                 f"only",
                      "install rclpy there (pip install 'ros-jazzy-rclpy[fastrtps]'; scripts/setup.sh does it), or "
                      "point MICROS_RT_ROS2_PYTHON at another ROS 2 Python")
-    return Check(name, OK, f"{python}: rclpy imports; services and actions reach ROS 2 through it")
+    return Check(name, OK, f"{python}: rclpy imports; {needs} go through it")
 
 
 def check_clocks(env: Mapping[str, str]) -> Check:

@@ -185,6 +185,8 @@ def test_doctor_flags_a_ros2_helper_python_that_is_not_there(graph: Dict[str, st
     lines = cp.stdout.splitlines()
     at = next(i for i, line in enumerate(lines) if line.startswith("[FAIL] ROS 2 helper"))
     assert "/nonexistent/python cannot run" in lines[at] and "served to ROS 1 only" in lines[at]
+    assert "(advertise_service, service_client, offer_action_to_ros2, offer_ros2_action, a relay's ros2: services" \
+        in lines[at], lines[at]   # what needs it, in words
     assert "fix: point MICROS_RT_ROS2_PYTHON at the python of an installation with rclpy" in lines[at + 1]
 
 
