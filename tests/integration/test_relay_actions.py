@@ -116,9 +116,9 @@ def test_actions_both_ways(setup: Setup, spawn: Any) -> None:
     out, err = listing.communicate(timeout=60)
     assert listing.returncode == 0 and "Traceback" not in err, (listing.returncode, out, err)
     rows = {a["name"]: a for a in json.loads(out)["actions"]}
-    fib = ("test_msgs/FibonacciAction", "test_msgs/action/Fibonacci")
+    fib_types = ("test_msgs/FibonacciAction", "test_msgs/action/Fibonacci")
     assert (rows[R1]["side"], rows[R1]["ros1_type"], rows[R1]["ros2_type"], rows[R1]["ros2_servers"],
-            rows[R1]["carried"]) == ("ROS 1+2", *fib, ["/relay_robot (relay, its ROS 2 helper)"],
+            rows[R1]["carried"]) == ("ROS 1+2", *fib_types, ["/relay_robot (relay, its ROS 2 helper)"],
                                      [f"relay /relay_robot: ROS 1 {R1} -> ROS 2 {R1}"]), rows[R1]
     assert [s.startswith(f"/stock_action_server_{r1.pid}_") for s in rows[R1]["ros1_servers"]] == [True], rows[R1]
     assert (rows[R2]["side"], rows[R2]["ros1_servers"], rows[R2]["carried"]) == (
