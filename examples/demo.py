@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""The QoS talker/listener demo: starts a rosmaster when none is reachable, runs
+"""The QoS talker/listener demo: uses the ROS master ROS_MASTER_URI names when it answers, else starts one (on
+that URI's port when it names this host, on a free port without ROS_MASTER_URI) and says which; runs
 examples/talker.py and examples/listener.py for a few seconds, prints what the
 listener hears, and stops everything it started.
 
@@ -16,19 +17,55 @@ import socket
 import subprocess
 import sys
 import time
+import urllib.parse
 import xmlrpc.client
 from pathlib import Path
-from typing import Dict, List, Optional
+from typing import Callable, Dict, List, Optional, Tuple
 
 HERE = Path(__file__).resolve().parent
 
 
-def master_reachable(uri: str) -> bool:
+def master_reachable(uri: str, timeout: float = 3.0) -> bool:
+    """Whether a ROS master answers at ``uri`` (its ``getPid``), within ``timeout`` seconds."""
+    old = socket.getdefaulttimeout()
+    socket.setdefaulttimeout(timeout)
     try:
         code, _msg, _pid = xmlrpc.client.ServerProxy(uri).getPid("/demo")
         return bool(code == 1)
     except (OSError, xmlrpc.client.Error):
         return False
+    finally:
+        socket.setdefaulttimeout(old)
+
+
+def master_plan(uri: Optional[str], reachable: Callable[[str], bool]) -> Tuple[str, Optional[int], str]:
+    """Which master the demo uses: (its URI, the port of a rosmaster to start there or None, what to say).
+
+    The master ``ROS_MASTER_URI`` names when it answers; else, when it names this host, a rosmaster on that very
+    port (so other terminals with the same ROS_MASTER_URI reach it); without ROS_MASTER_URI, the default master
+    (port 11311) or one on a free port. A named master on another host that does not answer is an error (port 0).
+
+    >>> master_plan("http://127.0.0.1:11311/", lambda u: True)[1:]
+    (None, 'using the ROS master at http://127.0.0.1:11311/ (ROS_MASTER_URI)')
+    >>> master_plan("http://localhost:12000", lambda u: False)
+    ('http://localhost:12000', 12000, 'no ROS master answers at http://localhost:12000 (ROS_MASTER_URI): starting rosmaster there, on port 12000; it stops when the demo ends')
+    """
+    if uri:
+        if reachable(uri):
+            return uri, None, f"using the ROS master at {uri} (ROS_MASTER_URI)"
+        parts = urllib.parse.urlparse(uri)
+        if parts.hostname in ("localhost", "127.0.0.1", socket.gethostname()) and parts.port:
+            return uri, parts.port, (f"no ROS master answers at {uri} (ROS_MASTER_URI): starting rosmaster there, on "
+                                     f"port {parts.port}; it stops when the demo ends")
+        return uri, 0, (f"no ROS master answers at {uri} (ROS_MASTER_URI), and it is not on this host: start it, or "
+                        f"unset ROS_MASTER_URI to let the demo start one")
+    default = "http://127.0.0.1:11311"
+    if reachable(default):
+        return default, None, f"using the ROS master at {default} (ROS_MASTER_URI is not set: the default)"
+    port = free_port()
+    return (f"http://127.0.0.1:{port}", port, f"no ROS master answers at {default} and ROS_MASTER_URI is not set: "
+            f"starting rosmaster on port {port} (ROS_MASTER_URI=http://127.0.0.1:{port}); it stops when the demo "
+            f"ends")
 
 
 def free_port() -> int:
@@ -57,26 +94,24 @@ def main() -> int:
     env: Dict[str, str] = dict(os.environ)
     if not env.get("ROS_IP") and not env.get("ROS_HOSTNAME"):
         env["ROS_IP"] = "127.0.0.1"
-    env.setdefault("ROS_MASTER_URI", "http://127.0.0.1:11311")
+    uri, port, said = master_plan(env.get("ROS_MASTER_URI", "").strip() or None, master_reachable)
+    print(f"demo: {said}", flush=True)
+    if port == 0:
+        return 1
+    env["ROS_MASTER_URI"] = uri
     env["PYTHONUNBUFFERED"] = "1"
     started: List["subprocess.Popen[bytes]"] = []
-    master: Optional["subprocess.Popen[bytes]"] = None
     try:
-        if not master_reachable(env["ROS_MASTER_URI"]):
-            port = free_port()
-            env["ROS_MASTER_URI"] = f"http://127.0.0.1:{port}"
-            print(f"demo: no ROS master reachable, starting rosmaster on port {port}", flush=True)
+        if port is not None:
             master = subprocess.Popen(["/usr/bin/rosmaster", "--core", "-p", str(port)], env=env,
                                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
             started.append(master)
             deadline = time.monotonic() + 20
-            while not master_reachable(env["ROS_MASTER_URI"]):
+            while not master_reachable(uri):
                 if time.monotonic() > deadline or master.poll() is not None:
-                    print("demo: rosmaster did not start", file=sys.stderr)
+                    print(f"demo: rosmaster did not start on port {port} (is the port taken?)", file=sys.stderr)
                     return 1
                 time.sleep(0.1)
-        else:
-            print(f"demo: using the ROS master at {env['ROS_MASTER_URI']}", flush=True)
         listener = subprocess.Popen([sys.executable, str(HERE / "listener.py"), "--duration",
                                      str(args.duration + 3)], env=env)
         started.append(listener)
