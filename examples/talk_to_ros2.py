@@ -4,8 +4,9 @@
 micros_rt publishes std_msgs/String on /chatter; on DDS that is topic ``rt/chatter`` with type
 ``std_msgs::msg::dds_::String_``, exactly what a ROS 2 node subscribed to ``/chatter`` looks for.
 It sends ``--count`` messages (default 20, at 2 Hz) and exits by itself. Like any volatile DDS
-publisher, messages sent before the ROS 2 subscriber has been discovered are not delivered to it:
-start the listener first (or keep the default rate, which leaves time for discovery).
+publisher, messages sent before the ROS 2 subscriber has been discovered are not delivered to it: even with the
+listener started first, discovery takes about 1.5 s from this node's start, so the listener's first message is
+"hello ROS 2 3" or so (docs/ros2.md, section 3, shows a run).
 
 Terminal 1 (ROS 1 master; micros_rt nodes still register with it):
 
@@ -22,7 +23,7 @@ Terminal 3 (this talker, project venv):
     export ROS_DOMAIN_ID=42 ROS_IP=127.0.0.1
     .venv/bin/python examples/talk_to_ros2.py
 
-The listener prints one JSON line per message, e.g. ``{"event": "recv", "data": "hello ROS 2 5", ...}``.
+The listener prints one JSON line per message, e.g. ``{"event": "recv", "seq": 0, "data": "hello ROS 2 3", ...}``.
 See docs/ros2.md for the walkthrough, the type mapping rules and the known limits.
 """
 
