@@ -25,6 +25,7 @@ import urllib.parse
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
+from . import CommandError
 from ._bothgraph import BOTH, ROS1, ROS2, Both, _is_hidden, _table, helper_owners
 from ._bothinfo import ros2_entries
 from ._graphinfo import Master, NodeReport, probe_all
@@ -158,21 +159,20 @@ def service_rows(both: Both, master: Optional[Master], *, include_hidden: bool =
     rows: Dict[str, CallRow] = {}
     owners = helper_owners(both)
     probe: Set[str] = set()
-    uris: Dict[str, Optional[str]] = {}
-    if both.ros1.available and master is not None:
-        names = sorted(both.ros1.services)
-
+    types: Dict[str, Optional[str]] = {}
+    names = sorted(both.ros1.services) if both.ros1.available else []
+    if names and master is not None:
         def lookup(name: str) -> Optional[str]:
             try:
                 return str(master.call("lookupService", name))
-            except Exception:  # gone since getSystemState
+            except CommandError:  # gone since getSystemState
                 return None
 
         with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, min(16, len(names)))) as pool:
             uris = dict(zip(names, pool.map(lookup, names)))
             types = dict(zip(names, pool.map(lambda n: service_type(uris[n] or "", n) if uris[n] else None, names)))
-        for name in names:
-            rows[name] = CallRow(name, ROS1, types.get(name), None, sorted(both.ros1.services[name]))
+    for name in names:
+        rows[name] = CallRow(name, ROS1, types.get(name), None, sorted(both.ros1.services[name]))
     for ep in both.dds.endpoints:
         found = _SRV.match(ep.type_name)
         if not (ep.topic.startswith("rq/") and ep.topic.endswith("Request") and found):
