@@ -193,7 +193,7 @@ def _read_event(proc: "subprocess.Popen[str]", ev: str, timeout: float) -> Dict[
     while time.monotonic() < deadline:
         line = proc.stdout.readline()
         if not line:
-            raise RuntimeError(f"process exited before {ev!r}: {proc.args}")
+            raise RuntimeError(f"process exited before {ev!r}: {proc.args!r}")
         try:
             data = json.loads(line)
         except ValueError:
