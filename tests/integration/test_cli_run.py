@@ -253,8 +253,12 @@ def test_an_unmodified_actionlib_client_and_server_both_under_run(ros_master: ha
     assert available["elapsed"] < 5.0, available
     results = {e["label"]: e for e in client.events("result")}
     fib = results["fib"]
-    assert (fib["status_name"], fib["feedback"], fib["feedback_in_order"], fib["sequence_ok"]) == \
-        ("SUCCEEDED", 20, True, True), (fib, server.events()[-4:])
+    # every feedback message from the first the client could take to the last, none lost or reordered between: stock
+    # actionlib's client drops one that arrives before send_goal() has stored the goal's handle, which the server's
+    # first (sent at once) can do on a loaded machine (seen 1 in ~10 loaded runs: 19 of 20, from 1)
+    assert (fib["status_name"], fib["feedback_unbroken"], fib["feedback_first"] + fib["feedback"], fib["sequence_ok"]) \
+        == ("SUCCEEDED", True, 20, True), (fib, server.events()[-4:])
+    assert fib["feedback_first"] <= 1, fib
     cancel = results["cancel"]
     assert cancel["status_name"] == "PREEMPTED" and cancel["feedback_in_order"] and cancel["feedback"] >= 5, cancel
     assert server.wait_for(lambda e: e.get("event") == "finished" and e["status"] == "PREEMPTED", 10)

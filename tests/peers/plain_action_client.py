@@ -56,7 +56,11 @@ def run_goal(client: Any, label: str, order: int, cancel_after: int = 0) -> None
          status_name=STATUS_NAMES[status] if 0 <= status < len(STATUS_NAMES) else "TIMEOUT",
          text=client.get_goal_status_text() if finished else "", elapsed=time.monotonic() - t0,
          sequence_ok=result is not None and list(result.sequence) == fibonacci(order),
-         feedback=len(received), feedback_in_order=received == list(range(len(received))))
+         feedback=len(received), feedback_in_order=received == list(range(len(received))),
+         # stock actionlib drops feedback that arrives before send_goal() has stored its goal handle
+         # (SimpleActionClient._handle_feedback: ``if not self.gh: return``): the first may go on a loaded machine
+         feedback_first=received[0] if received else None,
+         feedback_unbroken=bool(received) and received == list(range(received[0], received[0] + len(received))))
 
 
 def main() -> int:
