@@ -88,15 +88,15 @@ def test_twist_commands_reach_the_c_board_field_for_field_and_oversized_is_refus
     twist = {"linear": {"x": 0.25, "y": -1.5, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 3.0}}
     talker = spawn(mrt_peer_argv("talk", "--topic", "/mcu_b/cmd_vel", "--type", "geometry_msgs/Twist",
                                  "--data-json", json.dumps(twist), "--count", 20, "--rate", 20,
-                                 "--wait-subscribers", 1, "--wait-dds-readers", 1, "--linger", 0.5,
+                                 "--wait-subscribers", 1, "--linger", 0.5,
                                  "--node-name", "mcu_b_talker"))
     big = spawn(mrt_peer_argv("talk", "--topic", "/mcu_b/text", "--data-json", json.dumps({"data": "x" * 2000}),
-                              "--count", 2, "--rate", 5, "--wait-subscribers", 1, "--wait-dds-readers", 1,
+                              "--count", 2, "--rate", 5, "--wait-subscribers", 1,
                               "--linger", 0.5,
                               "--node-name", "mcu_b_big"))
     assert talker.wait(60) == 0 and big.wait(60) == 0
     small = spawn(mrt_peer_argv("talk", "--topic", "/mcu_b/text", "--data-json", json.dumps({"data": "small {i}"}),
-                                "--count", 2, "--rate", 5, "--wait-subscribers", 1, "--wait-dds-readers", 1,
+                                "--count", 2, "--rate", 5, "--wait-subscribers", 1,
                               "--linger", 0.5,
                                 "--node-name", "mcu_b_small"))
     assert small.wait(60) == 0
@@ -188,7 +188,7 @@ def test_a_board_speaking_the_readme_form_with_wire_form_readme(
     called = server.wait_for("called", 10)
     reset = mcu_harness.rosservice(ros_master, "call", "/mcu_r/reset")
     talker = spawn(mrt_peer_argv("talk", "--topic", "/mcu_r/text", "--data-json", json.dumps({"data": "r {i}"}),
-                                 "--count", 3, "--rate", 5, "--wait-subscribers", 1, "--wait-dds-readers", 1,
+                                 "--count", 3, "--rate", 5, "--wait-subscribers", 1,
                                  "--linger", 0.5, "--node-name", "mcu_r_talker"))
     assert talker.wait(60) == 0
     harness.wait_until(lambda: len(board.events("recv")) >= 3, 20, message="3 texts at the README-form board")

@@ -78,7 +78,7 @@ def test_a_cvra_board_of_each_era_through_the_bridge(ros_master: harness.RosMast
                                  ("gone", ("ros", "debug")), ("gone_trigger", ()))}
     talker = spawn(mrt_peer_argv("talk", "--topic", "/mcu_f/cmd_vel", "--type", "geometry_msgs/Twist",
                                  "--data-json", json.dumps({"linear": {"x": 0.25}, "angular": {"z": -0.5}}),
-                                 "--count", 3, "--rate", 10, "--wait-subscribers", 1, "--wait-dds-readers", 1,
+                                 "--count", 3, "--rate", 10, "--wait-subscribers", 1,
                                  "--linger", 0.5, "--node-name", "mcu_f_talker"))
     assert talker.wait(60) == 0
     harness.wait_until(lambda: len(board.events("recv")) >= 3, 20, message="3 Twist commands at the board")
