@@ -62,6 +62,9 @@ def play_clock_offset(pub: Any, offset: float) -> None:
     """Play a publisher whose clock is ``offset`` seconds off (a lagging host) without touching the
     system clock: this peer's DDS and shared-memory writes carry shifted source timestamps. Test-only, so it
     lives here."""
+    from micros_rt.cyclone import import_cyclonedds
+
+    import_cyclonedds()   # the one locked first import: the node's threads may be importing it now
     from cyclonedds._clayer import ddspy_write_ts
 
     shift = int(offset * 1e9)

@@ -41,6 +41,9 @@ def rss_kb() -> int:
 
 
 def process_state() -> Dict[str, int]:
+    from micros_rt.cyclone import import_cyclonedds
+
+    import_cyclonedds()   # the one locked first import: the node's threads may be importing it now
     from cyclonedds.core import Entity
 
     gc.collect()  # rospy leaves an epoll object per closed topic to the garbage collector

@@ -110,3 +110,17 @@ def test_three_threads_starting_dds_at_once_in_a_fresh_process_never_lose_it() -
         assert cp.returncode == 0, cp.stderr[-2000:]
         result = json.loads(cp.stdout.strip().splitlines()[-1])
         assert result == {"errors": [], "failed": None}, result
+
+
+def test_programs_beside_the_package_that_run_micros_rt_import_cyclonedds_after_it_too() -> None:
+    """The suite's micros_rt peers run a node (whose threads import cyclonedds in its first second) and may import
+    cyclonedds themselves: mrt_peer's clock offset once lost that race in CI (``cannot import name 'IdlStruct' from
+    partially initialized module 'cyclonedds.idl'``)."""
+    root = PACKAGE.parent
+    offenders: List[str] = []
+    for path in sorted((root / "tests" / "peers").glob("*.py")):
+        text = path.read_text()
+        if "micros_rt" not in text:
+            continue
+        offenders += _unguarded(ast.parse(text).body, False, str(path.relative_to(root)))
+    assert offenders == []
