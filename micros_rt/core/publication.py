@@ -241,6 +241,13 @@ class Publisher:
         """Subscribers this topic reaches now, over TCPROS and DDS (DDS ones once discovery matched them)."""
         return 0 if self._pub is None else self._pub.ready_connections()
 
+    def reaches(self, node: str) -> bool:
+        """Whether a message published now reaches the subscriber node ``node`` (its caller id, as the master
+        lists it): its TCPROS link is up, its shared-memory port attached or its DDS reader matched. Waiting for
+        ``get_num_connections()`` to reach a count can be fooled by another subscriber connecting first."""
+        tcpros = None if self._pub is None else self._pub.tcpros
+        return tcpros is not None and tcpros.reaches(node)
+
     def get_dds_connections(self) -> int:
         side = None if self._pub is None else self._pub.sides.get(names.DDS)
         return 0 if side is None else side.pseudo_links()

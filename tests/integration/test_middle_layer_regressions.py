@@ -156,6 +156,7 @@ pub = nh.advertise("badvalues", String, 10)
 deadline = time.monotonic() + 30
 while pub.get_num_connections() < 1 and time.monotonic() < deadline:
     time.sleep(0.05)
+reaches = [pub.reaches("/bad_listener"), pub.reaches("/listener_bad_int")]  # a subscriber of another topic: no
 raised = []
 def with_data(value):
     m = String()
@@ -189,10 +190,11 @@ except rospy.ROSSerializationException:
 time.sleep(1.0)
 pub.publish(String(data="good"))
 time.sleep(2.0)
-print(json.dumps({"raised": raised, "others": others}), flush=True)
+print(json.dumps({"raised": raised, "others": others, "reaches": reaches}), flush=True)
 micros_rt.shutdown()
 """)
     assert report["raised"] == [True, True, True], report
+    assert report["reaches"] == [True, False], report
     assert report["others"] == [True, True, True], report
     listener.wait_for(lambda e: e.get("event") == "recv", 15)
     got = [e.get("data") for e in listener.events("recv")]

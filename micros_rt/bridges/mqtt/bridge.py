@@ -59,7 +59,7 @@ PENDING_LIMIT = 100
 #: How often the master is asked for the types of ROS topics not yet subscribed (seconds).
 RESOLVE_INTERVAL = 0.3
 #: How long a new ROS publisher waits for the subscribers the master knows (seconds).
-SUBSCRIBER_WAIT = 3.0
+SUBSCRIBER_WAIT = 5.0
 #: How long (seconds after the first connect) a topic written in the peers' generation holds its messages
 #: while no mqtt_client peer has announced a type on the broker; then it writes the default (2.x).
 PEER_HOLD = 10.0
@@ -614,17 +614,27 @@ def _check_length(msg: genpy.Message, body: bytes) -> None:
 
 
 def _await_subscribers(pub: micros_rt.Publisher, *, timeout: float = SUBSCRIBER_WAIT) -> None:
-    """Wait (bounded) until the subscribers the master lists for a new publisher's topic are connected, so
-    that the first message, published right after advertising, reaches them (mqtt_client loses it)."""
+    """Wait (bounded) until each subscriber node the master lists for a new publisher's topic is reached, so
+    that the first message, published right after advertising, reaches them (mqtt_client loses it). By node,
+    not by count: the bridge's own subscriber of the topic (a ros2mqtt entry) connects first and would make a
+    count of one look like the listed subscriber's."""
     try:
         _, subscribers, _ = rospy.get_master().getSystemState()[2]
     except Exception as exc:  # master away: publish anyway
         _log.debug("micros_rt mqtt: cannot ask the master for subscribers: %s", exc)
         return
-    expected = sum(len(nodes) for topic, nodes in subscribers if topic == pub.resolved_name)
+    expected = {node for topic, nodes in subscribers if topic == pub.resolved_name for node in nodes}
     deadline = time.monotonic() + timeout
-    while pub.get_num_connections() < expected and time.monotonic() < deadline:
+    while True:
+        waiting = [node for node in expected if not pub.reaches(node)]
+        if not waiting or time.monotonic() >= deadline:
+            break
         time.sleep(0.01)
+    if not waiting:
+        return
+    _log.info("micros_rt mqtt: ROS topic '%s': subscriber(s) %s not connected %.0f s after advertising; "
+              "publishing anyway (they miss what comes before they connect)", pub.resolved_name,
+              ", ".join(sorted(waiting)), timeout)
 
 
 def _message_class(t: codec.RosMsgType) -> Type[genpy.Message]:

@@ -66,6 +66,12 @@ class TcprosWriter:
         """Connections in rospy's list: TCPROS links and micros_rt's DDS pseudo-connections."""
         return 0 if self._impl is None else len(self._impl.connections)
 
+    def reaches(self, node: str) -> bool:
+        """Whether a message published now reaches subscriber ``node`` (rospy's ``has_connection``, which counts a
+        shared-memory or DDS link once its subscriber attached or matched)."""
+        impl = self._impl
+        return impl is not None and bool(impl.has_connection(node))
+
     def latched(self) -> Any:
         """The message a latching publisher keeps for new subscribers (None: none yet)."""
         return None if self._impl is None else self._impl.latch
