@@ -287,7 +287,7 @@ def wait_for_service(service: str, timeout: Optional[float] = None) -> None:
         _ROSPY_WAIT_FOR_SERVICE(service, timeout)
         return
     from .services import ServiceTimeoutError, ros2_gateway
-    from .services.gateway import Ros2Unavailable
+    from .services.gateway import Ros2Unavailable, ros2_present
 
     resolved = rospy.names.resolve_name(service)
     deadline = None if timeout is None else time.monotonic() + timeout
@@ -299,7 +299,7 @@ def wait_for_service(service: str, timeout: Optional[float] = None) -> None:
         except rospy.ROSException:
             pass
         try:
-            if resolved in ros2_gateway().server_names():
+            if ros2_present() and resolved in ros2_gateway().server_names():
                 return
         except Ros2Unavailable as exc:
             ros2_note = f" (ROS 2 unreachable: {exc})"
@@ -377,9 +377,10 @@ def _ros2_action(name: str, action_class: Any) -> Any:
         if any(topic == f"{name}/status" for topic, _type in rospy.get_published_topics()):
             return None  # a ROS 1 server (or another process's offer): actionlib's own wait connects to it
         from .services import ros2_gateway
+        from .services.gateway import ros2_present
 
-        if f"{name}/_action/send_goal" not in ros2_gateway().server_names():
-            return None
+        if not ros2_present() or f"{name}/_action/send_goal" not in ros2_gateway().server_names():
+            return None  # no ROS 2 node on the domain (no helper started for nothing), or no such server
         offer = _ros2_actions[name] = _node.NodeHandle().offer_ros2_action(name, action_class)
         _log.info("micros_rt: action %s: served by ROS 2, offered to this process's actionlib clients (%s)", name,
                   offer.ros2_type)

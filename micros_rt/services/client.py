@@ -20,7 +20,7 @@ import rospy
 from ..exceptions import TypeMappingError
 from ..transports.tcpros import patches
 from .errors import ServiceError, ServiceTimeoutError, ServiceUnavailableError
-from .gateway import Ros2Gateway, Ros2Unavailable
+from .gateway import Ros2Gateway, Ros2Unavailable, ros2_present
 from .mapping import SrvMapping, srv_mapping
 
 __all__ = ["ServiceClient", "ROUTE_TTL"]
@@ -59,12 +59,26 @@ class ServiceClient:
         self.ros2_error: Optional[str] = None if ros2 else "not requested (ros2=False)"
         self._ros2_started = threading.Event()
         self.closed = False
+        #: the ROS 2 side not started: no ROS 2 peer on the DDS domain yet (``MICROS_RT_ROS2=auto``); looked for
+        #: again when the client looks for its server
+        self._ros2_deferred: Optional[Callable[[], Ros2Gateway]] = None
+        self._defer_lock = threading.Lock()
         if ros2:
+            self._ros2_deferred = gateway
+            self._kick_ros2()
+        else:
+            self._ros2_started.set()
+
+    def _kick_ros2(self) -> None:
+        """Start the ROS 2 side once a ROS 2 peer may be on the domain (a ``stat`` while none is)."""
+        if self._ros2_deferred is None or not ros2_present():
+            return
+        with self._defer_lock:
+            gateway, self._ros2_deferred = self._ros2_deferred, None
+        if gateway is not None:
             # the helper takes about a second to start: discovery of a ROS 2 server runs meanwhile
             threading.Thread(target=self._start_ros2, args=(gateway,), name="micros_rt service client",
                              daemon=True).start()
-        else:
-            self._ros2_started.set()
 
     def _start_ros2(self, gateway: Callable[[], Ros2Gateway]) -> None:
         try:
@@ -98,6 +112,7 @@ class ServiceClient:
             return False
 
     def _find_route(self) -> Optional[str]:
+        self._kick_ros2()
         now = time.monotonic()
         if self._route is not None and now - self._route_time < ROUTE_TTL:
             return self._route
@@ -111,6 +126,7 @@ class ServiceClient:
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
             self._route = None
+            self._kick_ros2()
             if self._ros1_registered():
                 return
             if self._ros2_started.is_set() and self._ros2_ready():
@@ -124,6 +140,8 @@ class ServiceClient:
             time.sleep(_POLL)
 
     def _ros2_note(self) -> str:
+        if self._ros2_deferred is not None:
+            return " (no ROS 2 node on the DDS domain)"
         if not self._ros2_started.is_set():
             return " (the ROS 2 helper is still starting)"
         return f" (ROS 2 unreachable: {self.ros2_error})" if self.ros2_error else ""
@@ -154,7 +172,7 @@ class ServiceClient:
         limit = self.timeout if timeout is _UNSET else timeout
         started = time.monotonic()
         route = self._find_route()
-        if route is None and not self._ros2_started.is_set():
+        if route is None and self._ros2_deferred is None and not self._ros2_started.is_set():
             # the helper is starting: a ROS 2 server may be found when it is up
             self._ros2_started.wait(limit)
             self._route = None

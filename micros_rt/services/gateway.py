@@ -20,6 +20,7 @@ import socket
 import subprocess
 import tempfile
 import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Tuple
@@ -33,7 +34,8 @@ from .helper_protocol import (A_CANCEL, A_CLIENT, A_DONE, A_FEEDBACK, A_FORGET, 
                               UNADVERTISE)
 from ..transports.dds.participant import HELPER_ENCLAVE, _is_loopback
 
-__all__ = ["Ros2Gateway", "Ros2Unavailable", "gateway", "close_gateway", "ros2_python"]
+__all__ = ["Ros2Gateway", "Ros2Unavailable", "gateway", "close_gateway", "ros2_present", "ros2_python",
+           "when_ros2_present"]
 
 _log = nonblocking_logger("rosout.micros_rt.services")
 
@@ -406,6 +408,69 @@ def gateway(node_name: str) -> Ros2Gateway:
 
         rospy.on_shutdown(close_gateway)  # the helper also exits by itself when this process does
         return _gateway
+
+
+def ros2_present() -> bool:
+    """Whether a ROS 2 peer may be on the DDS domain now (:func:`micros_rt.transports.dds.process.ros2_on_domain`):
+    under ``MICROS_RT_ROS2=auto`` no helper starts before one is, so a robot with no ROS 2 node runs none."""
+    from ..transports.dds.process import ros2_on_domain
+
+    return ros2_on_domain()
+
+
+#: Seconds between looks for a ROS 2 peer on the domain while servers wait for one (a ``stat`` each)
+PRESENCE_POLL = 0.5
+
+
+class _WhenPresent:
+    """Starts of ROS 2 sides that wait for a ROS 2 peer on the domain, run in order on one thread of the process
+    once :func:`ros2_present` (the thread ends when none waits)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._waiting: List[Callable[[], None]] = []
+        self._thread: Optional[threading.Thread] = None
+
+    def run(self, start: Callable[[], None]) -> bool:
+        """``start()`` now when a ROS 2 peer may be there (True), else later, on this object's thread (False)."""
+        if ros2_present():
+            start()
+            return True
+        with self._lock:
+            self._waiting.append(start)
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._loop, name="micros_rt ROS 2 presence", daemon=True)
+                self._thread.start()
+        return False
+
+    def cancel(self, start: Callable[[], None]) -> None:
+        with self._lock:
+            if start in self._waiting:
+                self._waiting.remove(start)
+
+    def _loop(self) -> None:
+        import rospy
+
+        while True:
+            with self._lock:
+                if not self._waiting or rospy.is_shutdown():
+                    self._waiting, self._thread = [], None
+                    return
+            if not ros2_present():
+                time.sleep(PRESENCE_POLL)
+                continue
+            with self._lock:
+                starts, self._waiting = self._waiting, []
+            _log.info("micros_rt: a ROS 2 node is on the DDS domain: starting the ROS 2 side of this process's "
+                      "services")
+            for start in starts:
+                try:
+                    start()
+                except Exception:  # one server's failure must not keep the others from ROS 2
+                    _log.exception("micros_rt: starting a service's ROS 2 side failed")
+
+
+when_ros2_present = _WhenPresent()
 
 
 def close_gateway() -> None:

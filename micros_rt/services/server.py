@@ -12,7 +12,7 @@ import rospy
 from ..exceptions import TypeMappingError
 from ..log import nonblocking_logger
 from ..transports.tcpros import patches
-from .gateway import Ros2Gateway, Ros2Unavailable
+from .gateway import Ros2Gateway, Ros2Unavailable, when_ros2_present
 from .mapping import SrvMapping, srv_mapping
 
 __all__ = ["ServiceServer", "as_response"]
@@ -40,7 +40,9 @@ def as_response(value: Any, response_class: Any) -> Any:
 
 class ServiceServer:
     """What :meth:`micros_rt.NodeHandle.advertise_service` returns: ``shutdown()`` (or ``close()``) withdraws the
-    service from both sides. ``ros2_error`` says, in words, why ROS 2 clients are not served (None: they are)."""
+    service from both sides. ``ros2_error`` says, in words, why ROS 2 clients are not served (None: they are, or
+    will be: under ``MICROS_RT_ROS2=auto`` the ROS 2 side, an rclpy helper process, starts once a ROS 2 node is on
+    the DDS domain, ``ros2_waiting`` until then)."""
 
     def __init__(self, resolved_name: str, srv_class: Any, handler: Callable[[Any], Any],
                  gateway: Callable[[], Ros2Gateway], *, ros2: bool = True, ros1: bool = True) -> None:
@@ -55,15 +57,38 @@ class ServiceServer:
         # rospy's own class (``micros-rt run`` replaces the name ``rospy.Service``); none when the caller serves
         # ROS 1 itself (the drop-in rospy.Service)
         self._ros1 = patches.ROSPY_SERVICE(resolved_name, srv_class, handler) if ros1 else None
+        #: the ROS 2 side waits for a ROS 2 peer on the DDS domain (``MICROS_RT_ROS2=auto``: no helper before)
+        self.ros2_waiting = False
+        self._gateway_factory = gateway
         if ros2:
             try:
                 self._mapping = srv_mapping(srv_class)
-                gw = gateway()
-                gw.advertise(resolved_name, self._mapping.ros2_type, self._serve_ros2)
-                self._gateway = gw
-            except (Ros2Unavailable, TypeMappingError) as exc:
+            except TypeMappingError as exc:
                 self.ros2_error = str(exc)
                 _log.warning("micros_rt: service %s is served to ROS 1 clients only: %s", resolved_name, exc)
+            else:
+                self.ros2_waiting = True
+                when_ros2_present.run(self._start_ros2)
+
+    def _start_ros2(self) -> None:
+        """Offer the service to ROS 2 clients through the process's helper (started now if it is not)."""
+        mapping = self._mapping
+        assert mapping is not None
+        try:
+            if self.closed:
+                return
+            gw = self._gateway_factory()
+            gw.advertise(self.resolved_name, mapping.ros2_type, self._serve_ros2)
+            with self._lock:
+                if not self.closed:
+                    self._gateway = gw
+                    return
+            gw.unadvertise(self.resolved_name)  # shut down meanwhile
+        except Ros2Unavailable as exc:
+            self.ros2_error = str(exc)
+            _log.warning("micros_rt: service %s is served to ROS 1 clients only: %s", self.resolved_name, exc)
+        finally:
+            self.ros2_waiting = False
 
     @property
     def serves_ros2(self) -> bool:
@@ -90,6 +115,7 @@ class ServiceServer:
             if self.closed:
                 return
             self.closed = True
+        when_ros2_present.cancel(self._start_ros2)
         if self._ros1 is not None:
             self._ros1.shutdown(reason or "micros_rt ServiceServer.shutdown()")
         if self._gateway is not None:
@@ -104,5 +130,6 @@ class ServiceServer:
         self.shutdown()
 
     def __repr__(self) -> str:
-        sides = [side for side, on in (("ROS 1", self._ros1 is not None), ("ROS 2", self.serves_ros2)) if on]
+        sides = [side for side, on in (("ROS 1", self._ros1 is not None), ("ROS 2", self.serves_ros2),
+                                       ("ROS 2 once a ROS 2 node is on the domain", self.ros2_waiting)) if on]
         return f"<ServiceServer {self.resolved_name} ({self.srv_class._type}) {' + '.join(sides) or 'closed'}>"

@@ -175,11 +175,25 @@ def test_the_watcher_killed_another_node_takes_over(auto_env: Dict[str, str], sp
     listener.wait_for("recv", T)
 
 
-def test_a_node_offering_a_service_leaves_the_host_off_dds_and_rclpy_still_calls_it(
+def children(pid: int) -> List[int]:
+    """The child processes of ``pid`` (a micros_rt process's ROS 2 helper is one)."""
+    found: List[int] = []
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            found += [int(c) for c in (task / "children").read_text().split()]
+        except OSError:
+            pass
+    return found
+
+
+def test_a_node_offering_a_service_starts_no_helper_until_a_ros2_node_comes_and_the_helper_is_no_ros2_node(
         auto_env: Dict[str, str], spawn: harness.Spawner) -> None:
-    """The service's ROS 2 helper (an rclpy process of micros_rt's) is a DDS participant but no ROS 2 node: it must
-    not make the host's nodes ROS 2-visible (before, it did, and a 60-node ring with one service cost 2.2x rospy's
-    CPU). An rclpy client is a ROS 2 node: the service answers it."""
+    """A robot with no ROS 2 node pays nothing for its services' ROS 2 side: the rclpy helper process starts once a
+    ROS 2 node is on the domain (before, every process offering a service started one at once: a Python process
+    with rclpy and a Fast DDS participant per node). An rclpy client then gets its answers. The helper is a DDS
+    participant but no ROS 2 node: it must not make the host's nodes ROS 2-visible (before issue 41 it did, and a
+    60-node ring with one service cost 2.2x rospy's CPU); the watcher's marker goes when the client leaves, with
+    the helper still running."""
     service = "/auto/trigger"
     server = spawn([harness.MICROS_RT_PYTHON, str(harness.PEERS_DIR / "ros1_service_peer.py"), "--impl", "micros_rt",
                     "serve", "--services", json.dumps([{"name": service, "type": "std_srvs/Trigger"}]),
@@ -188,26 +202,37 @@ def test_a_node_offering_a_service_leaves_the_host_off_dds_and_rclpy_still_calls
                    env=auto_env, name="mrt_talker")
     listener = spawn(mrt("listen", "--topic", "/auto/svc_out", "--duration", 90, "--node-name", "svc_near"),
                      env=auto_env, name="mrt_listener")
-    assert server.wait_for("ready", T)["ros2"] == [service]
+    ready = server.wait_for("ready", T)
+    assert ready["ros2"] == [service] and ready["waiting"] == [service], ready
     assert listener.wait_for("recv", T)["transport"] == "SHM"
     nodes = [talker, listener]
-    # whichever micros_rt process watches the domain has seen the helper (and said it is micros_rt's) ...
+
     def said(peer: harness.Peer, words: str) -> bool:  # in a JSON log event, or rospy's own output of the server
         return any(words in (e.get("text") or e.get("line") or "") for e in peer.events()) or \
             words in peer.stderr_tail(400)
 
     marker = Path(f"/dev/shm/micros_rt_ros2_u{os.getuid()}_n{os.stat('/proc/self/ns/net').st_ino}_d{AUTO_DOMAIN}.seen")
-    wait_until(lambda: any(said(p, "ROS 2 helper joined") for p in [server, *nodes]) or marker.exists(), T,
-               "the host's watcher seeing the service's ROS 2 helper")
+    wait_until(lambda: any(watchers(p) for p in [server, *nodes]), T, "a micros_rt process watching the domain")
     count = len(listener.events("recv"))
-    listener.wait_for_count("recv", count + 20, T)  # a second more: the nodes' housekeeping ticks ran
-    # ... and no node made a participant for it: only the watcher has one, and no marker was written
+    listener.wait_for_count("recv", count + 30, T)  # a second and a half more: the housekeeping ticks ran
+    assert children(server.proc.pid) == [], "the service's ROS 2 helper started with no ROS 2 node on the domain"
     assert not marker.exists(), marker.read_text()
-    assert len(with_participant(nodes)) <= 1, [(p.name, udp_sockets(p.proc.pid)) for p in nodes]
-    assert not any(said(p, "make their topics ROS 2 topics") for p in [server, *nodes])
+    assert len(with_participant([server, *nodes])) <= 1, [(p.name, udp_sockets(p.proc.pid)) for p in nodes]
 
     client = spawn([harness.ROS2_PYTHON, str(harness.PEERS_DIR / "ros2_service_peer.py"), "call", "--plan",
-                    json.dumps([{"name": service, "type": "std_srvs/srv/Trigger", "count": 3, "timeout": 10}])],
+                    json.dumps([{"name": service, "type": "std_srvs/srv/Trigger", "count": 3, "timeout": 10,
+                                 "wait": 40}])],
                    env=auto_env, name="rclpy_client")
-    summary = client.wait_for("summary", 60)
+    summary = client.wait_for("summary", 90)
     assert summary["ok"] == 3, summary
+    helpers = children(server.proc.pid)
+    assert len(helpers) == 1, helpers
+    # the client gone, the helper stays; whichever process watches says the helper is micros_rt's, and the
+    # marker goes: the helper alone is no ROS 2 node, no node made a participant for it
+    client.wait(timeout=30)
+    wait_until(lambda: not marker.exists(), 3 * T, "the marker gone once the rclpy client left, the helper running")
+    wait_until(lambda: any(said(p, "ROS 2 helper joined") for p in [server, *nodes]), T,
+               "the watcher saying the helper is micros_rt's")
+    assert children(server.proc.pid) == helpers
+    # the client used the service, no topic: the topics' nodes kept off DDS (the watcher's participant at most)
+    assert len(with_participant(nodes)) <= 1, [(p.name, udp_sockets(p.proc.pid)) for p in nodes]

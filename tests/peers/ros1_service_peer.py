@@ -46,7 +46,7 @@ def serve(args: argparse.Namespace) -> None:
         nh = micros_rt.NodeHandle()
     else:
         rospy.init_node("stock_service_server", anonymous=True)
-    handles, ros2 = [], []
+    handles, ros2, waiting = [], [], []
     for spec in specs:
         cls, name, mode = srv_class(spec["type"]), spec["name"], spec.get("mode", "normal")
         who = f"{args.impl} {name}" + ("!" if mode == "fail" else "")
@@ -61,14 +61,16 @@ def serve(args: argparse.Namespace) -> None:
 
         if nh is not None:
             server = nh.advertise_service(name, cls, handler)
-            if server.serves_ros2:
+            if server.serves_ros2 or server.ros2_waiting:  # waiting: for a ROS 2 node on the domain (auto)
                 ros2.append(name)
+                if server.ros2_waiting:
+                    waiting.append(name)
             else:
                 emit("ros2_error", name=name, error=server.ros2_error)
             handles.append(server)
         else:
             handles.append(rospy.Service(name, cls, handler))
-    emit("ready", ros2=ros2)
+    emit("ready", ros2=ros2, waiting=waiting)
     end = time.monotonic() + args.seconds
     while not rospy.is_shutdown() and time.monotonic() < end:
         time.sleep(0.1)

@@ -5,6 +5,7 @@ participant), and the node's part in watching the domain for ROS 2 (``auto``). T
 
 from __future__ import annotations
 
+import os
 import threading
 from typing import TYPE_CHECKING, Any, Callable, Dict, List, Optional
 
@@ -19,7 +20,7 @@ if TYPE_CHECKING:
     from .host_gateway import EndpointDescription
     from .watch import Ros2Watch
 
-__all__ = ["AUTO", "OFF", "ON", "backend", "close", "info", "ros2_mode", "ros2_visible",
+__all__ = ["AUTO", "OFF", "ON", "backend", "close", "info", "ros2_mode", "ros2_on_domain", "ros2_visible",
            "start_early", "wait_started", "watch_ros2"]
 
 _log = nonblocking_logger("rosout.micros_rt")
@@ -72,6 +73,30 @@ def ros2_visible(profile: Any = None) -> bool:
     nothing for DDS but the host watcher's participant."""
     mode = ros2_mode(profile)
     return mode == ON or (mode == AUTO and _state.ros2_seen)
+
+
+def ros2_on_domain(profile: Any = None) -> bool:
+    """Whether a ROS 2 peer may be on this node's DDS domain now, for what only one needs: the rclpy helper of
+    micros_rt's services and actions (:mod:`micros_rt.services.gateway`). ``auto``: once the host's watcher has
+    seen something other than micros_rt on the domain (its marker file, one ``stat``) or this node is ROS
+    2-visible; True whenever that cannot be known here (no watch possible: DDS disabled or failed, a bad domain id).
+    ``on`` and ``off``: True (``off`` keeps the topics off DDS; services reach ROS 2 as before)."""
+    if _disabled() or ros2_mode(profile) != AUTO or _state.ros2_seen:
+        return True
+    watch = _state.watch
+    if watch is not None:
+        if watch.failed:
+            return True
+        marker = watch.marker
+    else:
+        from .participant import domain_id_from_env
+        from .watch import watch_paths
+
+        try:
+            marker = watch_paths(domain_id_from_env())[1]
+        except MicrosRtError:
+            return True
+    return os.path.exists(marker)
 
 
 def watch_ros2(profile: Any, node: str, endpoints: "Callable[[], List[EndpointDescription]]") -> bool:
