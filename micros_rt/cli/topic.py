@@ -114,6 +114,7 @@ def info_data(master: Master, topic: str, *, wait: float = DEFAULT_WAIT,
         "ros2_writers": [e for e in endpoints if e["writer"]], "ros2_readers": [e for e in endpoints if not e["writer"]],
         "dds_links": dds_links(endpoints), "carried": carried, "notes": both.notes(),
         "dds": {"domain": view.domain, "wait": view.wait} if view.available else None,
+        "ros1_unknown": None if snap is not None else ros1_note or "the ROS 1 master cannot be reached",
     }
     if in_master and snap is not None:
         data["publishers"] = [snap.endpoint(n, topic, publisher=True) for n in sorted(snap.publishers.get(topic, []))]
@@ -142,6 +143,9 @@ def format_info(data: Dict[str, Any]) -> str:
     for title, key in (("Publishers", "publishers"), ("Subscribers", "subscribers")):
         if data["side"] == ROS2:
             break
+        if data.get("ros1_unknown"):  # the master away: its side is not known, not empty
+            lines += [f"{title}: unknown (the ROS 1 master's list: {data['ros1_unknown']})", ""]
+            continue
         lines.append(f"{title}:" if data[key] else f"{title}: None")
         for ep in data[key]:
             sides[(key, ep["node"])] = ep["description"]

@@ -102,6 +102,11 @@ def test_topic_list_marks_ros1_ros2_and_both(graph: Dict[str, str]) -> None:
                      text, re.M), text
     assert re.search(rf"^{STOCK_TOPIC}  \[ROS 1\]  std_msgs/String\n +ROS 1 publishers: +{STOCK_NODE}$",
                      text, re.M), text
+    # the master away: topic info shows the ROS 2 side, and says the ROS 1 side is unknown, not empty
+    cp = cli(dict(graph, ROS_MASTER_URI=f"http://127.0.0.1:{harness.free_tcp_port()}/"), "topic", "info", MRT_TOPIC)
+    assert cp.returncode == 0 and "Traceback" not in cp.stderr, (cp.returncode, cp.stdout, cp.stderr)
+    assert "Publishers: unknown (the ROS 1 master's list: " in cp.stdout, cp.stdout
+    assert "Publishers: None" not in cp.stdout and re.search(rf"^ \* {R2_LISTENER}", cp.stdout, re.M), cp.stdout
 
 
 def test_node_list_marks_each_node_and_rclpy_names_the_micros_rt_node(graph: Dict[str, str],
