@@ -202,9 +202,9 @@ def test_a_node_offering_a_service_starts_no_helper_until_a_ros2_node_comes_and_
                    env=auto_env, name="mrt_talker")
     listener = spawn(mrt("listen", "--topic", "/auto/svc_out", "--duration", 90, "--node-name", "svc_near"),
                      env=auto_env, name="mrt_listener")
-    ready = server.wait_for("ready", T)
+    ready = server.wait_for("ready", 2 * T)
     assert ready["ros2"] == [service] and ready["waiting"] == [service], ready
-    assert listener.wait_for("recv", T)["transport"] == "SHM"
+    assert listener.wait_for("recv", 2 * T)["transport"] == "SHM"
     nodes = [talker, listener]
 
     def said(peer: harness.Peer, words: str) -> bool:  # in a JSON log event, or rospy's own output of the server
@@ -212,9 +212,12 @@ def test_a_node_offering_a_service_starts_no_helper_until_a_ros2_node_comes_and_
             words in peer.stderr_tail(400)
 
     marker = Path(f"/dev/shm/micros_rt_ros2_u{os.getuid()}_n{os.stat('/proc/self/ns/net').st_ino}_d{AUTO_DOMAIN}.seen")
-    wait_until(lambda: any(watchers(p) for p in [server, *nodes]), T, "a micros_rt process watching the domain")
+    from micros_rt.transports.dds.watch import watcher_pid
+    lock = marker.with_suffix(".lock")
+    pids = {p.proc.pid for p in [server, *nodes]}
+    wait_until(lambda: watcher_pid(str(lock)) in pids, 2 * T, "a micros_rt process watching the domain (lock held)")
     count = len(listener.events("recv"))
-    listener.wait_for_count("recv", count + 30, T)  # a second and a half more: the housekeeping ticks ran
+    listener.wait_for_count("recv", count + 30, 2 * T)  # a second and a half more: the housekeeping ticks ran
     assert children(server.proc.pid) == [], "the service's ROS 2 helper started with no ROS 2 node on the domain"
     assert not marker.exists(), marker.read_text()
     assert len(with_participant([server, *nodes])) <= 1, [(p.name, udp_sockets(p.proc.pid)) for p in nodes]
@@ -231,7 +234,7 @@ def test_a_node_offering_a_service_starts_no_helper_until_a_ros2_node_comes_and_
     # marker goes: the helper alone is no ROS 2 node, no node made a participant for it
     client.wait(timeout=30)
     wait_until(lambda: not marker.exists(), 3 * T, "the marker gone once the rclpy client left, the helper running")
-    wait_until(lambda: any(said(p, "ROS 2 helper joined") for p in [server, *nodes]), T,
+    wait_until(lambda: any(said(p, "ROS 2 helper joined") for p in [server, *nodes]), 2 * T,
                "the watcher saying the helper is micros_rt's")
     assert children(server.proc.pid) == helpers
     # the client used the service, no topic: the topics' nodes kept off DDS (the watcher's participant at most)
