@@ -360,7 +360,8 @@ def relay_marking(report: NodeReport, topic: str, *, publisher: bool) -> Optiona
         exporters = [str(e) for e in im.get("exporters") or []]
         seen = f"exported by {', '.join(exporters)}" if exporters else "no exporting relay seen now"
         dropped = [f"{key.removeprefix('dropped_').replace('_', ' ')} {counters[key]}" for key in (
-            "dropped_queue_full", *drop_counters(), "refused", "bad_input", "lost") if counters.get(key)]
+            "dropped_queue_full", *drop_counters(), "refused", "unknown_writer", "bad_input", "lost")
+            if counters.get(key)]
         summary = (f"relayed in from graph {im.get('origin')} (outside topic {im.get('outside')}, {seen}) by relay "
                    f"node {report.name}")
         straight = int(im.get("straight") or 0)

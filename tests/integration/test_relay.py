@@ -123,7 +123,7 @@ def test_stock_cpp_and_python_topics_cross_to_another_graph(robots: Tuple[harnes
     assert "/chatter" not in topics(b) and "/robot_a/chatter" in topics(b) and "/a_map" in topics(b)
     assert not any(t.startswith("/robot_") for t in topics(a)), topics(a)
     chatter_b = _stats_with(relay_b, "imports", "/robot_a/chatter")
-    assert chatter_b["refused"] == 0 and chatter_b["bad_input"] == 0, chatter_b
+    assert chatter_b["refused"] == 0 and chatter_b["unknown_writer"] == 0 and chatter_b["bad_input"] == 0, chatter_b
 
 
 def test_an_import_whose_type_differs_in_the_local_graph_is_refused_in_words(
@@ -399,6 +399,19 @@ def test_two_robots_importing_one_topic_get_it_by_multicast(three_robots: Robots
         assert seqs == list(range(seqs[0], seqs[0] + len(seqs))), seqs[:20]
 
 
+def _wait_received(peer: harness.Peer, n: int, importer: harness.Peer, timeout: float = 60) -> None:
+    """``n`` messages at ``peer``; a failure also shows what the importing relay counted last (received, published,
+    refused, unknown_writer per import) and its stderr: whether the import took nothing in or the link sent nothing
+    (a CI failure once left only the listener's side to read)."""
+    try:
+        peer.wait_for_count("recv", n, timeout=timeout)
+    except AssertionError as exc:
+        stats = importer.events("stats")
+        counters = stats[-1].get("imports") if stats else None
+        raise AssertionError(f"{exc}\nthe importing relay's last counters: {counters}\nits stderr tail:\n"
+                             f"{importer.stderr_tail(20)}") from None
+
+
 def _bus_info(master: harness.RosMaster, node: str) -> List[str]:
     return [str(link[-1]) for link in harness.node_call(harness.lookup_node(master, node), "getBusInfo")]
 
@@ -437,7 +450,7 @@ def test_micros_rt_subscribers_read_the_exporting_relay_straight_without_a_hop_t
                         "--duration", 140), env=b_dds, name="through")
     stock = spawn(stock_listener("--topic", "/robot_a/chatter", "--duration", 140), env=b.env)
     for peer in (direct, renamed, through, stock):
-        peer.wait_for_count("recv", 5, timeout=60)
+        _wait_received(peer, 5, relay_b)
     for peer in (direct, renamed, through):
         assert {e["transport"] for e in peer.events("recv")} == {"DDS"}
     assert {e["callerid"] for e in direct.events("recv")} == {node_b}  # still relay B's topic in B's graph

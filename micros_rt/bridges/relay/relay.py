@@ -210,6 +210,7 @@ class _Import:
         return {"topic": self.rule.outside, "as": self.rule.local, "received": s.received, "published": s.delivered,
                 "dropped_queue_full": s.dropped_queue_full, **{c: getattr(s, c) for c in drop_counters()},
                 "refused": self.feed.refused if self.feed else 0,
+                "unknown_writer": self.feed.unknown_writer if self.feed else 0,
                 "bad_input": self.feed.bad_input if self.feed else 0, "lost": self.feed.lost if self.feed else 0}
 
     def info(self) -> Dict[str, Any]:

@@ -291,7 +291,8 @@ class _TopicIn:
                 "type_source": self.type_source, "latch": self.latch, "latched_writers": len(self.latched), "received": s.received,
                 "published": s.delivered,
                 "dropped_queue_full": s.dropped_queue_full, **{c: getattr(s, c) for c in drop_counters()},
-                "refused": feed.refused if feed else 0, "bad_input": feed.bad_input if feed else 0,
+                "refused": feed.refused if feed else 0, "unknown_writer": feed.unknown_writer if feed else 0,
+                "bad_input": feed.bad_input if feed else 0,
                 "lost": feed.lost if feed else 0}
 
     def close(self) -> None:

@@ -55,6 +55,7 @@ class DDSFeed:
         self._push = push
         self._accept = accept
         self.refused = 0      # samples of writers ``accept`` turned away
+        self.unknown_writer = 0   # samples of a writer missing from the reader's matched writers (so no tag to judge)
         self.bad_input = 0    # samples that were not a valid encoding of the type
         self.lost = 0         # samples DDS reported lost: the writer's history dropped them before they arrived whole
         self._bad_log = RateLimitedLog(_log, interval=10.0)
@@ -103,7 +104,16 @@ class DDSFeed:
                     if not info.valid_data:
                         continue
                     writer = self._reader.writer_info(info.publication_handle)
-                    if writer is None or not self._accept(writer.tag):
+                    if writer is None:
+                        # Cyclone delivered it, yet does not list its writer among the reader's matches: not a writer
+                        # turned away, so counted and said apart (a relay importing nothing would be silent otherwise)
+                        self.unknown_writer += 1
+                        self._bad_log.warning(
+                            "unknown writer", f"micros_rt: DDS topic {self.dds_topic}: dropped a sample of writer "
+                            f"handle {info.publication_handle:#x}, which the reader has no match data for (so no "
+                            f"tag to judge); {self.unknown_writer} so far")
+                        continue
+                    if not self._accept(writer.tag):
                         self.refused += 1
                         continue
                     try:
