@@ -48,6 +48,7 @@ import micros_rt
 from micros_rt.extend import SendQueue, dds_backend, register_info_section, sender_for, unregister_info_section
 from micros_rt.qos import DURATION_MAX, SubscribeQoSOptions
 from micros_rt.log import nonblocking_logger
+from micros_rt.ratelimit import RateLimitedLog
 from micros_rt.qos.options import drop_counters
 from micros_rt.qos.topic_rules import best_match
 from micros_rt.transports.base import EndpointSpec, PushReader, TransportWriter
@@ -147,8 +148,17 @@ class _Import:
         self.feed: Optional[DDSFeed] = None
         own_graph = relay.graph_id
 
+        refusals = RateLimitedLog(_log, interval=30.0)
+
         def accept(tag: Optional[Dict[str, str]]) -> bool:
-            return tag is not None and tag.get("relay") == rule.origin and tag.get("graph") != own_graph
+            if tag is not None and tag.get("relay") == rule.origin and tag.get("graph") != own_graph:
+                return True
+            if tag is None or tag.get("graph") != own_graph:  # this graph's own writers are refused as a rule
+                who = "no micros_rt tag" if tag is None else (f"relay {tag.get('relay')!r} of graph "
+                                                              f"{tag.get('graph')!r}, node {tag.get('node')!r}")
+                refusals.warning(who, f"micros_rt relay: import {rule.outside}: refusing samples of a DDS writer with "
+                                 f"{who} (this import takes relay {rule.origin!r}'s writers only); counted as refused")
+            return False
 
         def open_reader(depth: Optional[int], wake: Callable[[], None]) -> PushReader:
             push = PushReader("DDS", depth, wake, blocking=False)
