@@ -732,17 +732,51 @@ def verdict(fig, figs, t):
     return "ok" if ok else "MISS"
 
 
+def markdown(data, figs, spread, transports, made, errors, wall):
+    """latest.md's lines: the machine, the table and the configurations of a run (also from a saved latest.json:
+    ``markdown_from(path)``)."""
+    mach = data["machine"]
+    md = ["## Performance", "",
+          f"Measured with `{data['command']}` ({data['rounds']} round(s), {wall / 60:.1f} min) on "
+          f"{mach['cpu']}, {mach['cores']} cores, {mach['mem_GB']} GB, {mach['os']}, Linux {mach['kernel']}, "
+          f"Python {mach['python']}, cyclonedds {mach['cyclonedds']}, rclpy {mach['rclpy']}. "
+          "Every endpoint is its own process, loopback only; figures are medians over rounds (loss: the worst "
+          "round). Latency: ping-pong round trip in µs. Throughput: one-way, measured at the receiver; lost = "
+          f"sent − received. The last three columns compare {headline(transports)} (micros_rt's default on one "
+          "host when measured) with stock rospy TCPROS measured in the same run, against the targets of "
+          "issue 34.", "",
+          table(figs, spread, transports, md=True), "",
+          "Configurations:", ""]
+    md += [f"- **{t}**: {CONFIG.get(t, data['config'].get(t, ''))}" for t in transports]
+    if made:
+        md += ["", "Plots: " + ", ".join(f"[{m}](benchmarks/results/{m})" for m in made)]
+    if errors:
+        md += ["", "Phases that failed in this run:", ""] + [f"- {e}" for e in errors]
+    return md
+
+
+def markdown_from(path):
+    """Write latest.md beside a saved ``latest.json`` (nothing is measured)."""
+    path = Path(path)
+    data = json.loads(path.read_text())
+    transports = list(data["config"])
+    made = sorted(p.name for p in path.parent.glob("*.png") if p.name != "summary.png")
+    md = markdown(data, data["figures"], data["spread"], transports, made, data.get("errors", []), data["wall_s"])
+    (path.parent / "latest.md").write_text("\n".join(md) + "\n")
+
+
 def table(figs, spread, transports, md=False):
     names = sorted({f for t in transports for f, v in figs.get(t, {}).items()
                     if not isinstance(v, (dict, list)) and not f.endswith("_sent")}, key=_fig_order)
     short = {"micros_rt_shm": "mrt SHM", "micros_rt_shm_ros2": "mrt SHM ROS2 on", "micros_rt_shm_rclpy": "mrt SHM +rclpy", "micros_rt_shm_local": "mrt SHM local", "micros_rt_dds": "mrt DDS", "micros_rt_dds_budget": "mrt budget", "micros_rt_tcpros": "mrt TCPROS", "rospy_tcpros": "rospy",
-             "cyclonedds_python": "cyclone-py", "rclpy_fastdds": "rclpy"}
+             "cyclonedds_python": "cyclone-py", "rclpy_fastdds": "rclpy", "micros_rt_shm_service": "mrt SHM +service",
+             "rospy_tcpros_service": "rospy +service"}
     cols = [t for t in transports]
-    head = ["figure"] + [short[t] for t in cols]
+    head = ["figure"] + [short.get(t, t) for t in cols]
     budget = "micros_rt_dds_budget" in cols
     head_t = headline(cols)
     if BASE in cols:
-        head += [f"{short[head_t]}/rospy", "target", ""] + (["budget/rospy", ""] if budget else [])
+        head += [f"{short.get(head_t, head_t)}/rospy", "target", ""] + (["budget/rospy", ""] if budget else [])
     rows = []
     for f in names:
         row = [f]
@@ -1195,22 +1229,7 @@ def main():
     print(f"\neth0 tx packets during the run (whole machine): {eth0}")
     print(f"\nwall time {wall:.0f} s; results in {outdir}/latest.json, latest.md, {', '.join(made)}")
 
-    md = ["## Performance", "",
-          f"Measured with `{data['command']}` ({P['rounds']} round(s), {wall / 60:.1f} min) on "
-          f"{mach['cpu']}, {mach['cores']} cores, {mach['mem_GB']} GB, {mach['os']}, Linux {mach['kernel']}, "
-          f"Python {mach['python']}, cyclonedds {mach['cyclonedds']}, rclpy {mach['rclpy']}. "
-          "Every endpoint is its own process, loopback only; figures are medians over rounds (loss: the worst "
-          "round). Latency: ping-pong round trip in µs. Throughput: one-way, measured at the receiver; lost = "
-          f"sent − received. The last three columns compare {headline(transports)} (micros_rt's default on one "
-          "host when measured) with stock rospy TCPROS measured in the same run, against the targets of "
-          "issue 34.", "",
-          table(figs, spread, transports, md=True), "",
-          "Configurations:", ""]
-    md += [f"- **{t}**: {CONFIG[t]}" for t in transports]
-    if made:
-        md += ["", "Plots: " + ", ".join(f"[{m}](benchmarks/results/{m})" for m in made)]
-    if b.errors:
-        md += ["", "Phases that failed in this run:", ""] + [f"- {e}" for e in b.errors]
+    md = markdown(data, figs, spread, transports, made, b.errors, wall)
     (outdir / "latest.md").write_text("\n".join(md) + "\n")
     if args.keep_logs:
         print(f"logs: {logdir}")
