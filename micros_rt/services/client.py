@@ -112,10 +112,10 @@ class ServiceClient:
             return False
 
     def _find_route(self) -> Optional[str]:
-        self._kick_ros2()
         now = time.monotonic()
         if self._route is not None and now - self._route_time < ROUTE_TTL:
             return self._route
+        self._kick_ros2()  # a route kept needs no ROS 2 side started: no stat per call
         route = ROS1 if self._ros1_registered() else ROS2 if self._ros2_ready() else None
         self._route, self._route_time = route, now
         return route

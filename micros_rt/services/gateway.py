@@ -431,17 +431,16 @@ class _WhenPresent:
         self._waiting: List[Callable[[], None]] = []
         self._thread: Optional[threading.Thread] = None
 
-    def run(self, start: Callable[[], None]) -> bool:
-        """``start()`` now when a ROS 2 peer may be there (True), else later, on this object's thread (False)."""
+    def run(self, start: Callable[[], None]) -> None:
+        """``start()`` now when a ROS 2 peer may be there, else later, on this object's thread."""
         if ros2_present():
             start()
-            return True
+            return
         with self._lock:
             self._waiting.append(start)
             if self._thread is None:
                 self._thread = threading.Thread(target=self._loop, name="micros_rt ROS 2 presence", daemon=True)
                 self._thread.start()
-        return False
 
     def cancel(self, start: Callable[[], None]) -> None:
         with self._lock:
