@@ -206,6 +206,10 @@ def run_robot(domain: int, *, cyclonedds_uri: bool = True, say: Callable[[str], 
             "rclpy action client -> run server (offered by a micros_rt node)": results2.get("fib", {}),
         }
         report = {"rows": rows, "calls": calls, "goals": goals, "seconds": time.monotonic() - t0}
+        if any(c["answered"] < c["sent"] for c in calls.values()):   # what the server and its ROS 2 helper said
+            server_log, client_log = service.stderr_tail(60), calls2.stderr_tail(20) + "\n" + json.dumps(summary)
+            report.update(server_log=server_log, rclpy_client_log=client_log)
+            say(f"run server's stderr:\n{server_log}\nrclpy client:\n{client_log}")
         say(format_table(report))
         return report
     finally:
@@ -244,6 +248,7 @@ def main() -> int:
     if args.json:
         print(json.dumps(report))
     bad = [r for r in report["rows"] if r["lost"] or not r["received"]]
+    bad += [c for c in report["calls"].values() if c["answered"] < c["sent"]]
     return 1 if bad else 0
 
 

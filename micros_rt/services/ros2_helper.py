@@ -26,10 +26,12 @@ import itertools
 import json
 import os
 import queue
+import re
 import socket
 import sys
 import threading
 import time
+import warnings
 from collections import deque
 from typing import Any, Deque, Dict, List, Optional, Tuple
 
@@ -71,6 +73,39 @@ FEEDBACK_DEPTH = 1000
 _HEAD = HEAD
 #: how often pending calls are checked for a server that went away
 _WATCH_PERIOD = 0.2
+#: a response Fast DDS would not send (the client's response reader not yet matched by this helper's writer) is
+#: tried again every RESEND_PERIOD s for RESEND_FOR s; then it is counted lost and said
+RESEND_PERIOD = 0.05
+RESEND_FOR = 10.0
+#: rclpy 7 (Jazzy) makes a response the RMW did not send a RuntimeWarning, not an error (service_send_response):
+#: rmw_fastrtps waits 100 ms for the writer to match the client's reader and then gives up, "client will not
+#: receive response". A client that found the server can still be unknown to it: discovery is two-sided and, under
+#: load, the server's side comes later. The warning is caught here (per thread) and the response sent again.
+_SEND_TIMEOUT = "failed to send response (timeout)"
+_unsent = threading.local()
+
+
+def _catch_send_timeouts() -> None:
+    """Route rclpy's "failed to send response (timeout)" warnings to the thread that sent (``_unsent.hit``)
+    instead of stderr; every one of them, not only the first of its line (Python's default)."""
+    shown = warnings.showwarning
+
+    def showwarning(message: Any, category: Any, filename: str, lineno: int, file: Any = None,
+                    line: Optional[str] = None) -> None:
+        if issubclass(category, RuntimeWarning) and str(message).startswith(_SEND_TIMEOUT):
+            _unsent.hit = True
+            return
+        shown(message, category, filename, lineno, file, line)
+
+    warnings.filterwarnings("always", message=re.escape(_SEND_TIMEOUT), category=RuntimeWarning)
+    warnings.showwarning = showwarning
+
+
+def send_or_timed_out(send: Any, response: Any, header: Any) -> bool:
+    """Send one response; False when the RMW gave up on it (the client's reader not matched yet)."""
+    _unsent.hit = False
+    send(response, header)
+    return not _unsent.hit
 
 
 def srv_class(ros2_type: str) -> Any:
@@ -107,6 +142,7 @@ class Helper:
         self.node.create_timer(_WATCH_PERIOD, self.watch)
         self.node_name = node_name
         self._actions: Optional["Actions"] = None
+        self.resender = Resender()
 
     # -- frames -----------------------------------------------------------------------------------------------
     def send(self, op: int, cid: int, meta: Optional[Dict[str, Any]] = None, body: bytes = b"") -> None:
@@ -251,7 +287,7 @@ class Helper:
             with self.served_lock:
                 rid = self.next_request
                 self.next_request += 1
-                self.served[rid] = {"cls": cls, "header": None, "body": None, "t": time.monotonic()}
+                self.served[rid] = {"cls": cls, "name": name, "header": None, "body": None, "t": time.monotonic()}
                 self.by_response[id(response)] = rid
             self.send(REQUEST, rid, {"name": name}, serialize_message(request))
             return response
@@ -293,9 +329,60 @@ class Helper:
     def reply(self, slot: Dict[str, Any], send: Any, header: Any, body: Optional[bytes] = None) -> None:
         try:
             response = deserialize_message(body if body is not None else slot["body"], slot["cls"].Response)
-            send(response, header)
+            if not send_or_timed_out(send, response, header):
+                self.resender.put(slot["name"], send, response, header)
         except Exception as exc:
             sys.stderr.write(f"micros_rt ROS 2 helper: cannot send a response: {exc}\n")
+
+
+class Resender:
+    """Responses the RMW did not send yet (their client's reader not matched), sent again on a thread of their own
+    every RESEND_PERIOD s until it takes them or RESEND_FOR s passed; those are counted (``lost``) and said."""
+
+    def __init__(self, period: float = RESEND_PERIOD, give_up_after: float = RESEND_FOR) -> None:
+        self.period, self.give_up_after = period, give_up_after
+        self.pending: "queue.Queue[Tuple[float, str, Any, Any, Any]]" = queue.Queue()
+        self.resent = 0   # responses that went out on a later try
+        self.lost = 0
+        self._thread: Optional[threading.Thread] = None
+        self._lock = threading.Lock()
+
+    def put(self, name: str, send: Any, response: Any, header: Any) -> None:
+        with self._lock:
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name="micros_rt resend", daemon=True)
+                self._thread.start()
+        self.pending.put((time.monotonic() + self.give_up_after, name, send, response, header))
+
+    def _run(self) -> None:
+        while True:
+            item = self.pending.get()
+            waiting = [item]
+            while True:   # everything that waits, tried together each period
+                time.sleep(self.period)
+                while not self.pending.empty():
+                    waiting.append(self.pending.get_nowait())
+                waiting = [w for w in waiting if not self._try(*w)]
+                if not waiting:
+                    break
+
+    def _try(self, deadline: float, name: str, send: Any, response: Any, header: Any) -> bool:
+        """True when the item is done with: sent, or given up on."""
+        try:
+            if send_or_timed_out(send, response, header):
+                self.resent += 1
+                return True
+        except Exception as exc:
+            sys.stderr.write(f"micros_rt ROS 2 helper: cannot send a response of {name}: {exc}\n")
+            self.lost += 1
+            return True
+        if time.monotonic() < deadline:
+            return False
+        self.lost += 1
+        sys.stderr.write(f"micros_rt ROS 2 helper: a response of {name} is lost ({self.lost} so far): the ROS 2 "
+                         f"client's response reader was not discovered by this helper within {self.give_up_after:.0f}"
+                         f" s (its request was)\n")
+        return True
 
 
 class _Served:
@@ -365,10 +452,19 @@ class Actions:
         self.thread.start()
 
     def spin(self) -> None:
-        try:
-            self.executor.spin()
-        except (KeyboardInterrupt, ExternalShutdownException):
-            pass
+        while True:
+            try:
+                self.executor.spin()
+                return
+            except (KeyboardInterrupt, ExternalShutdownException):
+                return
+            except Exception as exc:
+                # a callback's exception leaves rclpy's spin (e.g. rclpy's ActionServer raises "Failed to send goal
+                # response" when Fast DDS gave up on a client's reader not yet discovered): that one exchange is
+                # lost, the client's own timeout tells it; the actions go on
+                if not rclpy.ok():
+                    return
+                self.drop(f"an action exchange rclpy failed on ({exc})")
 
     def close(self) -> None:
         for slot in list(self.served.values()):
@@ -603,6 +699,7 @@ def main() -> None:
     # (micros_rt/transports/dds/watch.py) knows this participant as micros_rt's, not a ROS 2 node's
     enclave = sys.argv[3] if len(sys.argv) > 3 else "/"
     rclpy.init(args=["--ros-args", "--enclave", enclave])
+    _catch_send_timeouts()
     helper = Helper(sock, node_name)
     executor = SingleThreadedExecutor()
     executor.add_node(helper.node)

@@ -101,6 +101,14 @@ def test_stock_rospy_client_calls_micros_rt_server(servers: Dict[str, harness.Pe
 
 
 def test_rclpy_client_calls_micros_rt_server(servers: Dict[str, harness.Peer], spawn: Any) -> None:
+    # a client the server can never answer (its response reader is transient-local; the helper's writer volatile):
+    # rclpy 7 only warns when the RMW gives up on a response, so the helper must see that itself, send it again
+    # (a client's reader discovered late, as under load) and at last count it lost and say so. The client calls for
+    # 20 s, well beyond the 10 s the helper tries (its first calls may go before its writer matched the server):
+    # a client gone is no loss (Fast DDS then sends to nobody and does not warn)
+    deaf = spawn(ros2_peer("call", [
+        {"label": "deaf", "name": f"{P}/mrt/set_bool", "type": "std_srvs/srv/SetBool", "args": {"data": True},
+         "response_durability": "transient_local", "count": 10, "timeout": 2, "wait": 15}]), name="ros2_deaf_client")
     client = spawn(ros2_peer("call", [
         {"label": "true", "name": f"{P}/mrt/set_bool", "type": "std_srvs/srv/SetBool", "args": {"data": True},
          "wait": 15},
@@ -136,6 +144,11 @@ def test_rclpy_client_calls_micros_rt_server(servers: Dict[str, harness.Peer], s
                                                                  "message": f"micros_rt {P}/mrt/trigger triggered"}
     assert by_label(client, "user srv", "response")["fields"] == BASIC
     assert by_label(client, "still serving", "response")["fields"]["success"] is True
+    deaf.wait_for("done", T)
+    assert by_label(deaf, "deaf", "summary")["ok"] == 0
+    harness.wait_until(lambda: f"a response of {P}/mrt/set_bool is lost" in servers["micros_rt"].stderr_tail(200),
+                       T, message="the helper's word on the response its client could never take:\n"
+                       + servers["micros_rt"].stderr_tail(60) + "\n" + str(deaf.events()[-4:]))
 
 
 def test_micros_rt_client_calls_rospy_and_rclpy_servers(servers: Dict[str, harness.Peer], spawn: Any) -> None:

@@ -4,7 +4,8 @@
     ros2_service_peer.py call --plan '[{"name": "/mrt/set_bool", "type": "std_srvs/srv/SetBool",
                                         "args": {"data": true}, "count": 100, "timeout": 2, "wait": 10}]'
 
-A step's "start_at" (time.time() value) holds its calls until then; "echo_check" (for an echoing server, test_msgs/BasicTypes) counts responses that differ from the request in
+A step's "response_durability": "transient_local" makes a client no server can answer (its response reader
+matches no volatile writer; it calls once the service is listed). A step's "start_at" (time.time() value) holds its calls until then; "echo_check" (for an echoing server, test_msgs/BasicTypes) counts responses that differ from the request in
 the summary's "mismatches". The same server modes and events as tests/peers/ros1_service_peer.py ("silent": never answers; "fail": SetBool
 raises for False, which in rclpy ends the server's spin, so it is not used here). Environment as ros2_peer.py
 (loopback-only Fast DDS, this run's ROS_DOMAIN_ID).
@@ -23,6 +24,7 @@ from typing import Any, Dict, List
 import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 
 #: set when the peer stops: a "silent" callback returns then, so that the process exits cleanly (Fast DDS
@@ -90,9 +92,24 @@ def call(args: argparse.Namespace, node: Any, executor: Any) -> None:
     for step in json.loads(args.plan):
         label = step.get("label", step["name"])
         cls = srv_class(step["type"])
-        client = node.create_client(cls, step["name"])
+        if step.get("response_durability") == "transient_local":
+            # a response reader no server's (volatile) writer matches: the server gets the requests and can
+            # never answer; the client is never "ready", so it calls once the service is in the graph
+            qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+            client = node.create_client(cls, step["name"], qos_profile=qos)
+        else:
+            client = node.create_client(cls, step["name"])
         t0 = time.monotonic()
-        if not client.wait_for_service(timeout_sec=step.get("wait", 10.0)):
+        if "response_durability" in step:
+            def listed() -> bool:
+                return step["name"] in dict(node.get_service_names_and_types())
+            while not listed() and time.monotonic() - t0 < step.get("wait", 10.0):
+                time.sleep(0.05)
+            if not listed():
+                emit("unavailable", label=label, elapsed=time.monotonic() - t0)
+                continue
+        elif not client.wait_for_service(timeout_sec=step.get("wait", 10.0)):
             emit("unavailable", label=label, elapsed=time.monotonic() - t0)
             continue
         emit("available", label=label, elapsed=time.monotonic() - t0)
