@@ -101,6 +101,25 @@ def _catch_send_timeouts() -> None:
     warnings.showwarning = showwarning
 
 
+def _resend_action_responses(resender: "Resender") -> None:
+    """rclpy's ActionServer sends its goal, cancel and result responses inside rclpy (action/server.py), with the
+    same warning when Fast DDS gives up on them: its three senders go through the resender too (this process has
+    no other action servers than micros_rt's)."""
+    from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+    for method in ("send_goal_response", "send_cancel_response", "send_result_response"):
+        original = getattr(_rclpy.ActionServer, method)
+        what = method[len("send_"):].replace("_", " ")
+
+        def patched(handle: Any, header: Any, response: Any, original: Any = original, what: str = what) -> None:
+            def send(response: Any, header: Any) -> None:
+                original(handle, header, response)
+            if not send_or_timed_out(send, response, header):
+                resender.put(f"an action's {what}", send, response, header)
+
+        setattr(_rclpy.ActionServer, method, patched)
+
+
 def send_or_timed_out(send: Any, response: Any, header: Any) -> bool:
     """Send one response; False when the RMW gave up on it (the client's reader not matched yet)."""
     _unsent.hit = False
@@ -330,7 +349,7 @@ class Helper:
         try:
             response = deserialize_message(body if body is not None else slot["body"], slot["cls"].Response)
             if not send_or_timed_out(send, response, header):
-                self.resender.put(slot["name"], send, response, header)
+                self.resender.put(f"a response of {slot['name']}", send, response, header)
         except Exception as exc:
             sys.stderr.write(f"micros_rt ROS 2 helper: cannot send a response: {exc}\n")
 
@@ -348,6 +367,7 @@ class Resender:
         self._lock = threading.Lock()
 
     def put(self, name: str, send: Any, response: Any, header: Any) -> None:
+        """``name``: what the response is, in words ("a response of /robot/set_mode")."""
         with self._lock:
             if self._thread is None:
                 self._thread = threading.Thread(target=self._run, name="micros_rt resend", daemon=True)
@@ -373,13 +393,13 @@ class Resender:
                 self.resent += 1
                 return True
         except Exception as exc:
-            sys.stderr.write(f"micros_rt ROS 2 helper: cannot send a response of {name}: {exc}\n")
+            sys.stderr.write(f"micros_rt ROS 2 helper: cannot send {name}: {exc}\n")
             self.lost += 1
             return True
         if time.monotonic() < deadline:
             return False
         self.lost += 1
-        sys.stderr.write(f"micros_rt ROS 2 helper: a response of {name} is lost ({self.lost} so far): the ROS 2 "
+        sys.stderr.write(f"micros_rt ROS 2 helper: {name} is lost ({self.lost} so far): the ROS 2 "
                          f"client's response reader was not discovered by this helper within {self.give_up_after:.0f}"
                          f" s (its request was)\n")
         return True
@@ -428,6 +448,7 @@ class Actions:
         from rclpy.executors import MultiThreadedExecutor
         from rclpy.qos import QoSProfile
 
+        _resend_action_responses(helper.resender)
         self.ActionClient, self.ActionServer, self.QoSProfile = ActionClient, ActionServer, QoSProfile
         self.CancelResponse, self.GoalResponse = CancelResponse, GoalResponse
         self.helper = helper

@@ -58,10 +58,12 @@ def graph(ros_master: harness.RosMaster) -> Iterator[Dict[str, harness.Peer]]:
         "r1": harness.Peer(stock("serve", "--name", f"{P}/r1/fib"), env, name="stock_action_server"),
         "r1_dying": harness.Peer(stock("serve", "--name", f"{P}/r1/dying", "--die-after", "5"), env,
                                  name="stock_dying_server"),
+        # the deaf client's (its goals would preempt another's on an actionlib SimpleActionServer)
+        "r1_deaf": harness.Peer(stock("serve", "--name", f"{P}/r1/deaf"), env, name="stock_deaf_server"),
         "r2": harness.Peer(ros2("serve", "--actions", json.dumps([
             {"name": f"{P}/r2/fib"}, {"name": f"{P}/r2/silent", "mode": "silent"}])), env, name="ros2_action_server"),
         "bridge": harness.Peer([harness.MICROS_RT_PYTHON, PEER1, "bridge",
-                                "--to-ros2", f"{P}/r1/fib", f"{P}/r1/dying",
+                                "--to-ros2", f"{P}/r1/fib", f"{P}/r1/dying", f"{P}/r1/deaf",
                                 "--from-ros2", f"{P}/r2/fib", f"{P}/r2/silent", f"{P}/r2/none",
                                 "--expect", f"{P}/r2/fib", f"{P}/r2/silent",
                                 "--accept-timeout", str(ACCEPT_TIMEOUT),
@@ -83,6 +85,11 @@ def graph(ros_master: harness.RosMaster) -> Iterator[Dict[str, harness.Peer]]:
 def test_rclpy_client_drives_actionlib_server(graph: Dict[str, harness.Peer], spawn: Any) -> None:
     ready = graph["bridge"].events("ready")[0]
     assert ready["types"][f"{P}/r1/fib"] == "test_msgs/action/Fibonacci", ready
+    # a client whose goal response the helper can never send (see test_services' deaf client): rclpy's ActionServer
+    # only warns; the helper sends it again for 10 s, then counts it lost and says so. The client waits 20 s.
+    deaf = spawn(ros2("call", "--plan", json.dumps([
+        {"label": "deaf", "name": f"{P}/r1/deaf", "order": 1, "wait": 20, "timeout": 20,
+         "goal_durability": "transient_local"}])), name="ros2_deaf_action_client")
     client = spawn(ros2("call", "--plan", json.dumps([
         {"label": "fib", "name": f"{P}/r1/fib", "order": 100, "wait": 20},
         {"label": "cancel", "name": f"{P}/r1/fib", "order": 5000, "cancel_after": 5}])), name="ros2_action_client")
@@ -97,6 +104,11 @@ def test_rclpy_client_drives_actionlib_server(graph: Dict[str, harness.Peer], sp
     print(f"rclpy -> actionlib: 100/100 feedback, cancel reached the ROS 1 server in {latency * 1e3:.1f} ms")
     assert 0 <= latency < CANCEL_BOUND, latency
     assert graph["r1"].wait_for(lambda e: e.get("event") == "finished" and e["status"] == "PREEMPTED", 5.0)
+    deaf.wait_for("done", T)
+    assert result(deaf, "deaf")["status_name"] == "TIMEOUT"
+    harness.wait_until(lambda: "an action's goal response is lost" in graph["bridge"].stderr_tail(200), T,
+                       message="the helper's word on the goal response its client could never take:\n"
+                       + graph["bridge"].stderr_tail(20))
 
 
 def test_actionlib_client_drives_rclpy_server(graph: Dict[str, harness.Peer], spawn: Any) -> None:

@@ -12,7 +12,8 @@ never answers); "die" (the process kills itself with SIGKILL after --die-after f
 "goal" {name, order}, "cancel_received" {name, t}, "finished" {name, status, feedback}. Client steps: "available" /
 "unavailable", "cancel_sent" {t} for a step with "cancel_after", "result" {label, status, status_name,
 sequence_ok, feedback, feedback_in_order, elapsed}, then "done". Status names are action_msgs/GoalStatus's, plus
-"REJECTED" (the goal response said no) and "TIMEOUT".
+"REJECTED" (the goal response said no) and "TIMEOUT". A step's "goal_durability": "transient_local" makes a client
+whose goal no server can answer (its goal response reader matches no volatile writer).
 """
 
 from __future__ import annotations
@@ -26,10 +27,10 @@ import time
 from typing import Any, Dict, List
 
 import rclpy
-from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
+from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse, get_action_names_and_types
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
-from rclpy.qos import QoSProfile
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from test_msgs.action import Fibonacci
 
 STATUS_NAMES = ("UNKNOWN", "ACCEPTED", "EXECUTING", "CANCELING", "SUCCEEDED", "CANCELED", "ABORTED")
@@ -105,12 +106,30 @@ def call(args: argparse.Namespace, node: Any) -> None:
     clients: Dict[str, Any] = {}
     for step in json.loads(args.plan):
         label, name = step.get("label", step["name"]), step["name"]
-        if name not in clients:
+        deaf = step.get("goal_durability") == "transient_local"
+        if deaf:
+            # a goal response reader no server's (volatile) writer matches: the server takes the goal and can never
+            # answer it; the client is never "ready", so it sends once the action is in the graph
+            client = ActionClient(node, Fibonacci, name, goal_service_qos_profile=QoSProfile(
+                depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        elif name not in clients:
             # every feedback message counts here: a reader deeper than rclpy's default 10, as the CPU is shared
             clients[name] = ActionClient(node, Fibonacci, name, feedback_sub_qos_profile=QoSProfile(depth=1000))
-        client = clients[name]
+        client = client if deaf else clients[name]
         t0 = time.monotonic()
-        if not client.wait_for_server(timeout_sec=step.get("wait", 10.0)):
+        if deaf:
+            while name not in dict(get_action_names_and_types(node)) and time.monotonic() - t0 < step.get("wait", 10):
+                time.sleep(0.05)
+            # a goal every 2 s (the first ones may go before the goal writer matched the server's reader)
+            futures = []
+            while time.monotonic() - t0 < step.get("timeout", 20.0):
+                futures.append(client.send_goal_async(Fibonacci.Goal(order=step["order"])))
+                time.sleep(2.0)
+            answered_goals = sum(1 for f in futures if f.done())
+            emit("result", label=label, status=-1, status_name="TIMEOUT" if not answered_goals else "ANSWERED",
+                 goals=len(futures), answered=answered_goals, elapsed=time.monotonic() - t0)
+            continue
+        elif not client.wait_for_server(timeout_sec=step.get("wait", 10.0)):
             emit("unavailable", label=label, elapsed=time.monotonic() - t0)
             continue
         emit("available", label=label, elapsed=time.monotonic() - t0)

@@ -45,7 +45,7 @@ def test_a_response_the_rmw_did_not_send_goes_on_a_later_try() -> None:
         service = FakeService(unknown_for=3)
         assert ros2_helper.send_or_timed_out(service.send_response, "r1", "h1") is False
         resender = ros2_helper.Resender(period=0.01, give_up_after=5.0)
-        resender.put("/svc", service.send_response, "r1", "h1")
+        resender.put("a response of /svc", service.send_response, "r1", "h1")
         wait(lambda: service.sent)
         assert service.sent == [("r1", "h1")] and service.tries == 4
         assert (resender.resent, resender.lost) == (1, 0)
@@ -60,7 +60,7 @@ def test_a_response_never_taken_is_counted_and_said(capsys: Any) -> None:
         ros2_helper._catch_send_timeouts()
         service = FakeService(unknown_for=10 ** 9)
         resender = ros2_helper.Resender(period=0.01, give_up_after=0.2)
-        resender.put("/robot/set_mode", service.send_response, "r", "h")
+        resender.put("a response of /robot/set_mode", service.send_response, "r", "h")
         wait(lambda: resender.lost == 1)
         assert service.sent == [] and service.tries > 2
     err = capsys.readouterr().err
