@@ -82,8 +82,11 @@ def serve(args: argparse.Namespace, node: Any) -> None:
             emit("finished", name=name, status="SUCCEEDED", feedback=sent)
             return Fibonacci.Result(sequence=fibonacci(order))
 
+        # feedback kept for a slow reader (rclpy's default depth is 10: at 200 Hz on a loaded host the writer
+        # overwrote feedback not yet acknowledged, 94 of 100 once); the readers here are as deep
         ActionServer(node, Fibonacci, name, execute_callback=execute, goal_callback=on_goal,
-                     cancel_callback=on_cancel, callback_group=group)
+                     cancel_callback=on_cancel, callback_group=group,
+                     feedback_pub_qos_profile=QoSProfile(depth=1000))
     if args.clock:
         # a simulator's clock: rosgraph_msgs/msg/Clock on /clock, 2000 s + n * 0.1 s, every 50 ms
         from rosgraph_msgs.msg import Clock
