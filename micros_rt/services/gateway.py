@@ -1,9 +1,12 @@
 """The micros_rt side of the ROS 2 service helper (:mod:`micros_rt.services.ros2_helper`).
 
-One helper per process, started on first use with the Python of a ROS 2 installation: ``MICROS_RT_ROS2_PYTHON``,
-else ``.venv-ros2/bin/python`` beside the micros_rt source tree or in the working directory. Requests and
-replies cross a Unix socket pair as serialized ROS 2 messages (the DDS codec of
-:mod:`micros_rt.transports.dds.types`); the helper's rclpy node does the ROS 2 service protocol on DDS.
+One helper per host, user, DDS domain and ROS 2 environment (:func:`helper_address`), shared by every micros_rt
+process that has services or actions toward ROS 2: the first process that needs it starts it with the Python of a
+ROS 2 installation (``MICROS_RT_ROS2_PYTHON``, else ``.venv-ros2/bin/python`` beside the micros_rt source tree or in
+the working directory), the others connect to it. It is a session of its own (a Ctrl-C of the process that started
+it does not stop it) and exits a few seconds after the last process left. Each process has its own connection and
+its own rclpy node in the helper (``ros2 node list`` shows ``<node>_services`` per process); requests and replies
+cross the connection as serialized ROS 2 messages (the DDS codec of :mod:`micros_rt.transports.dds.types`).
 
 Its DDS participant follows micros_rt's network rule (:mod:`micros_rt.transports.dds.participant`): on a loopback
 node (``ROS_IP``/``ROS_HOSTNAME`` loopback) Fast DDS gets ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and a profile
@@ -12,6 +15,7 @@ that whitelists 127.0.0.1, unless the environment already names a Fast DDS profi
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 import json
 import os
@@ -30,19 +34,18 @@ from ..exceptions import MicrosRtError
 from ..log import nonblocking_logger
 from .helper_protocol import (A_CANCEL, A_CLIENT, A_DONE, A_FEEDBACK, A_FORGET, A_READY, A_SEND, A_SERVE, A_UNSERVE,
                               A_VERDICT, ADVERTISE, CALL, CANCEL, CLIENT, ERROR, FAIL, G_ACCEPTED, G_CANCEL, G_FEEDBACK,
-                              G_GOAL, G_RESULT, HEAD, HELLO, READY, REQUEST, RESPONSE, RESULT, SERVICE_NAMES, STATUS,
-                              UNADVERTISE)
+                              G_GOAL, G_RESULT, HELLO, LOG, READY, REQUEST, RESPONSE, RESULT, SERVICE_NAMES,
+                              STATUS, UNADVERTISE, encode, read_frame)
 from ..transports.dds.participant import HELPER_ENCLAVE, _is_loopback
 
-__all__ = ["Ros2Gateway", "Ros2Unavailable", "gateway", "close_gateway", "ros2_present", "ros2_python",
-           "when_ros2_present"]
+__all__ = ["Ros2Gateway", "Ros2Unavailable", "gateway", "close_gateway", "helper_address", "ros2_present",
+           "ros2_python", "when_ros2_present"]
 
 _log = nonblocking_logger("rosout.micros_rt.services")
 
 #: what an action sink gets when the helper is gone: ``sink(GONE, 0, {"error": words}, b"")``
 GONE = 0
 ACTION_EVENTS = frozenset((G_GOAL, G_CANCEL, G_ACCEPTED, G_FEEDBACK, G_RESULT))
-_HEAD = HEAD
 
 HELPER = Path(__file__).resolve().parent / "ros2_helper.py"
 #: seconds the helper may take to import rclpy and start its node
@@ -63,6 +66,29 @@ _FASTDDS_LOOPBACK = """<?xml version="1.0" encoding="UTF-8"?>
 
 #: what must not reach the helper's interpreter from a rospy process
 _SCRUB_ENV = ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV", "ROS_PACKAGE_PATH", "ROS_PYTHON_VERSION")
+#: the environment that makes a helper another (its DDS domain and discovery, its RMW and profile): processes that
+#: differ in one of these get helpers of their own
+_HELPER_ENV = ("ROS_DOMAIN_ID", "RMW_IMPLEMENTATION", "FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE",
+               "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS", "ROS_LOCALHOST_ONLY", "ROS_SECURITY_ENABLE",
+               "ROS_SECURITY_KEYSTORE", "ROS_DISABLE_LOANED_MESSAGES")
+
+
+def helper_address(python: str, env: Optional[Dict[str, str]] = None) -> str:
+    """The abstract Unix socket name of the helper for ``python`` and this environment: one per user, ROS 2
+    environment (:data:`_HELPER_ENV`, micros_rt's loopback rule) and helper code (an edited helper is another).
+    Abstract names belong to a network namespace, so each namespace host has its own.
+
+    >>> a = helper_address("/p", {"ROS_DOMAIN_ID": "7"})
+    >>> a == helper_address("/p", {"ROS_DOMAIN_ID": "7", "OTHER": "x"}), a == helper_address("/p", {"ROS_DOMAIN_ID": "8"})
+    (True, False)
+    """
+    given: Dict[str, str] = dict(os.environ if env is None else env)
+    code = hashlib.sha1()
+    for path in (HELPER, Path(__file__).resolve().parent / "helper_protocol.py"):
+        code.update(path.read_bytes())
+    key = "\0".join([str(os.getuid()), python, str(_is_loopback(given)), code.hexdigest(),
+                     *(f"{k}={given.get(k, '')}" for k in _HELPER_ENV)])
+    return "micros_rt_ros2_helper_" + hashlib.sha1(key.encode()).hexdigest()[:24]
 
 
 class Ros2Unavailable(MicrosRtError):
@@ -99,7 +125,8 @@ ActionSink = Callable[[int, int, Dict[str, Any], bytes], None]
 
 
 class Ros2Gateway:
-    """A running helper process and the calls in flight through it. Thread-safe; ``close()`` stops it."""
+    """This process's connection to the host's ROS 2 helper and the calls in flight through it. Thread-safe;
+    ``close()`` leaves the helper."""
 
     def __init__(self, node_name: str, *, python: Optional[str] = None, workers: int = 4) -> None:
         python = python or ros2_python()
@@ -118,35 +145,94 @@ class Ros2Gateway:
         self.unrouted_action_frames = 0
         self._workers = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="micros_rt service")
         self.closed = False
-        self._hello = _Pending()
-        ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
-        # blocking, whatever socket.setdefaulttimeout() says: rospy sets 60 s once a subscriber has connected
-        # (masterslave.py), which would hand the helper a non-blocking descriptor
-        ours.setblocking(True)
-        theirs.setblocking(True)
-        self._sock = ours
-        env, scratch = self._helper_env()
+        self._sock, self._reader, hello = self._connect(python, _ros2_node_name(node_name))
+        threading.Thread(target=self._read_loop, name="micros_rt ROS 2 helper", daemon=True).start()
+        _log.info("micros_rt: ROS 2 service helper reached (pid %s, %s)", hello.get("pid"), hello.get("rmw"))
+
+    def _connect(self, python: str, node: str) -> Tuple[socket.socket, Any, Dict[str, Any]]:
+        """A connection to the host's helper, and its HELLO: started first when none runs (or the one that runs is
+        leaving). Ros2Unavailable when none answers within START_TIMEOUT."""
+        address = helper_address(python)
+        deadline = time.monotonic() + START_TIMEOUT
+        started: Optional[Tuple["subprocess.Popen[bytes]", str, List[str]]] = None   # (process, its stderr file, scratch)
+        why = ""
         try:
-            self._proc = subprocess.Popen(
-                [python, str(HELPER), str(theirs.fileno()), _ros2_node_name(node_name), HELPER_ENCLAVE],
-                pass_fds=(theirs.fileno(),), env=env, stdin=subprocess.DEVNULL, close_fds=True)
+            while time.monotonic() < deadline:
+                sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+                try:
+                    sock.connect("\0" + address)
+                except OSError as exc:
+                    sock.close()
+                    why = f"cannot connect ({exc})"
+                    if started is not None and started[0].poll() is not None:
+                        if started[0].returncode != 0:
+                            break   # it failed: its output says why
+                        self._forget(started)   # another helper had the address (and may be leaving): again
+                        started = None
+                    if started is None:
+                        started = self._start(python, address)
+                    time.sleep(0.05)
+                    continue
+                # blocking, whatever socket.setdefaulttimeout() says (rospy sets 60 s once a subscriber connected)
+                sock.settimeout(max(0.1, deadline - time.monotonic()))
+                reader = sock.makefile("rb", buffering=1 << 16)
+                try:
+                    sock.sendall(encode(HELLO, 0, {"node": node}))
+                    frame = read_frame(reader)
+                except OSError as exc:
+                    frame, why = None, f"no HELLO ({exc})"
+                if frame is None or frame[0] != HELLO:
+                    sock.close()   # the helper was leaving (its last process had gone): start or find another
+                    why = why or "the helper closed the connection before its HELLO"
+                    time.sleep(0.05)
+                    continue
+                sock.settimeout(None)
+                return sock, reader, frame[2]
+            if started is not None and started[0].poll() is not None:
+                raise Ros2Unavailable(f"the ROS 2 service helper ({python} {HELPER.name}) exited with code "
+                                      f"{started[0].returncode} at its start: {self._tail(started[1])!r}; is rclpy "
+                                      f"installed there, and ROS_DOMAIN_ID valid (0-232)?")
+            raise Ros2Unavailable(f"the ROS 2 service helper ({python} {HELPER.name}) did not answer within "
+                                  f"{START_TIMEOUT:g} s: {why}; is rclpy installed there?")
+        finally:
+            if started is not None:
+                self._forget(started)
+
+    @classmethod
+    def _start(cls, python: str, address: str) -> Tuple["subprocess.Popen[bytes]", str, List[str]]:
+        env, scratch = cls._helper_env()
+        fd, log = tempfile.mkstemp(prefix="micros_rt_ros2_helper_", suffix=".log")
+        try:
+            # its output in a file (Fast DDS says a fatal error on stdout and exits), unlinked once it answered
+            proc = subprocess.Popen([python, str(HELPER), address, HELPER_ENCLAVE], env=env, stdin=subprocess.DEVNULL,
+                                    stdout=fd, stderr=fd, close_fds=True, start_new_session=True)
         except OSError as exc:
-            ours.close()
+            for path in [log, *scratch]:
+                os.unlink(path)
             raise Ros2Unavailable(f"cannot start the ROS 2 service helper with {python}: {exc}") from exc
         finally:
-            theirs.close()
-        self._reader = ours.makefile("rb", buffering=1 << 16)
-        threading.Thread(target=self._read_loop, name="micros_rt ROS 2 helper", daemon=True).start()
+            os.close(fd)
+        # reaped here while this process runs (it outlives this process when others use it)
+        threading.Thread(target=proc.wait, name="micros_rt ROS 2 helper reaper", daemon=True).start()
+        return proc, log, scratch
+
+    @staticmethod
+    def _forget(started: Tuple["subprocess.Popen[bytes]", str, List[str]]) -> None:
+        """The files of a helper this process started: Fast DDS has read its profile once the helper answered
+        (or it is gone); its stderr stays open in it, unlinked."""
+        for path in [started[1], *started[2]]:
+            try:
+                os.unlink(path)
+            except OSError:
+                pass
+
+    @staticmethod
+    def _tail(path: str) -> str:
         try:
-            if not self._hello.event.wait(START_TIMEOUT) or not self._hello.meta:
-                self.close()
-                raise Ros2Unavailable(f"the ROS 2 service helper ({python} {HELPER.name}) did not start within "
-                                      f"{START_TIMEOUT:g} s (exit code {self._proc.poll()}); is rclpy installed there?")
-        finally:
-            for path in scratch:
-                os.unlink(path)  # Fast DDS has read its profile once the node is up
-        _log.info("micros_rt: ROS 2 service helper started (pid %s, %s)", self._hello.meta.get("pid"),
-                  self._hello.meta.get("rmw"))
+            with open(path, "rb") as f:
+                return f.read()[-600:].decode(errors="replace").strip()
+        except OSError:
+            return ""
 
     @staticmethod
     def _helper_env() -> Tuple[Dict[str, str], List[str]]:
@@ -163,8 +249,7 @@ class Ros2Gateway:
 
     # -- frames -------------------------------------------------------------------------------------------------
     def _send(self, op: int, cid: int, meta: Optional[Dict[str, Any]] = None, body: bytes = b"") -> None:
-        raw = json.dumps(meta).encode() if meta else b""
-        frame = _HEAD.pack(_HEAD.size - 4 + len(raw) + len(body), op, cid, len(raw)) + raw + body
+        frame = encode(op, cid, meta, body)
         try:
             with self._send_lock:
                 self._sock.sendall(frame)
@@ -174,28 +259,28 @@ class Ros2Gateway:
     def _read_loop(self) -> None:
         try:
             while True:
-                head = self._reader.read(_HEAD.size)
-                if len(head) < _HEAD.size:
+                frame = read_frame(self._reader)
+                if frame is None:
                     break
-                length, op, cid, meta_len = _HEAD.unpack(head)
-                rest = self._reader.read(length - (_HEAD.size - 4))
-                meta = json.loads(rest[:meta_len]) if meta_len else {}
-                body = bytes(rest[meta_len:])
+                op, cid, meta, body = frame
                 if op == REQUEST:
                     self._workers.submit(self._serve, cid, meta.get("name", ""), body)
                     continue
                 if op in ACTION_EVENTS:
                     self._route_action(op, cid, meta, body)
                     continue
-                slot = self._hello if op == HELLO else self._pending.pop(cid, None)
+                if op == LOG:
+                    _log.warning("micros_rt ROS 2 helper: %s", meta.get("text", ""))
+                    continue
+                slot = self._pending.pop(cid, None)
                 if slot is not None:
                     slot.meta, slot.body = meta or {"ok": True}, body
                     slot.event.set()
         except (OSError, ValueError):
             pass
         finally:
-            self._fail_all("the ROS 2 service helper exited" + ("" if self.closed else
-                                                               f" (exit code {self._proc.poll()})"))
+            self._fail_all("the ROS 2 service helper is closed" if self.closed else
+                           "the ROS 2 service helper went away (it was stopped or died)")
 
     def _fail_all(self, why: str) -> None:
         with self._lock:
@@ -204,7 +289,6 @@ class Ros2Gateway:
         for slot in pending.values():
             slot.meta = {"ok": False, "error": why}
             slot.event.set()
-        self._hello.event.set()
         for name, sink in sinks.items():
             self._call_sink(name, sink, GONE, 0, {"name": name, "error": why}, b"")
 
@@ -350,7 +434,7 @@ class Ros2Gateway:
         self._send(op, key, meta, body)
 
     def close(self) -> None:
-        """Stop the helper (its DDS entities go with it); harmless twice."""
+        """Leave the helper (this process's ROS 2 nodes go); harmless twice."""
         if self.closed:
             return
         self.closed = True
@@ -358,12 +442,7 @@ class Ros2Gateway:
             self._sock.shutdown(socket.SHUT_RDWR)
         except OSError:
             pass
-        self._sock.close()
-        try:
-            self._proc.wait(timeout=3.0)
-        except subprocess.TimeoutExpired:
-            self._proc.kill()
-            self._proc.wait()
+        self._sock.close()   # the helper drops this process's nodes (and exits when no process is left)
         self._workers.shutdown(wait=False)
         self._fail_all("the ROS 2 service helper is closed")
 

@@ -1,10 +1,18 @@
 """micros_rt's ROS 2 service helper: the rclpy side of a micros_rt process's services.
 
 Run by :mod:`micros_rt.services.gateway` with the Python of a ROS 2 installation (rclpy with its RMW, Fast DDS
-in Jazzy), never inside the rospy process: ``python ros2_helper.py FD NODE_NAME``. ``FD`` is one end of a Unix
-socket pair whose other end is the micros_rt process; when that end closes (the process exits or dies), the
-helper exits. It imports nothing of micros_rt or ROS 1 but ``helper_protocol.py`` beside it (standard library
-only). Imported as part of the package (beside rospy, without rclpy) it defines its names and runs nothing.
+in Jazzy), never inside the rospy process: ``python ros2_helper.py ADDRESS ENCLAVE``. One helper serves every
+micros_rt process of the host that has the same user, DDS domain and ROS 2 environment (issue 42: one DDS
+participant for the host's services and actions, not one per process). It listens on the abstract Unix socket
+``ADDRESS`` (a name per network namespace; a second helper of the same name cannot bind it and exits). Each
+connection is one micros_rt process: its first frame (HELLO) names its node, and the helper gives it an rclpy node of
+its own in the one rclpy context (so ``ros2 node list`` shows one node per process, all in one participant). When a
+process closes its end (it exits or dies), its node goes; when none is left for IDLE_EXIT s, the helper exits.
+It imports nothing of micros_rt or ROS 1 but ``helper_protocol.py`` beside it (standard library only). Imported
+as part of the package (beside rospy, without rclpy) it defines its names and runs nothing.
+
+What the helper has to say about one process's services or actions goes to that process as a LOG frame (it logs
+it); its own stderr is a file the first process unlinks once the helper is up.
 
 Why a helper and not Cyclone in the micros_rt process (docs/services.md): ROS 2's Fast DDS RMW identifies a
 request by its RTPS sample identity and answers with a ``related_sample_identity`` inline QoS parameter, and a
@@ -33,7 +41,7 @@ import threading
 import time
 import warnings
 from collections import deque
-from typing import Any, Deque, Dict, List, Optional, Tuple
+from typing import Any, Callable, Deque, Dict, List, Optional, Tuple
 
 try:
     import rclpy
@@ -48,13 +56,14 @@ except ImportError:
 if __package__:
     from .helper_protocol import (A_CANCEL, A_CLIENT, A_DONE, A_FEEDBACK, A_FORGET, A_READY, A_SEND, A_SERVE,
                                   A_UNSERVE, A_VERDICT, ADVERTISE, CALL, CANCEL, CLIENT, ERROR, FAIL, G_ACCEPTED,
-                                  G_CANCEL, G_FEEDBACK, G_GOAL, G_RESULT, HEAD, HELLO, READY, REQUEST, RESPONSE, RESULT,
-                                  SERVICE_NAMES, STATUS, UNADVERTISE)
+                                  G_CANCEL, G_FEEDBACK, G_GOAL, G_RESULT, HELLO, LOG, READY, REQUEST, RESPONSE,
+                                  RESULT, SERVICE_NAMES, STATUS, UNADVERTISE, encode, read_frame)
 else:  # run as a script by the ROS 2 interpreter: its own directory is sys.path[0]
     from helper_protocol import (A_CANCEL, A_CLIENT, A_DONE, A_FEEDBACK, A_FORGET,  # type: ignore[import-not-found,no-redef]
                                  A_READY, A_SEND, A_SERVE, A_UNSERVE, A_VERDICT, ADVERTISE, CALL, CANCEL, CLIENT, ERROR,
-                                 FAIL, G_ACCEPTED, G_CANCEL, G_FEEDBACK, G_GOAL, G_RESULT, HEAD, HELLO, READY, REQUEST,
-                                 RESPONSE, RESULT, SERVICE_NAMES, STATUS, UNADVERTISE)
+                                 FAIL, G_ACCEPTED, G_CANCEL, G_FEEDBACK, G_GOAL, G_RESULT, HELLO, LOG, READY,
+                                 REQUEST, RESPONSE, RESULT, SERVICE_NAMES, STATUS, UNADVERTISE, encode,
+                                 read_frame)
 #: ops about goals in flight: handled on the socket's thread (setting up and tearing down go through the executor)
 _GOAL_OPS = (A_VERDICT, A_FEEDBACK, A_DONE, A_SEND, A_CANCEL, A_FORGET)
 #: action_msgs/GoalStatus codes
@@ -70,9 +79,10 @@ FEEDBACK_GRACE = 0.02
 #: is 10): a burst of feedback, or an executor behind under load, does not overwrite feedback not yet taken
 FEEDBACK_DEPTH = 1000
 
-_HEAD = HEAD
 #: how often pending calls are checked for a server that went away
 _WATCH_PERIOD = 0.2
+#: seconds the helper stays with no process connected before it exits (a process restarting finds it there)
+IDLE_EXIT = 5.0
 #: a response Fast DDS would not send (the client's response reader not yet matched by this helper's writer) is
 #: tried again every RESEND_PERIOD s for RESEND_FOR s; then it is counted lost and said
 RESEND_PERIOD = 0.05
@@ -101,12 +111,26 @@ def _catch_send_timeouts() -> None:
     warnings.showwarning = showwarning
 
 
-def _resend_action_responses(resender: "Resender") -> None:
+#: id(rclpy ActionServer handle) -> what says words to the process that offers it (Helper.say)
+_ACTION_OWNERS: Dict[int, Callable[[str], None]] = {}
+
+
+def _say_to_stderr(text: str) -> None:
+    try:
+        sys.stderr.write(f"micros_rt ROS 2 helper: {text}\n")
+    except (OSError, ValueError):
+        pass
+
+
+def _resend_action_responses() -> None:
     """rclpy's ActionServer sends its goal, cancel and result responses inside rclpy (action/server.py), with the
     same warning when Fast DDS gives up on them: its three senders go through the resender too (this process has
-    no other action servers than micros_rt's)."""
+    no other action servers than micros_rt's). Done once per helper."""
     from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
+    if getattr(_rclpy.ActionServer, "_micros_rt_resends", False):
+        return
+    _rclpy.ActionServer._micros_rt_resends = True
     for method in ("send_goal_response", "send_cancel_response", "send_result_response"):
         original = getattr(_rclpy.ActionServer, method)
         what = method[len("send_"):].replace("_", " ")
@@ -115,7 +139,8 @@ def _resend_action_responses(resender: "Resender") -> None:
             def send(response: Any, header: Any) -> None:
                 original(handle, header, response)
             if not send_or_timed_out(send, response, header):
-                resender.put(f"an action's {what}", send, response, header)
+                RESENDER.put(f"an action's {what}", send, response, header,
+                             _ACTION_OWNERS.get(id(handle), _say_to_stderr))
 
         setattr(_rclpy.ActionServer, method, patched)
 
@@ -144,9 +169,13 @@ def srv_class(ros2_type: str) -> Any:
 
 
 class Helper:
-    def __init__(self, sock: socket.socket, node_name: str) -> None:
+    """One micros_rt process's services and actions: its rclpy node (and ``<node>_actions`` once it has actions)
+    in the helper's one rclpy context, its frames on its connection."""
+
+    def __init__(self, sock: socket.socket, reader: Any, node_name: str, executor: Any) -> None:
         self.sock = sock
-        self.reader = sock.makefile("rb", buffering=1 << 16)
+        self.reader = reader
+        self.executor = executor
         self.send_lock = threading.Lock()
         self.node = rclpy.create_node(node_name)
         self.inbox: Deque[Tuple[int, int, Dict[str, Any], bytes]] = deque()
@@ -161,12 +190,18 @@ class Helper:
         self.node.create_timer(_WATCH_PERIOD, self.watch)
         self.node_name = node_name
         self._actions: Optional["Actions"] = None
-        self.resender = Resender()
+        executor.add_node(self.node)
+
+    def say(self, text: str) -> None:
+        """Words for this process's log (a LOG frame; stderr once the process is gone)."""
+        if self.sock.fileno() < 0:
+            _say_to_stderr(text)
+            return
+        self.send(LOG, 0, {"text": text})
 
     # -- frames -----------------------------------------------------------------------------------------------
     def send(self, op: int, cid: int, meta: Optional[Dict[str, Any]] = None, body: bytes = b"") -> None:
-        raw = json.dumps(meta).encode() if meta else b""
-        frame = _HEAD.pack(_HEAD.size - 4 + len(raw) + len(body), op, cid, len(raw)) + raw + body
+        frame = encode(op, cid, meta, body)
         with self.send_lock:
             try:
                 self.sock.sendall(frame)
@@ -174,32 +209,40 @@ class Helper:
                 pass  # micros_rt went away: the reader sees the end and stops the helper
 
     def read_loop(self) -> None:
+        """The process's frames until it closes its end (it exits or dies); then its nodes go."""
         try:
             while True:
-                head = self.reader.read(_HEAD.size)
-                if len(head) < _HEAD.size:
+                frame = read_frame(self.reader)
+                if frame is None:
                     break
-                length, op, cid, meta_len = _HEAD.unpack(head)
-                rest = self.reader.read(length - (_HEAD.size - 4))
-                meta = json.loads(rest[:meta_len]) if meta_len else {}
-                body = rest[meta_len:]
+                op, cid, meta, body = frame
                 if op in (RESPONSE, FAIL):
                     self.answer(op, cid, meta, body)  # no executor needed: send_response is thread-safe
                 elif op in _GOAL_OPS:
                     try:
                         self.actions().goal_op(op, cid, meta, body)
                     except Exception as exc:  # the socket's thread must go on
-                        sys.stderr.write(f"micros_rt ROS 2 helper: a goal's frame (op {op}) failed: {exc}\n")
+                        self.say(f"a goal's frame (op {op}) failed: {exc}")
                 else:
                     self.inbox.append((op, cid, meta, body))
                     self.wake.trigger()
+        except (OSError, ValueError):
+            pass
         finally:
-            # micros_rt closed its end: nothing left to serve. A clean shutdown lets Fast DDS remove its
-            # shared-memory segments (/dev/shm/fastrtps_*); os._exit is the fallback if that hangs.
-            fallback = threading.Timer(3.0, os._exit, args=(0,))
-            fallback.daemon = True
-            fallback.start()
-            rclpy.try_shutdown()
+            self.close()
+
+    def close(self) -> None:
+        """The process is gone: its actions, services, clients and node go (the helper goes on for others)."""
+        try:
+            self.sock.close()
+        except OSError:
+            pass
+        self.close_actions()
+        try:
+            self.executor.remove_node(self.node)
+            self.node.destroy_node()
+        except Exception as exc:   # the helper is shutting down itself
+            _say_to_stderr(f"removing the node {self.node_name} failed: {exc}")
 
     def drain(self) -> None:
         while self.inbox:
@@ -349,30 +392,32 @@ class Helper:
         try:
             response = deserialize_message(body if body is not None else slot["body"], slot["cls"].Response)
             if not send_or_timed_out(send, response, header):
-                self.resender.put(f"a response of {slot['name']}", send, response, header)
+                RESENDER.put(f"a response of {slot['name']}", send, response, header, self.say)
         except Exception as exc:
-            sys.stderr.write(f"micros_rt ROS 2 helper: cannot send a response: {exc}\n")
+            self.say(f"cannot send a response of {slot['name']}: {exc}")
 
 
 class Resender:
     """Responses the RMW did not send yet (their client's reader not matched), sent again on a thread of their own
-    every RESEND_PERIOD s until it takes them or RESEND_FOR s passed; those are counted (``lost``) and said."""
+    every RESEND_PERIOD s until it takes them or RESEND_FOR s passed; those are counted (``lost``) and said to the
+    process they are of."""
 
     def __init__(self, period: float = RESEND_PERIOD, give_up_after: float = RESEND_FOR) -> None:
         self.period, self.give_up_after = period, give_up_after
-        self.pending: "queue.Queue[Tuple[float, str, Any, Any, Any]]" = queue.Queue()
+        self.pending: "queue.Queue[Tuple[float, str, Any, Any, Any, Callable[[str], None]]]" = queue.Queue()
         self.resent = 0   # responses that went out on a later try
         self.lost = 0
         self._thread: Optional[threading.Thread] = None
         self._lock = threading.Lock()
 
-    def put(self, name: str, send: Any, response: Any, header: Any) -> None:
-        """``name``: what the response is, in words ("a response of /robot/set_mode")."""
+    def put(self, what: str, send: Any, response: Any, header: Any,
+            say: Callable[[str], None] = _say_to_stderr) -> None:
+        """``what``: the response in words ("a response of /robot/set_mode"); ``say``: where words about it go."""
         with self._lock:
             if self._thread is None:
                 self._thread = threading.Thread(target=self._run, name="micros_rt resend", daemon=True)
                 self._thread.start()
-        self.pending.put((time.monotonic() + self.give_up_after, name, send, response, header))
+        self.pending.put((time.monotonic() + self.give_up_after, what, send, response, header, say))
 
     def _run(self) -> None:
         while True:
@@ -386,23 +431,27 @@ class Resender:
                 if not waiting:
                     break
 
-    def _try(self, deadline: float, name: str, send: Any, response: Any, header: Any) -> bool:
+    def _try(self, deadline: float, what: str, send: Any, response: Any, header: Any,
+             say: Callable[[str], None]) -> bool:
         """True when the item is done with: sent, or given up on."""
         try:
             if send_or_timed_out(send, response, header):
                 self.resent += 1
                 return True
         except Exception as exc:
-            sys.stderr.write(f"micros_rt ROS 2 helper: cannot send {name}: {exc}\n")
             self.lost += 1
+            say(f"cannot send {what}: {exc}")
             return True
         if time.monotonic() < deadline:
             return False
         self.lost += 1
-        sys.stderr.write(f"micros_rt ROS 2 helper: {name} is lost ({self.lost} so far): the ROS 2 "
-                         f"client's response reader was not discovered by this helper within {self.give_up_after:.0f}"
-                         f" s (its request was)\n")
+        say(f"{what} is lost ({self.lost} so far): the ROS 2 client's response reader was not discovered by the "
+            f"helper within {self.give_up_after:.0f} s (its request was)")
         return True
+
+
+#: the helper's one resender (its responses are of every process it serves)
+RESENDER = Resender()
 
 
 class _Served:
@@ -448,7 +497,7 @@ class Actions:
         from rclpy.executors import MultiThreadedExecutor
         from rclpy.qos import QoSProfile
 
-        _resend_action_responses(helper.resender)
+        _resend_action_responses()
         self.ActionClient, self.ActionServer, self.QoSProfile = ActionClient, ActionServer, QoSProfile
         self.CancelResponse, self.GoalResponse = CancelResponse, GoalResponse
         self.helper = helper
@@ -491,6 +540,8 @@ class Actions:
         for slot in list(self.served.values()):
             slot.verdict.set()
             slot.items.put((A_DONE, _ABORTED, b""))
+        for server in self.servers.values():
+            _ACTION_OWNERS.pop(id(server._handle), None)
         self.executor.shutdown(timeout_sec=1.0)
         # the spinning thread must be out of rclpy before the node goes and the process exits (else a C++
         # std::terminate at exit, seen when the helper closed right after the actions' node started)
@@ -500,7 +551,7 @@ class Actions:
     def drop(self, what: str) -> None:
         self.dropped += 1
         if self.dropped == 1 or self.dropped % 100 == 0:
-            sys.stderr.write(f"micros_rt ROS 2 helper: dropped {what} ({self.dropped} action frames dropped so far)\n")
+            self.helper.say(f"dropped {what} ({self.dropped} action frames dropped so far)")
 
     # -- set-up (on the service node's executor thread) ---------------------------------------------------------
     def serve(self, name: str, ros2_type: str) -> None:
@@ -512,6 +563,7 @@ class Actions:
             goal_callback=lambda request: self.on_goal(name, request),
             cancel_callback=lambda handle: self.on_cancel(name, handle),
             callback_group=self.serve_group, feedback_pub_qos_profile=self.QoSProfile(depth=FEEDBACK_DEPTH))
+        _ACTION_OWNERS[id(self.servers[name]._handle)] = self.helper.say
 
     def client(self, name: str, ros2_type: str) -> Tuple[Any, Any]:
         found = self.clients.get(name)
@@ -528,6 +580,7 @@ class Actions:
             for slot in [g for g in self.served.values() if g.name == name]:
                 slot.verdict.set()
                 slot.items.put((A_DONE, _ABORTED, b""))
+            _ACTION_OWNERS.pop(id(server._handle), None)
             server.destroy()
         client = self.clients.pop(name, None)
         if client is not None:
@@ -557,8 +610,8 @@ class Actions:
         slot = _Served(name)
         with self.lock:
             if len(self.served) >= MAX_SERVED_GOALS:
-                sys.stderr.write(f"micros_rt ROS 2 helper: a ROS 2 client's goal of {name} is rejected: "
-                                 f"{MAX_SERVED_GOALS} goals of ROS 2 clients are running already\n")
+                self.helper.say(f"a ROS 2 client's goal of {name} is rejected: {MAX_SERVED_GOALS} goals of ROS 2 "
+                                f"clients are running already in this process")
                 return self.GoalResponse.REJECT
             self.served[key] = slot
             self.by_request[id(request)] = key   # the goal handle keeps this very message as its request
@@ -605,8 +658,8 @@ class Actions:
                 try:
                     result = deserialize_message(body, cls.Result) if body else cls.Result()
                 except Exception as exc:
-                    sys.stderr.write(f"micros_rt ROS 2 helper: the result of a goal of {name} does not fit "
-                                     f"{cls.__name__}.Result ({exc}); the goal ends aborted\n")
+                    self.helper.say(f"the result of a goal of {name} does not fit {cls.__name__}.Result ({exc}); the "
+                                    f"goal ends aborted")
                     result, status = cls.Result(), _ABORTED
                 if status == _SUCCEEDED:
                     handle.succeed()
@@ -712,28 +765,106 @@ class Actions:
                     f"the ROS 2 action server of {slot.name} went away during the goal")})
 
 
+class Host:
+    """The helper's listening socket and the processes connected to it; the helper exits IDLE_EXIT s after the
+    last one left (or after START_GRACE s when none came)."""
+
+    #: seconds a helper waits for its first process (the one that started it connects within START_TIMEOUT)
+    START_GRACE = 30.0
+
+    def __init__(self, listener: socket.socket, executor: Any) -> None:
+        self.listener, self.executor = listener, executor
+        self.lock = threading.Lock()
+        self.connected = 0
+        self.closing = False
+        self.helpers: List[Helper] = []
+
+    def accept_loop(self) -> None:
+        while True:
+            try:
+                conn, _ = self.listener.accept()
+            except OSError:
+                return   # closed: the helper is on its way out
+            threading.Thread(target=self.serve, args=(conn,), name="micros_rt process", daemon=True).start()
+
+    def serve(self, conn: socket.socket) -> None:
+        """One process: its HELLO (its node's name), then its frames until it closes its end."""
+        conn.setblocking(True)
+        with self.lock:
+            if self.closing:
+                conn.close()   # it connects again and starts a new helper
+                return
+            self.connected += 1
+        helper: Optional[Helper] = None
+        try:
+            reader = conn.makefile("rb", buffering=1 << 16)
+            frame = read_frame(reader)
+            if frame is None or frame[0] != HELLO:
+                return
+            helper = Helper(conn, reader, str(frame[2].get("node") or "micros_rt_services"), self.executor)
+            with self.lock:
+                self.helpers.append(helper)
+            helper.send(HELLO, frame[1], {"pid": os.getpid(), "rmw": rclpy.get_rmw_implementation_identifier()})
+            helper.read_loop()   # closes the helper (its nodes) at the end
+        except Exception as exc:   # one process's failure must not stop the others'
+            _say_to_stderr(f"a process's connection failed: {type(exc).__name__}: {exc}")
+        finally:
+            conn.close()
+            with self.lock:
+                if helper is not None and helper in self.helpers:
+                    self.helpers.remove(helper)
+                self.connected -= 1
+                if self.connected == 0:
+                    self.exit_later(IDLE_EXIT)
+
+    def exit_later(self, seconds: float) -> None:
+        timer = threading.Timer(seconds, self.exit_if_idle)
+        timer.daemon = True
+        timer.start()
+
+    def exit_if_idle(self) -> None:
+        with self.lock:
+            if self.connected or self.closing:
+                return
+            self.closing = True
+        self.listener.close()   # a process that comes now starts a new helper
+        rclpy.try_shutdown()    # the executor's spin ends
+
+
 def main() -> None:
-    fd, node_name = int(sys.argv[1]), sys.argv[2]
-    sock = socket.socket(fileno=fd)
-    sock.setblocking(True)   # the descriptor may come non-blocking (a default timeout in the micros_rt process)
+    address = sys.argv[1]
     # the enclave rmw writes in the participant's user data ("enclave=/micros_rt;"): by it the host's ROS 2 watcher
     # (micros_rt/transports/dds/watch.py) knows this participant as micros_rt's, not a ROS 2 node's
-    enclave = sys.argv[3] if len(sys.argv) > 3 else "/"
+    enclave = sys.argv[2] if len(sys.argv) > 2 else "/"
+    listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        listener.bind("\0" + address)   # abstract: no file, gone with the process, one per network namespace
+    except OSError:
+        return   # a helper of this name runs already: the processes use that one
+    listener.listen(128)
     rclpy.init(args=["--ros-args", "--enclave", enclave])
     _catch_send_timeouts()
-    helper = Helper(sock, node_name)
     executor = SingleThreadedExecutor()
-    executor.add_node(helper.node)
-    threading.Thread(target=helper.read_loop, name="micros_rt socket", daemon=True).start()
-    helper.send(HELLO, 0, {"pid": os.getpid(), "rmw": rclpy.get_rmw_implementation_identifier()})
+    host = Host(listener, executor)
+    threading.Thread(target=host.accept_loop, name="micros_rt accept", daemon=True).start()
+    host.exit_later(Host.START_GRACE)
     try:
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        helper.close_actions()
+        # a clean shutdown lets Fast DDS remove its shared-memory segments (/dev/shm/fastrtps_*); os._exit is the
+        # fallback if that hangs
+        fallback = threading.Timer(3.0, os._exit, args=(0,))
+        fallback.daemon = True
+        fallback.start()
+        try:
+            listener.close()
+        except OSError:
+            pass
+        for helper in list(host.helpers):
+            helper.close_actions()
         executor.shutdown(timeout_sec=1.0)
-        helper.node.destroy_node()
         rclpy.try_shutdown()
 
 

@@ -38,10 +38,12 @@ def test_the_check_finds_a_second_table(tmp_path: Path) -> None:
 
 
 def test_both_sides_have_every_op_code_of_the_table() -> None:
-    assert len(helper_protocol.OPS) == 29 and len(set(helper_protocol.OPS.values())) == 29
+    assert len(helper_protocol.OPS) == 30 and len(set(helper_protocol.OPS.values())) == 30
     for name, value in helper_protocol.OPS.items():
         assert getattr(gateway, name) == value and getattr(ros2_helper, name) == value, name
-    assert gateway._HEAD is ros2_helper._HEAD is helper_protocol.HEAD
+    # one encoder and one reader of frames, both sides
+    for name in ("encode", "read_frame"):
+        assert getattr(gateway, name) is getattr(ros2_helper, name) is getattr(helper_protocol, name), name
 
 
 def test_the_helper_imports_without_rclpy_and_its_protocol_without_micros_rt() -> None:

@@ -110,25 +110,25 @@ def test_helper_environment_on_loopback(monkeypatch: pytest.MonkeyPatch) -> None
     assert env["FASTRTPS_DEFAULT_PROFILES_FILE"] == "/etc/mine.xml" and scratch == []
 
 
-def _read_frame(sock: socket.socket) -> Tuple[int, int, bytes, bytes]:
-    head = sock.recv(gw._HEAD.size, socket.MSG_WAITALL)
-    length, op, cid, meta_len = gw._HEAD.unpack(head)
-    rest = sock.recv(length - (gw._HEAD.size - 4), socket.MSG_WAITALL)
-    return op, cid, rest[:meta_len], rest[meta_len:]
-
-
 def test_gateway_against_a_scripted_helper(tmp_path: Any, monkeypatch: pytest.MonkeyPatch) -> None:
     """The micros_rt side of the frame protocol, with a stand-in helper (plain Python) at the other end."""
     script = tmp_path / "fake_helper.py"
     script.write_text('''
 import json, socket, struct, sys
 H = struct.Struct("<IBIH")
-s = socket.socket(fileno=int(sys.argv[1]))
+listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+listener.bind("\\0" + sys.argv[1])
+listener.listen(1)
+s, _ = listener.accept()
 r = s.makefile("rb")
 def send(op, cid, meta=None, body=b""):
     raw = json.dumps(meta).encode() if meta else b""
     s.sendall(H.pack(H.size - 4 + len(raw) + len(body), op, cid, len(raw)) + raw + body)
-send(24, 0, {"pid": 1, "rmw": "fake"})
+head = r.read(H.size)
+n, op, cid, m = H.unpack(head)
+hello = json.loads(r.read(n - (H.size - 4))[:m])
+assert op == 24 and hello["node"] == "unit_services", (op, hello)
+send(24, cid, {"pid": 1, "rmw": "fake"})
 while True:
     head = r.read(H.size)
     if len(head) < H.size:
