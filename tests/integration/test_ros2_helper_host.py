@@ -48,7 +48,7 @@ def alive(pid: int) -> bool:
 
 
 def test_the_processes_of_a_host_share_one_ros2_helper_each_with_its_node(ros_master: harness.RosMaster,
-                                                                           spawn: Any) -> None:
+                                                                           spawn: harness.Spawner) -> None:
     env = dict(ros_master.env)
     names = [f"{P}/a", f"{P}/b", f"{P}/c"]
 
@@ -60,7 +60,7 @@ def test_the_processes_of_a_host_share_one_ros2_helper_each_with_its_node(ros_ma
     def node_count(n: int) -> Dict[str, Any]:
         info = spawn([harness.ROS2_PYTHON, str(harness.PEERS_DIR / "ros2_peer.py"), "info", "--topic", f"{P}/none",
                       "--wait", str(T), "--node-count", f"mrt_service_server:{n}"], env=env, name="rclpy_info")
-        return info.wait_for("info", T + 20)
+        return dict(info.wait_for("info", T + 20))
 
     first = client("first", names)    # a ROS 2 node on the domain: the servers start their ROS 2 side at once
     servers = [spawn([harness.MICROS_RT_PYTHON, str(harness.PEERS_DIR / "ros1_service_peer.py"), "--impl",
