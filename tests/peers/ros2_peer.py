@@ -24,6 +24,7 @@ import array
 import hashlib
 import importlib
 import json
+import re
 import sys
 import time
 from typing import Any, Dict, List, Optional, Tuple
@@ -327,10 +328,10 @@ class Runner:
             if a.wait_node:  # also wait until ROS 2's graph names that node (ros_discovery_info)
                 named = {e.node_name for e in pubs + subs}
                 enough = enough and set(a.wait_node.split(",")) <= named
-            if a.node_count:  # "PART:N": until exactly N node names contain PART
-                part, _, n = a.node_count.rpartition(":")
+            if a.node_count:  # "REGEX:N": until exactly N node names match REGEX
+                pattern, _, n = a.node_count.rpartition(":")
                 names = [name for name, _ns in self.node.get_node_names_and_namespaces()]
-                enough = enough and sum(1 for name in names if part in name) == int(n)
+                enough = enough and sum(1 for name in names if re.search(pattern, name)) == int(n)
             if (enough and (a.min_publishers or a.min_subscriptions or a.wait_node or a.node_count)) \
                     or time.monotonic() >= deadline:
                 break
@@ -374,7 +375,7 @@ def main(argv: Optional[List[str]] = None) -> int:
             p.add_argument("--wait-node", default="",
                            help="also wait until endpoints are attributed to these node names (comma list)")
             p.add_argument("--node-count", default="",
-                           help="PART:N, also wait until exactly N node names of the graph contain PART")
+                           help="REGEX:N, also wait until exactly N node names of the graph match REGEX")
     args = ap.parse_args(argv)
 
     rclpy.init()
