@@ -35,6 +35,7 @@ import json
 import os
 import queue
 import re
+import signal
 import socket
 import sys
 import threading
@@ -47,6 +48,7 @@ try:
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.serialization import deserialize_message, serialize_message
+    from rclpy.signals import SignalHandlerOptions
 except ImportError:
     if not __package__:
         raise  # run as the helper: rclpy is what it is for
@@ -83,6 +85,8 @@ FEEDBACK_DEPTH = 1000
 _WATCH_PERIOD = 0.2
 #: seconds the helper stays with no process connected before it exits (a process restarting finds it there)
 IDLE_EXIT = 5.0
+#: seconds of one spin of the helper's main thread (it looks for its end between them)
+SPIN_SLICE = 0.5
 #: a response Fast DDS would not send (the client's response reader not yet matched by this helper's writer) is
 #: tried again every RESEND_PERIOD s for RESEND_FOR s; then it is counted lost and said
 RESEND_PERIOD = 0.05
@@ -778,6 +782,8 @@ class Host:
         self.connected = 0
         self.closing = False
         self.helpers: List[Helper] = []
+        #: set to end the helper: idle, or SIGTERM/SIGINT
+        self.stop = threading.Event()
 
     def accept_loop(self) -> None:
         while True:
@@ -828,7 +834,7 @@ class Host:
                 return
             self.closing = True
         self.listener.close()   # a process that comes now starts a new helper
-        rclpy.try_shutdown()    # the executor's spin ends
+        self.stop.set()         # the main thread's spin ends
 
 
 def main() -> None:
@@ -842,14 +848,20 @@ def main() -> None:
     except OSError:
         return   # a helper of this name runs already: the processes use that one
     listener.listen(128)
-    rclpy.init(args=["--ros-args", "--enclave", enclave])
+    # no rclpy signal handlers: a SIGTERM left rclpy's spin with no node waiting forever (seen: a helper nobody had
+    # connected to, still there 28 min after `timeout` sent it SIGTERM). The main thread spins in slices instead and
+    # ends cleanly on SIGTERM/SIGINT (its own session: a Ctrl-C of a node's terminal does not reach it)
+    rclpy.init(args=["--ros-args", "--enclave", enclave], signal_handler_options=SignalHandlerOptions.NO)
     _catch_send_timeouts()
     executor = SingleThreadedExecutor()
     host = Host(listener, executor)
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: host.stop.set())
     threading.Thread(target=host.accept_loop, name="micros_rt accept", daemon=True).start()
     host.exit_later(Host.START_GRACE)
     try:
-        executor.spin()
+        while not host.stop.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=SPIN_SLICE)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
