@@ -28,6 +28,17 @@ sys.path.insert(0, str(ROOT / "tests"))
 import harness  # noqa: E402
 
 
+def pss_kb(pids: List[int]) -> int:
+    total = 0
+    for p in pids:
+        try:
+            total += sum(int(line.split()[1]) for line in Path(f"/proc/{p}/smaps_rollup").read_text().splitlines()
+                         if line.startswith("Pss:"))
+        except OSError:
+            pass
+    return total
+
+
 def tree_pss_kb(pid: int) -> Tuple[int, int]:
     """PSS of ``pid`` and its children (kB), and how many processes that is."""
     pids = [pid]
@@ -36,14 +47,7 @@ def tree_pss_kb(pid: int) -> Tuple[int, int]:
             pids += [int(c) for c in Path(f"/proc/{pid}/task/{task}/children").read_text().split()]
         except OSError:
             pass
-    total = 0
-    for p in pids:
-        try:
-            total += sum(int(line.split()[1]) for line in Path(f"/proc/{p}/smaps_rollup").read_text().splitlines()
-                         if line.startswith("Pss:"))
-        except OSError:
-            pass
-    return total, len(pids)
+    return pss_kb(pids), len(pids)
 
 
 def one(master: harness.RosMaster, domain: int, on: bool, settle: float) -> Dict[str, Any]:
@@ -81,17 +85,6 @@ def helpers_on(domain: int) -> List[int]:
         if f"ROS_DOMAIN_ID={domain}".encode() in env:
             found.append(int(entry.name))
     return found
-
-
-def pss_kb(pids: List[int]) -> int:
-    total = 0
-    for p in pids:
-        try:
-            total += sum(int(line.split()[1]) for line in Path(f"/proc/{p}/smaps_rollup").read_text().splitlines()
-                         if line.startswith("Pss:"))
-        except OSError:
-            pass
-    return total
 
 
 def host(master: harness.RosMaster, domain: int, n: int, settle: float) -> Dict[str, Any]:

@@ -4,8 +4,9 @@ there, the watcher is the host's one presence in ROS 2's graph (every node and e
 node's topics become ROS 2 topics of its own once a ROS 2 endpoint is on one of them, whichever starts first; the
 watcher's death hands the watch to another node.
 
-The rest of the suite runs with visibility on (tests/harness.py, dds_env); these tests set ``auto`` and use
-a DDS domain of their own, so no ROS 2 peer of another test (or its lingering discovery data) is seen here.
+The rest of the suite runs the defaults too (``auto``; only the modules that test DDS between the nodes of one host
+apply tests/harness.py's DDS_BETWEEN_NODES, each saying why); these tests say ``auto`` outright and use a DDS
+domain of their own, so no ROS 2 peer of another test (or its lingering discovery data) is seen here.
 Nodes of one host talk over shared memory, as by default. A process has a DDS participant exactly when it has
 UDP sockets (rospy and shared memory use none).
 """
