@@ -392,6 +392,31 @@ def _as_predicate(pred: Predicate) -> Callable[[Event], bool]:
     return pred
 
 
+_DECODER = json.JSONDecoder()
+
+
+def split_events(line: str) -> List[Event]:
+    """The events in one stdout line: JSON objects, and ``_raw`` for any other text.
+
+    A peer's JSON object and a log line written by another thread of the same process can share
+    a line (``print`` writes the text and its newline separately); both are kept.
+    """
+    events: List[Event] = []
+    rest = line
+    while rest.startswith("{"):
+        try:
+            ev, end = _DECODER.raw_decode(rest)
+        except ValueError:
+            break
+        if not isinstance(ev, dict):
+            break
+        events.append(ev)
+        rest = rest[end:]
+    if rest.strip():
+        events.append({"event": "_raw", "line": rest})
+    return events
+
+
 class Peer:
     """A subprocess that prints one JSON object per stdout line.
 
@@ -426,15 +451,11 @@ class Peer:
                 line = line.rstrip("\n")
                 if not line:
                     continue
-                try:
-                    ev = json.loads(line)
-                    if not isinstance(ev, dict):
-                        ev = {"event": "_raw", "line": line}
-                except ValueError:
-                    ev = {"event": "_raw", "line": line}
-                ev["_rx"] = time.time()
+                rx = time.time()
                 with self._cond:
-                    self._events.append(ev)
+                    for ev in split_events(line):
+                        ev["_rx"] = rx
+                        self._events.append(ev)
                     self._cond.notify_all()
         finally:
             with self._cond:

@@ -45,7 +45,9 @@ STATUS_NAMES = ("PENDING", "ACTIVE", "PREEMPTED", "SUCCEEDED", "ABORTED", "REJEC
 
 
 def emit(event: str, **kw: Any) -> None:
-    print(json.dumps({"event": event, **kw}, default=repr), flush=True)
+    # one write per line: a log line from another thread must not land inside it
+    sys.stdout.write(json.dumps({"event": event, **kw}, default=repr) + "\n")
+    sys.stdout.flush()
 
 
 def serve(args: argparse.Namespace) -> None:

@@ -34,7 +34,9 @@ from ros1_srv_types import answer, fields, msg_class, srv_class  # noqa: E402
 
 
 def emit(event: str, **kw: Any) -> None:
-    print(json.dumps({"event": event, **kw}, default=repr), flush=True)
+    # one write per line: a log line from another thread must not land inside it
+    sys.stdout.write(json.dumps({"event": event, **kw}, default=repr) + "\n")
+    sys.stdout.flush()
 
 
 def serve(args: argparse.Namespace) -> None:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import os
 import signal
 import threading
@@ -39,7 +40,9 @@ STOP = threading.Event()
 
 
 def emit(event: str, **kw: Any) -> None:
-    print(json.dumps({"event": event, **kw}, default=repr), flush=True)
+    # one write per line: a log line from another thread must not land inside it
+    sys.stdout.write(json.dumps({"event": event, **kw}, default=repr) + "\n")
+    sys.stdout.flush()
 
 
 def fibonacci(n: int) -> List[int]:

@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import sys
 import os
 import threading
 import time
@@ -33,7 +34,9 @@ STOP = threading.Event()
 
 
 def emit(event: str, **kw: Any) -> None:
-    print(json.dumps({"event": event, **kw}, default=repr), flush=True)
+    # one write per line: a log line from another thread must not land inside it
+    sys.stdout.write(json.dumps({"event": event, **kw}, default=repr) + "\n")
+    sys.stdout.flush()
 
 
 def srv_class(name: str) -> Any:
