@@ -195,7 +195,8 @@ class SubscriptionSide(abc.ABC):
         """On the delivery thread, after each drain: deliver what waited for a negotiation's answer."""
 
     def housekeeping(self, now: float) -> None:
-        """On the delivery thread, about twice a second: drop links whose publisher went."""
+        """On the delivery thread, about once a second (``core.subscription.HOUSEKEEPING_PERIOD``): drop links
+        whose publisher went."""
 
     def pending(self) -> bool:
         """Messages taken from the readers and not yet delivered."""
