@@ -635,11 +635,27 @@ class MasterWatch:
         back = self._down_since is not None
         self._pid = pid
         self._down_since = None
-        if restarted or back:
+        if restarted or (back and not self._knows_this_node()):
             counts = reregister_all()
             _log.warning("micros_rt: the ROS master at %s is back%s; re-registered %d publications, "
                          "%d subscriptions and %d services", self.uri, " (restarted)" if restarted else "",
                          *counts)
+        elif back:  # slow, not gone (a host busy starting many nodes): its registrations stand
+            _log.info("micros_rt: the ROS master at %s answers again; it still has this node's registrations",
+                      self.uri)
+
+    def _knows_this_node(self) -> bool:
+        """The master (back after not answering) still has this node at this node's URI: it was slow or paused,
+        not restarted, and re-registering every topic would only add to its load (60 nodes starting at once kept
+        a master too busy to answer in 2 s, and each node that re-registered then made it busier). A master
+        restarted with the same pid (its container's first process) does not know the node: re-registered."""
+        proxy = xmlrpc.client.ServerProxy(self.uri, transport=TimeoutTransport(2.0))
+        try:
+            answer: Any = proxy.lookupNode(caller_id(), caller_id())
+            code, _msg, uri = answer
+            return code == 1 and str(uri) == str(rospy.core.get_node_uri())
+        except (OSError, xmlrpc.client.Error, ValueError, TypeError):
+            return False
 
 
 def _reg_manager() -> Any:
