@@ -11,6 +11,7 @@ import time
 from typing import Any, Iterator, List, Tuple
 
 import pytest
+import rospy.core
 
 from micros_rt.transports.tcpros import patches as rospy_compat
 
@@ -114,7 +115,7 @@ def test_a_master_too_busy_to_answer_then_back_is_re_registered_with_only_if_it_
     The same master (it still has this node at this node's URI) is not re-registered with; one that lost the node
     (restarted in a container with the same pid) is."""
     me = "http://127.0.0.1:1/"
-    monkeypatch.setattr(rospy_compat.rospy.core, "get_node_uri", lambda: me)
+    monkeypatch.setattr(rospy.core, "get_node_uri", lambda: me)
     port = free_port()
     slow = tmp_path / "slow"
     slow.touch()

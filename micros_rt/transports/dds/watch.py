@@ -194,6 +194,8 @@ class Ros2Watch:
         except TransportError as exc:
             self.failed = True
             self._release()
+            if participant.closed:  # the process is ending: it took the lock of a watcher that ended first
+                return
             _log.warning("micros_rt: cannot watch DDS domain %d for ROS 2 nodes (%s)", self.domain, exc)
             return
         self._since = time.monotonic()
