@@ -60,8 +60,11 @@ def test_a_node_description_reads_back_as_written_and_the_visible_file_names_nod
     assert len(set(desc.keys())) == 2
     with open(f"{prefix}999999999.json", "w") as f:  # a pid no process has: a node killed
         f.write("{}")
+    open(f"{prefix}999999998.json.tmp", "w").close()  # a node killed while it wrote its description
+    open(f"{prefix}{os.getpid()}.json.tmp", "w").close()  # a live node writing its own: not touched
     prune_descriptions(prefix)
-    assert sorted(os.listdir(str(tmp_path))) == [f"d.node{os.getpid()}.json"]  # the live one stays
+    assert sorted(os.listdir(str(tmp_path))) == [f"d.node{os.getpid()}.json", f"d.node{os.getpid()}.json.tmp"]
+    os.unlink(f"{prefix}{os.getpid()}.json.tmp")
     remove_description(prefix)
     assert not os.path.exists(f"{prefix}{os.getpid()}.json")
 

@@ -107,14 +107,16 @@ def remove_description(prefix: str) -> None:
 
 
 def prune_descriptions(prefix: str) -> None:
-    """Remove the description files of processes that are gone (killed: a node that shuts down removes its own)."""
+    """Remove the description files of processes that are gone (killed: a node that shuts down removes its own),
+    and the half-written ones they left (``.json.tmp``: killed between :func:`write_description`'s open and rename;
+    seen in /dev/shm after a 60-node ring was killed)."""
     directory, base = os.path.split(prefix)
     try:
-        names = [n for n in os.listdir(directory) if n.startswith(base) and n.endswith(".json")]
+        names = [n for n in os.listdir(directory) if n.startswith(base) and n.endswith((".json", ".json.tmp"))]
     except OSError:
         return
     for name in names:
-        stem = name[len(base):-len(".json")]
+        stem = name[len(base):].split(".", 1)[0]
         if stem.isdigit() and not _alive(int(stem)):
             try:
                 os.unlink(os.path.join(directory, name))
