@@ -20,9 +20,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import os
 import signal
+import sys
 import threading
 import time
 from typing import Any, Dict, List

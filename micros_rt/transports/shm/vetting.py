@@ -27,8 +27,8 @@ __all__ = ["OfferVetting", "vetting"]
 
 #: How long each of the two calls may take (a master or subscriber that does not answer: the offer is refused,
 #: and the link takes the subscriber's next protocol, DDS or TCPROS, for good). Both together stay within the
-#: subscriber's 10 s for requestTopic. 2 s was too short for a host starting 60 nodes at once: a third of them
-#: then linked over DDS, each with a participant of its own (1.3 x the CPU of the same ring over shared memory).
+#: subscriber's 10 s for requestTopic. 2 s was too short for a host starting 60 nodes at once: 1 and 3 of them (two
+#: runs) then linked over DDS, each with a participant of its own; none in three runs with 4.5 s.
 CALL_TIMEOUT = 4.5
 
 

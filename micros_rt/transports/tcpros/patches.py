@@ -599,8 +599,12 @@ class MasterWatch:
         except (OSError, ValueError):
             return False
 
+    def _master(self) -> Any:
+        """A proxy of the master whose calls wait 2 s at most (the watch's two questions)."""
+        return xmlrpc.client.ServerProxy(self.uri, transport=TimeoutTransport(2.0))
+
     def _master_pid(self) -> Optional[int]:
-        proxy = xmlrpc.client.ServerProxy(self.uri, transport=TimeoutTransport(2.0))
+        proxy = self._master()
         try:
             answer: Any = proxy.getPid(caller_id())
             code, _msg, pid = answer
@@ -649,7 +653,7 @@ class MasterWatch:
         not restarted, and re-registering every topic would only add to its load (60 nodes starting at once kept
         a master too busy to answer in 2 s, and each node that re-registered then made it busier). A master
         restarted with the same pid (its container's first process) does not know the node: re-registered."""
-        proxy = xmlrpc.client.ServerProxy(self.uri, transport=TimeoutTransport(2.0))
+        proxy = self._master()
         try:
             answer: Any = proxy.lookupNode(caller_id(), caller_id())
             code, _msg, uri = answer
