@@ -92,6 +92,20 @@ def test_matches_reads_the_page_as_documented() -> None:
     assert matches(['{"e": "recv", "data": "hello ...", ...}'], ['{"e": "recv", "data": "hello 3", "t": 1.5}'])
 
 
+def test_the_rclpy_listeners_listing_allows_its_graph_line_after_a_message() -> None:
+    """CI's run of stop 51: rclpy's graph counted the talker (``matched``) after the first message had come."""
+    ci = ['{"event": "ready", "node": "/ros2_peer_listen", "topic": "/chatter"}', '{"event": "matched", "n": 0}',
+          '{"event": "recv", "seq": 0, "data": "hello 12", "t": 1795865440.3278685, "msg": {"data": "hello 12"}}',
+          '{"event": "matched", "n": 1}',
+          '{"event": "recv", "seq": 1, "data": "hello 13", "t": 1795865440.427959, "msg": {"data": "hello 13"}}',
+          '{"event": "recv", "seq": 2, "data": "hello 14", "t": 1795865440.528007, "msg": {"data": "hello 14"}}',
+          '{"event": "done", "received": 3}']
+    listing = next(expected for command, expected in page_commands(PAGE.read_text(encoding="utf-8"))
+                   if "ros2_peer.py listen" in command)
+    assert matches(listing, ci)
+    assert matches(listing, [ci[0], ci[1], ci[3], ci[2], ci[4], ci[5], ci[6]])  # the usual order
+    assert not matches(listing, ci[:2] + ci[3:])                                # a message missing
+
 def test_the_migration_page_runs_as_written(dds_domain: int, tmp_path: Path) -> None:
     text = PAGE.read_text(encoding="utf-8")
     steps = page_commands(text)
