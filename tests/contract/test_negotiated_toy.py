@@ -48,7 +48,7 @@ toy_got = []
 toy = nh.subscribe_with_qos("/toy_chatter", String, toy_got.append, 10,
                             SubscribeQoSOptions(time_filter_duration=1.0, ordered_by_sending_timestamp=False),
                             transport_hints=hints)
-print(json.dumps({"event": "ready"}), flush=True)
+print(json.dumps({"event": "ready"}) + "\\n", end="", flush=True)
 # this process's subscriber and the other process's: two links, one of them TOY
 wait(lambda: pub.get_num_connections() >= 2, "two subscribers")
 wait(lambda: toy.connection_transports(), "the subscription connected")
@@ -59,7 +59,7 @@ pub.publish(String(data="after"))
 wait(lambda: len(toy_got) >= 2, "the toy's two")
 print(json.dumps({"event": "done", "toy": [m.data for m in toy_got],
                   "toy_transport": [m._connection_header["transport"] for m in toy_got],
-                  "toy_links": toy.connection_transports(), "toy_stats": dataclasses.asdict(toy.statistics())}),
+                  "toy_links": toy.connection_transports(), "toy_stats": dataclasses.asdict(toy.statistics())}) + "\\n", end="",
       flush=True)
 sys.stdin.readline()                      # until the other process has its messages
 micros_rt.shutdown()
@@ -71,7 +71,7 @@ nh = micros_rt.NodeHandle()
 got = []
 sub = nh.subscribe("/toy_chatter", String, got.append, 10, hints)
 wait(lambda: len(got) >= 6, "six messages")
-print(json.dumps({"event": "done", "got": [m.data for m in got], "links": sub.connection_transports()}),
+print(json.dumps({"event": "done", "got": [m.data for m in got], "links": sub.connection_transports()}) + "\\n", end="",
       flush=True)
 micros_rt.shutdown()
 """

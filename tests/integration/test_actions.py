@@ -157,8 +157,9 @@ def test_bad_input_reaches_the_caller_in_words(graph: Dict[str, harness.Peer], s
     dies = result(ros2_client, "dies")
     # the server sent 5 feedback messages before its SIGKILL; ROS 2 carries feedback (a topic) and the result (a
     # service) apart, and rclpy's client drops feedback it takes after the result: the 5th may lose that race
-    # (a full run: 4), never more than 5 arrive
-    assert dies["status_name"] == "ABORTED" and 4 <= dies["feedback"] <= 5 and dies["elapsed"] < 5.0, dies
+    # (a full run: 4), never more than 5 arrive. The server's actionlib publishes feedback from a queue (its
+    # queue_size 50: a writer thread), so the 4th, sent 5 ms before the kill, may still be in it on a loaded machine
+    assert dies["status_name"] == "ABORTED" and 3 <= dies["feedback"] <= 5 and dies["elapsed"] < 5.0, dies
     bridge = graph["bridge"]
     harness.wait_until(lambda: "went away during a ROS 2 client's goal" in bridge.stderr_tail(200), 5.0,
                        message="the bridge's warning about the ROS 1 server that died")

@@ -36,8 +36,9 @@ SECONDS = 6.0
 PACED_P90_MS = 12.0
 PACED_P99_MS = 50.0
 #: the camera over paced TCPROS: its segments still share the link's queue in bursts (p50 5.7, p90 11.0, p99 22.0 ms
-#: once; unpaced p90 20.9, p99 44.4), so that test keeps its p99 bound of before (every recorded full run below it)
-PACED_TCP_P99_MS = 25.0
+#: once; unpaced p90 20.9, p99 44.4). Its p99 bound of before (25 ms) was 1.1x what was seen, a scheduling hiccup
+#: away from failing on a loaded machine; the 90th percentile tells paced from unpaced with room on both sides
+PACED_TCP_P90_MS = 16.0
 
 
 def kept_out_of_the_queue(summary: Dict[str, Any], *, p90_ms: Optional[float] = PACED_P90_MS,
@@ -247,5 +248,5 @@ def test_a_link_in_the_publishers_profile_paces_the_camera_and_control_keeps_mil
     assert 1e6 < camera["rate_bps"] <= 36e6 + 1, radio
     assert published["control"] >= 0.9 * published["intended_control"], published
     assert summary["control"] >= 0.99 * published["control"], (summary, published)
-    kept_out_of_the_queue(summary, p90_ms=None, p99_ms=PACED_TCP_P99_MS)
+    kept_out_of_the_queue(summary, p90_ms=PACED_TCP_P90_MS)
     assert summary["image"] >= 10, summary

@@ -3,7 +3,9 @@ and counts every drop. Real processes, counted by sequence number."""
 
 from __future__ import annotations
 
+import tempfile
 import time
+from pathlib import Path
 from typing import Any, Dict, List
 
 import pytest
@@ -23,8 +25,15 @@ def stream(spawn: harness.Spawner, topic: str, count: int, size: int, *, recv_ar
            send_args: tuple[str, ...] = (), timeout: float = 120.0) -> Dict[str, Any]:
     listener = spawn(seq("recv", "--topic", topic, "--count", str(count), "--timeout", str(timeout), *recv_args))
     listener.wait_for("ready", 30)
-    talker = spawn(seq("send", "--topic", topic, "--count", str(count), "--size", str(size), *send_args))
-    summary = listener.wait_for("summary", timeout + 30)
+    with tempfile.TemporaryDirectory(prefix="micros_rt_lossless_") as tmp:
+        # the sender starts once the receiver has matched it too (its writer's count alone leaves a DDS reader that
+        # matches later on a loaded machine missing the first samples)
+        start = Path(tmp) / "start"
+        talker = spawn(seq("send", "--topic", topic, "--count", str(count), "--size", str(size),
+                           "--start-file", str(start), *send_args))
+        listener.wait_for("connected", 60)
+        start.touch()
+        summary = listener.wait_for("summary", timeout + 30)
     sent = talker.wait_for("sent", 30)
     print(f"\n{topic}: {count} x {size} B: sent in {sent['seconds']:.2f} s (publish blocked "
           f"{sent['blocked_seconds']:.2f} s), received {summary['received']} distinct {summary['distinct']} "
@@ -49,7 +58,9 @@ def test_bursts_without_latency_budget_arrive_whole_and_without_waiting_for_the_
     assert summary["transports"] == ["DDS"]
     assert_lossless(summary, 500)
     assert summary["latency"]["count"] == 500, summary
-    assert summary["latency"]["max"] < 0.1, summary["latency"]
+    # a burst's tail left for the next write comes 200 ms late in each of the 10 bursts (2 % of the samples), which
+    # p99 sees; the single worst sample is one scheduling stall of a loaded machine away from 100 ms
+    assert summary["latency"]["p99"] < 0.1 and summary["latency"]["max"] < 0.19, summary["latency"]
 
 
 @pytest.mark.parametrize("count,size", [(100_000, 64), (2_000, 1 << 20)])

@@ -71,7 +71,8 @@ after = state()
 sub = nh.subscribe("leak0", String, lambda m: None, 10)
 pub = nh.advertise("leak0", String, 10)
 working = state()
-print(json.dumps({"base": base, "after": after, "errors": len(errors), "working": working}), flush=True)
+sys.stdout.write(json.dumps({"base": base, "after": after, "errors": len(errors), "working": working}) + "\\n")
+sys.stdout.flush()
 micros_rt.shutdown()
 """)
     assert report["errors"] == 40, report
@@ -98,7 +99,7 @@ def worker(k):
 threads = [threading.Thread(target=worker, args=(k,)) for k in range(4)]
 for t in threads: t.start()
 for t in threads: t.join()
-print(json.dumps({"base": base, "after": state(), "failures": failures[:5], "n_failures": len(failures)}),
+print(json.dumps({"base": base, "after": state(), "failures": failures[:5], "n_failures": len(failures)}) + "\\n", end="",
       flush=True)
 micros_rt.shutdown()
 """, timeout=150)
@@ -129,7 +130,7 @@ go.set()
 for t in threads: t.join()
 during = state()
 sub.unregister()
-print(json.dumps({"during": during, "after": state(), "readers_attr": len(impl.sides["DDS"].readers)}), flush=True)
+print(json.dumps({"during": during, "after": state(), "readers_attr": len(impl.sides["DDS"].readers)}) + "\\n", end="", flush=True)
 micros_rt.shutdown()
 """)
     assert report["during"]["readers"] == 2, report  # the volatile reader and ONE transient-local reader
@@ -190,7 +191,7 @@ except rospy.ROSSerializationException:
 time.sleep(1.0)
 pub.publish(String(data="good"))
 time.sleep(2.0)
-print(json.dumps({"raised": raised, "others": others, "reaches": reaches}), flush=True)
+print(json.dumps({"raised": raised, "others": others, "reaches": reaches}) + "\\n", end="", flush=True)
 micros_rt.shutdown()
 """)
     assert report["raised"] == [True, True, True], report

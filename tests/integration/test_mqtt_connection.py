@@ -104,7 +104,7 @@ def test_broker_down_at_start_up_buffer_on_disk_expired_dropped(ros_master: harn
     buffer_dir = tmp_path / "buffer"
     params = write_params(tmp_path / "p.yaml", {
         "broker": {"host": broker.host, "port": broker.port},
-        "client": {"id": "buf_bridge", "buffer": {"size": 100, "directory": str(buffer_dir), "max_age": 12}},
+        "client": {"id": "buf_bridge", "buffer": {"size": 100, "directory": str(buffer_dir), "max_age": 18}},
         "bridge": {"ros2mqtt": [{"ros_topic": "/buf/seq", "mqtt_topic": "buf/seq", "primitive": True,
                                  "advanced": {"ros": {"queue_size": 100}, "mqtt": {"qos": 1}}}]}})
     try:
@@ -116,8 +116,9 @@ def test_broker_down_at_start_up_buffer_on_disk_expired_dropped(ros_master: harn
         harness.wait_until(lambda: len(list((buffer_dir / "buf_bridge").glob("*.mqtt"))) == 5, 30)
         # the first five are now expired; the next five must still be fresh when the bridge reconnects, which
         # its backoff (up to RECONNECT_MAX_DELAY, 8 s) can put 8 s after the broker is back: with a 6 s
-        # max_age the first of them expired on this machine (4 of 5 sent, every run)
-        time.sleep(13)
+        # max_age the first of them expired on this machine (4 of 5 sent, every run); 18 s leaves the broker's
+        # start and the bridge's reconnect 8 s more than that on a loaded machine
+        time.sleep(19)
         new = spawn(mrt("talk", "--topic", "/buf/seq", "--type", "std_msgs/String", "--count", 5, "--rate", 20,
                         "--prefix", "new", "--wait-subscribers", 1, "--node-name", "buf_new"), name="buf_new")
         assert new.wait(timeout=60) == 0

@@ -110,7 +110,7 @@ def test_actions_both_ways(setup: Setup, spawn: Any) -> None:
     ros1_client = spawn([harness.STOCK_PYTHON, PEER1, "call", "--plan",
                          json.dumps([{**step, "name": R2} for step in plan])], env, name="stock_action_client")
     # meanwhile, `micros-rt action list` (issue 43): both actions, their types and servers on each side
-    listing = subprocess.Popen([CLI, "action", "list", "--json"], env=env, stdin=subprocess.DEVNULL,
+    listing = subprocess.Popen([CLI, "action", "list", "--json", "--wait", "4"], env=env, stdin=subprocess.DEVNULL,
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     ros1_client.wait_for("done", T)
     out, err = listing.communicate(timeout=60)

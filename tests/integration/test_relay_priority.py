@@ -117,8 +117,9 @@ def test_link_bandwidth_keeps_the_low_process_short_in_a_fifo_link(
     assert 33_000 not in buffers["HIGH"], buffers
     assert summary["control"] >= 0.99 * published["control"], (summary, published)
     # p50 is what the link's rate changes (23-25 ms without it); p99 ranged 9-26 ms over 6 runs of this code on
-    # a 2-core VM (and 13-23 ms with the lane code before one retry loop), so its bound is the queue without it
-    assert summary["p50_ms"] < 10.0 and summary["p99_ms"] < 30.0, summary
+    # a 2-core VM (and 13-23 ms with the lane code before one retry loop): the tail is the machine's scheduling,
+    # so it is only bounded by the link's 50 ms queue
+    assert summary["p50_ms"] < 10.0 and summary["p99_ms"] < 50.0, summary
     assert summary["image"] >= 10, summary
 
 

@@ -277,8 +277,11 @@ def test_services_of_a_ros2_only_type_both_ways(setup: Setup) -> None:
         assert entry["failed"] == 0 and entry["type"] == "test_msgs/BasicTypes", entry
 
 
-TOOLS = (["topic", "info", "--json", "/chatter"], ["topic", "info", "/ros2_chatter"], ["service", "list", "--json"],
-         ["graph", "--dot"])   # a topic only ROS 2 has: docs/migration.md's step 3 (tests/integration/test_migration.py)
+# a topic only ROS 2 has: docs/migration.md's step 3 (tests/integration/test_migration.py). --wait 4: each tool is a
+# new DDS participant, which learns the others' endpoints ~1.1 s after meeting them when idle (the default listens
+# 1.5 s); four tools started at once beside the relay and the peers are not idle
+TOOLS = (["topic", "info", "--json", "--wait", "4", "/chatter"], ["topic", "info", "--wait", "4", "/ros2_chatter"],
+         ["service", "list", "--json", "--wait", "4"], ["graph", "--dot", "--wait", "4"])
 
 
 def _run_tools(setup: Setup) -> None:

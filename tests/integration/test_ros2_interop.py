@@ -13,6 +13,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import json
+import time
 from typing import Any, Dict, List
 
 import pytest
@@ -289,10 +290,13 @@ def test_latched_micros_rt_publisher_reaches_late_rclpy_transient_local_subscrib
     talker = spawn(mrt("talk", "--topic", topic, "--count", 3, "--rate", 20, "--latch", "--linger", 20,
                        "--prefix", "latched"), name="mrt_talker")
     talker.wait_for(lambda e: e.get("event") == "sent" and e.get("seq") == 2, T)
-    # the listener runs a fixed 4 s and exits: everything it was ever going to receive is in by "done"
-    listener = spawn(ros2("listen", "--topic", topic, "--durability", "transient_local", "--duration", 4),
+    # under the defaults the talker makes its DDS writer only once it sees the rclpy reader: the latched message
+    # comes after that chain (about 1.5 s idle, more when loaded); then a bounded look for a second one
+    listener = spawn(ros2("listen", "--topic", topic, "--durability", "transient_local", "--duration", 60),
                      name="rclpy_listener")
-    listener.wait_for("done", T)
+    listener.wait_for("recv", T)
+    time.sleep(2.0)
+    listener.stop()
     assert [e["data"] for e in listener.events("recv")] == ["latched 2"]
 
 

@@ -14,6 +14,7 @@ import signal
 import subprocess
 import tempfile
 import time
+from pathlib import Path
 from typing import Dict, List
 
 import pytest
@@ -48,7 +49,7 @@ def iox_entries() -> List[str]:
 
 
 def test_shm_tcpros_and_dds_on_one_topic_each_message_once(ros_master: harness.RosMaster,
-                                                          spawn: harness.Spawner) -> None:
+                                                          spawn: harness.Spawner, tmp_path: Path) -> None:
     env = shm_env(ros_master)
     topic = "/shm/mixed"
     n = 100
@@ -58,9 +59,15 @@ def test_shm_tcpros_and_dds_on_one_topic_each_message_once(ros_master: harness.R
                  name="rclpy_listener")
     for peer in (shm_listener, stock, ros2):
         peer.wait_for("ready", T)
+    # the counted messages go once the rclpy reader has matched the talker's writer too (its graph counts it; the
+    # writer's own count is one side of the match): volatile, a message before that would not reach it
+    start = tmp_path / "start"
     talker = spawn(mrt("talk", "--topic", topic, "--count", n, "--rate", 50, "--wait-subscribers", 2,
-                       "--wait-dds-readers", 1, "--start-delay", 1.5, "--linger", T, "--queue-size", 0), env,
-                   name="mrt_talker")
+                       "--wait-dds-readers", 1, "--start-file", start, "--start-delay", 0.3, "--linger", T,
+                       "--queue-size", 0), env, name="mrt_talker")
+    talker.wait_for("dds_matched", T)
+    ros2.wait_for(lambda e: e.get("event") == "matched" and e.get("n", 0) >= 1, T)
+    start.touch()
     want = [f"hello {i}" for i in range(n)]
     shm_listener.wait_for_count("recv", n, T)
     stock.wait_for_count("recv", n, T)
@@ -106,7 +113,8 @@ def test_order_by_sending_time_on_shm(ros_master: harness.RosMaster, spawn: harn
     listener = spawn(mrt("listen", "--topic", topic, "--duration", T, "--queue-size", "1000",
                          qos={"ordered_by_sending_timestamp": True}), env, name="order_listener")
     listener.wait_for("ready", T)
-    now = spawn(mrt("talk", "--topic", topic, "--count", "120", "--rate", "20", "--prefix", "now",
+    # "now" sends for 10 s: "late"'s start-up (seconds on a loaded machine) and its 2 s of samples fall inside that
+    now = spawn(mrt("talk", "--topic", topic, "--count", "200", "--rate", "20", "--prefix", "now",
                     "--node-name", "talker_now", "--wait-subscribers", "1", "--linger", "2"), env)
     now.wait_for(lambda e: e.get("event") == "sent" and e["seq"] == 5, T)
     late = spawn(mrt("talk", "--topic", topic, "--count", "40", "--rate", "20", "--prefix", "late",
@@ -118,15 +126,15 @@ def test_order_by_sending_time_on_shm(ros_master: harness.RosMaster, spawn: harn
     # which channel it held, the listener's link to "now" was made anew when "late" came and went, and a message
     # in the old channel was lost, counted nowhere
     try:
-        stats = listener.wait_for(lambda e: e.get("event") == "status" and e["statistics"]["received"] >= 160,
+        stats = listener.wait_for(lambda e: e.get("event") == "status" and e["statistics"]["received"] >= 240,
                                   T)["statistics"]
     finally:
         got = received(listener)
-        print("never arrived:", sorted(set(f"now {i}" for i in range(120)) - set(got)))
+        print("never arrived:", sorted(set(f"now {i}" for i in range(200)) - set(got)))
     n_now, n_late = sum(1 for x in got if x.startswith("now")), sum(1 for x in got if x.startswith("late"))
     assert set(transports(listener)) == {"SHM"}
-    print(f"order by source on SHM: now={n_now}/120 late={n_late}/40, statistics {stats}")
-    assert n_now == 120, n_now
+    print(f"order by source on SHM: now={n_now}/200 late={n_late}/40, statistics {stats}")
+    assert n_now == 200, n_now
     assert n_late <= 3, got  # only while "now" is silent could one slip through
     assert stats["dropped_out_of_order"] == 40 - n_late, stats  # every drop counted
 
@@ -144,10 +152,11 @@ def test_a_killed_publisher_is_noticed_and_its_restart_reconnects_over_shm(ros_m
     first.proc.kill()
     killed = time.monotonic()
     start = len(listener.events())
-    # the listener drops the dead link within 2 s (its status lists the connections it has)
+    # the listener drops the dead link within about 2 s (its status lists the connections it has, every 0.5 s; the
+    # link is looked at every second): 4 s leaves a loaded machine room, and a link never dropped still fails
     listener.wait_for(lambda e: e.get("event") == "status" and not e.get("transports"), T, start=start)
     noticed = time.monotonic() - killed
-    assert noticed < 2.0 + 0.6, f"the dead publisher was noticed after {noticed:.1f} s"
+    assert noticed < 4.0, f"the dead publisher was noticed after {noticed:.1f} s"
     start = len(listener.events())
     second = spawn(mrt("talk", "--topic", topic, "--node-name", "shm_talker", "--count", 100000, "--rate", 50,
                        "--prefix", "second"), env, name="second_talker")
@@ -171,7 +180,7 @@ def test_latched_message_reaches_a_late_shm_subscriber(ros_master: harness.RosMa
     t0 = time.monotonic()
     got = listener.wait_for("recv", T)
     assert got["data"] == "hello 2" and got["transport"] == "SHM"
-    assert time.monotonic() - t0 < 2.0
+    assert time.monotonic() - t0 < 5.0  # the latched replay, not a later publish (the talker sent its last long ago)
 
 
 def test_lossless_burst_to_a_slow_shm_subscriber_loses_nothing(ros_master: harness.RosMaster,

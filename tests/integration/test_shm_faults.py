@@ -34,7 +34,7 @@ def faults(mode: str, *args: Any) -> List[str]:
 
 
 @pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM", "signal_shutdown"])
-def test_a_node_publishing_in_a_tight_loop_over_shm_stops_within_2_s(ros_master: harness.RosMaster,
+def test_a_node_publishing_in_a_tight_loop_over_shm_stops_without_hanging(ros_master: harness.RosMaster,
                                                                      spawn: harness.Spawner, stop: str) -> None:
     # rospy's signal handler ran micros_rt's shutdown hook in the thread it interrupted, which could be inside
     # ShmChannel.try_send holding the channel's lock that close() then waited for: a deadlock (3 of 6 runs)
@@ -56,13 +56,16 @@ def test_a_node_publishing_in_a_tight_loop_over_shm_stops_within_2_s(ros_master:
             talker.wait_for("shutting_down", T)
             t0 = time.monotonic()
         try:
-            code = talker.proc.wait(10.0)  # the bound is 2 s; a hung node (the old code) fails here
+            code = talker.proc.wait(10.0)  # a hung node (the old code) fails here
         except subprocess.TimeoutExpired:
             pytest.fail(f"run {run}: the SHM talker still ran 10 s after {stop}: {talker.stderr_tail()}")
         took = time.monotonic() - t0
         print(f"run {run}: the SHM talker stopped {took:.2f} s after {stop}, exit code {code}")
         assert code == 0, talker.stderr_tail()
-        assert took < 2.0, (took, talker.stderr_tail())
+        # about 1 s by design (SHUTDOWN_WAIT, rospy's unregistration; benchmarks/shm_faults.py times it): the
+        # bound tells a node that stops from one that hangs, with room for a loaded machine
+        assert took < 5.0, (took, talker.stderr_tail())
+        talker.wait_for("stopped", 10)  # the harness's reader may not have read its last line when the process ends
         assert talker.count("stopped") == 1
 
 
@@ -155,9 +158,9 @@ def test_a_thousand_forged_offers_cost_the_publisher_nothing(ros_master: harness
     except subprocess.TimeoutExpired:
         pytest.fail(f"the publisher still ran 10 s after SIGINT: {talker.stderr_tail()}")
     took = time.monotonic() - t0
-    stopped = talker.events("stopped")[-1]
+    stopped = talker.wait_for("stopped", 10)
     print(f"stopped {took:.2f} s after SIGINT; longest publish() {stopped['longest_publish']:.3f} s")
-    assert took < 2.0 and stopped["longest_publish"] < 1.0, (took, stopped)
+    assert took < 5.0 and stopped["longest_publish"] < 1.0, (took, stopped)
     assert stopped["statistics"]["refused_offers"] == 1000, stopped  # counted
 
 

@@ -183,6 +183,8 @@ def main() -> int:
     ap.add_argument("--linger", type=float, default=0.5, help="seconds to stay up after the last message")
     ap.add_argument("--start-delay", type=float, default=0.0,
                     help="talk: seconds to wait after the subscribers are there (a ROS 2 reader's own discovery)")
+    ap.add_argument("--start-file", default="",
+                    help="talk: send the counted messages once this file exists (the test has seen the readers match)")
     ap.add_argument("--warmup-file", default="",
                     help="talk: publish 'warmup' every 50 ms until this file exists, then the counted messages")
     ap.add_argument("--deadline-events", action="store_true")
@@ -278,6 +280,10 @@ def main() -> int:
                 break
             pub.publish(fill(data_class(), "warmup", -1, False, 0.0))
             time.sleep(0.05)
+        while args.start_file and not os.path.exists(args.start_file) and time.monotonic() < deadline + 60:
+            if micros_rt.is_shutdown():
+                break
+            time.sleep(0.02)
         time.sleep(args.start_delay)
         period = 1.0 / args.rate if args.rate > 0 else 0.0
         start = time.monotonic()
@@ -316,11 +322,11 @@ def main() -> int:
 
         def cb(msg: Any) -> None:
             _cb(msg)
+            received[0] += 1  # after its recv line: --exit-after's "done" never comes before the last "recv"
             if args.callback_sleep:
                 time.sleep(args.callback_sleep)
 
         def _cb(msg: Any) -> None:
-            received[0] += 1
             header = getattr(msg, "_connection_header", {}) or {}
             if args.full_msg:
                 data = getattr(msg, "data", None)

@@ -67,12 +67,11 @@ def main() -> int:
         nonlocal received
         t = time.time()
         with lock:
-            if finished.is_set():
+            if finished.is_set() or (args.count and received >= args.count):
                 return
             seq = received
             received += 1
-            if args.count and received >= args.count:
-                finished.set()
+            last = bool(args.count and received >= args.count)
         hdr: Dict[str, Any] = dict(getattr(msg, "_connection_header", None) or {})
         hdr.pop("message_definition", None)
         transport = transport_of(getattr(msg, "_connection_header", None))
@@ -80,6 +79,8 @@ def main() -> int:
             hdr["transport"] = transport
         data, extra = summary(msg)
         emit("recv", seq=seq, data=data, t=t, connection_header=hdr, **extra)
+        if last:  # after its line: "done" never comes before the last "recv"
+            finished.set()
 
     sub = rospy.Subscriber(topic, cls, callback, queue_size=args.queue_size, tcp_nodelay=args.tcp_nodelay)
     if not wait_registered(rosgraph.get_master_uri(), caller_id, topic, False, min(20.0, args.duration)):
