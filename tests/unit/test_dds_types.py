@@ -109,3 +109,22 @@ def test_bad_input_is_a_clear_error() -> None:
         dds_type_for(Int32).encode(Int32(data="x"))
     with pytest.raises(TypeMappingError, match="not a genpy"):
         dds_type_for(int)
+
+
+def test_a_bad_field_is_named_after_a_run_time_header_class_was_registered(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A run-time type that nests std_msgs/Header registers a run-time Header class (genpy.dynamic) in the process;
+    an installed message's own Header is then another class of the same type. The error still names the field
+    (it said ``field header: ... is not a std_msgs/Header`` when ``tests/unit`` had run before the contract)."""
+    import genpy.dynamic
+
+    from micros_rt.transports.dds import types
+
+    monkeypatch.setattr(types, "_runtime_classes", {})
+    classes = genpy.dynamic.generate_dynamic("std_msgs/Header", Header._full_text)
+    types.register_message_classes(classes)
+    assert types._msg_class("std_msgs/Header") is not Header  # the situation: two classes of one type
+    bad = PoseStamped()
+    bad.header.frame_id = 123  # type: ignore[assignment]
+    assert types.describe_bad_field(bad, "geometry_msgs/PoseStamped") == \
+        "field header.frame_id: 123 is not a string"
+    assert types.describe_bad_field(String(data="x"), "geometry_msgs/PoseStamped").startswith("field (message)")

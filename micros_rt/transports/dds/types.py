@@ -598,7 +598,7 @@ def describe_bad_field(msg: Any, ros_type: str, path: str = "") -> str | None:
                                                                                "duration" else "uint32")]
     else:
         cls = _msg_class(ros_type)
-        if not isinstance(msg, cls) and not (ros_type in TIME_TYPES):
+        if not _is_a(msg, cls):
             return f"field {path or '(message)'}: {_short(msg)} is not a {ros_type}"
         fields = list(zip(cls.__slots__, cls._slot_types))
     for name, slot_type in fields:
@@ -639,9 +639,16 @@ def _describe_value(value: Any, base: str, where: str) -> str | None:
             return f"field {where}: {_short(value)} is not a {base}"
         return describe_bad_field(value, base, where)
     sub = _msg_class(base)
-    if not isinstance(value, sub):
+    if not _is_a(value, sub):
         return f"field {where}: {_short(value)} is not a {sub._type}"
     return describe_bad_field(value, sub._type, where)
+
+
+def _is_a(value: Any, cls: Type[genpy.Message]) -> bool:
+    """``value`` is a ``cls`` message: that class, or another class of the same type and definition (a run-time
+    class of a type that is also installed, e.g. the std_msgs/Header a run-time type nests)."""
+    return isinstance(value, cls) or (getattr(value, "_type", None) == cls._type
+                                      and getattr(value, "_md5sum", None) == cls._md5sum)
 
 
 def is_numpy_msg(data_class: Any) -> bool:
