@@ -277,6 +277,29 @@ def test_with_ros2_visibility_off_local_nodes_use_shm_and_load_no_dds(ros_master
         "a node with ROS 2 visibility off and only local peers loaded Cyclone DDS"
 
 
+def test_by_default_local_nodes_use_shm_and_only_the_hosts_watcher_loads_dds(ros_master: harness.RosMaster,
+                                                                             spawn: harness.Spawner) -> None:
+    # the defaults (ROS 2 visibility auto): one node of the host watches the DDS domain for ROS 2 (its participant);
+    # the others only look at its files. Every node used to import cyclonedds for that look (~120 ms of CPU each,
+    # half of a 60-node robot's extra start-up over rospy); now only the watcher loads it
+    env = shm_env(ros_master)
+    topic = "/shm/one_watcher"
+    listeners = [spawn(mrt("listen", "--topic", topic, "--duration", T, "--node-name", f"l{i}"), env,
+                       name=f"listener_{i}") for i in range(2)]
+    for listener in listeners:
+        listener.wait_for("ready", T)
+    talker = spawn(mrt("talk", "--topic", topic, "--count", 1000, "--rate", 50, "--linger", 5), env, name="talker")
+    for listener in listeners:
+        listener.wait_for_count("recv", 20, T)
+        assert set(transports(listener)) == {"SHM"}
+    nodes = [talker, *listeners]
+    assert all(n.proc.poll() is None for n in nodes)  # all three running, each past several housekeeping ticks
+    loaded = [n.name for n in nodes if _maps_ddsc(n.proc.pid)]
+    assert len(loaded) <= 1, f"more than the host's watcher loaded Cyclone DDS: {loaded}"
+    for n in nodes:
+        n.stop()
+
+
 def test_with_ros2_visibility_off_a_peer_on_another_host_gets_dds_on_demand(dds_domain: int,
                                                                            spawn: harness.Spawner) -> None:
     from netns import Hosts

@@ -74,3 +74,16 @@ def test_a_node_description_reads_back_as_written_and_the_visible_file_names_nod
         f.write(f"{os.getpid()} /ns/n\n1 /other\nbroken\n")
     assert read_visible(visible) == {os.getpid(): "/ns/n", 1: "/other"}
     assert named_visible(visible, "/ns/n") and not named_visible(visible, "/ns/m")
+
+
+def test_importing_the_watch_loads_no_dds_library() -> None:
+    """Every node but the host's watcher only looks at the watcher's files: the module it runs must not import
+    cyclonedds (it did, through the discovery module's user-data parser: ~120 ms of CPU per node)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, micros_rt.transports.dds.watch, micros_rt.transports.dds.discovery\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'cyclonedds'))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]", out.stdout

@@ -20,7 +20,7 @@ from typing import Any, Callable, Dict, Iterable, List, NamedTuple, Optional, Tu
 from ...cyclone import import_cyclonedds
 from ...exceptions import TransportError
 from ...log import nonblocking_logger
-from .endpoints import parse_user_data
+from .tags import parse_user_data
 
 __all__ = ["DiscoveredEndpoint", "DiscoveredParticipant", "Discovery", "NodeAnnouncements", "AnnouncedNode",
            "guid_of"]

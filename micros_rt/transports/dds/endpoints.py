@@ -22,6 +22,7 @@ from cyclonedds.sub import DataReader
 from ...exceptions import DDSUnavailableError
 from .batching import adaptive_write, batch_window, batching_writer_class, budget_write, c_function, flusher
 from .participant import DDSParticipant, delete_entity
+from .tags import USER_DATA_PREFIX, make_user_data, parse_user_data
 from .types import DDSType
 from ...log import nonblocking_logger
 
@@ -29,7 +30,6 @@ __all__ = ["DDSWriter", "DDSReader", "WriterInfo", "USER_DATA_PREFIX", "make_use
 
 _log = nonblocking_logger("rosout.micros_rt.dds")
 
-USER_DATA_PREFIX = b"micros_rt;"
 _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
 
 
@@ -49,23 +49,6 @@ def wait_for_acks(ref: int, timeout: float) -> int:
     if fn is None:
         fn = _c_wait_for_acks = c_function("dds_wait_for_acks", [ctypes.c_int32, ctypes.c_int64], ctypes.c_int32)
     return int(fn(ref, int(timeout * 1e9)))
-
-
-def make_user_data(**fields: str) -> bytes:
-    """USER_DATA tag of micros_rt endpoints: ``micros_rt;graph=...;node=...;``."""
-    return USER_DATA_PREFIX + b"".join(f"{k}={v};".encode() for k, v in fields.items())
-
-
-def parse_user_data(data: Optional[bytes]) -> Optional[Dict[str, str]]:
-    """The fields of a micros_rt tag, or None for an endpoint micros_rt did not create."""
-    if not data or not data.startswith(USER_DATA_PREFIX):
-        return None
-    out: Dict[str, str] = {}
-    for part in data[len(USER_DATA_PREFIX):].decode("utf-8", "replace").split(";"):
-        if "=" in part:
-            k, _, v = part.partition("=")
-            out[k] = v
-    return out
 
 
 def matched_handles(get: Callable[[], List[int]]) -> List[int]:
