@@ -471,7 +471,8 @@ def test_micros_rt_subscribers_read_the_exporting_relay_straight_without_a_hop_t
             return len(through.events("recv")), len(stock.events("recv"))
 
         frozen, still_since = counts(), time.monotonic()  # ... once neither count moved for 0.5 s (a loaded
-        while time.monotonic() - still_since < 0.5:       # machine may read a socket's last message late)
+        bound = still_since + 10                          # machine may read a socket's last message late)
+        while time.monotonic() - still_since < 0.5 and time.monotonic() < bound:
             time.sleep(0.05)
             if counts() != frozen:
                 frozen, still_since = counts(), time.monotonic()

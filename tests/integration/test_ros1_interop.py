@@ -56,7 +56,7 @@ def test_rostopic_list_info_and_rosnode_see_micros_rt_node(ros_master: harness.R
     assert "std_msgs/String" in info and "/visible_talker" in info
     assert "/visible_talker" in harness.rosnode(ros_master, "list").stdout
     # rostopic hz never exits by itself: stop it with SIGINT after its start-up and a few reports
-    hz = subprocess.run(["timeout", "-s", "INT", "15", harness.STOCK_PYTHON, harness.ROSTOPIC, "hz", "-w", "5",
+    hz = subprocess.run(["timeout", "-s", "INT", "10", harness.STOCK_PYTHON, harness.ROSTOPIC, "hz", "-w", "5",
                          "/visible"], env=ros_master.env, capture_output=True, text=True, timeout=40).stdout
     assert "average rate" in hz, hz
 

@@ -51,6 +51,7 @@ def main() -> int:
 
     lock = threading.Lock()
     received = 0
+    emitted = 0  # recv lines written
     finished = threading.Event()
     sub: Any = None
 
@@ -64,23 +65,26 @@ def main() -> int:
         return None
 
     def callback(msg: Any) -> None:
-        nonlocal received
+        nonlocal received, emitted
         t = time.time()
         with lock:
             if finished.is_set() or (args.count and received >= args.count):
                 return
             seq = received
             received += 1
-            last = bool(args.count and received >= args.count)
-        hdr: Dict[str, Any] = dict(getattr(msg, "_connection_header", None) or {})
-        hdr.pop("message_definition", None)
-        transport = transport_of(getattr(msg, "_connection_header", None))
-        if transport is not None:
-            hdr["transport"] = transport
-        data, extra = summary(msg)
-        emit("recv", seq=seq, data=data, t=t, connection_header=hdr, **extra)
-        if last:  # after its line: "done" never comes before the last "recv"
-            finished.set()
+        try:
+            hdr: Dict[str, Any] = dict(getattr(msg, "_connection_header", None) or {})
+            hdr.pop("message_definition", None)
+            transport = transport_of(getattr(msg, "_connection_header", None))
+            if transport is not None:
+                hdr["transport"] = transport
+            data, extra = summary(msg)
+            emit("recv", seq=seq, data=data, t=t, connection_header=hdr, **extra)
+        finally:
+            with lock:  # lines written, not messages taken: "done" never comes before a "recv" line (rospy's
+                emitted += 1  # callback thread per publisher may still be writing an earlier one)
+                if args.count and emitted >= args.count:
+                    finished.set()
 
     sub = rospy.Subscriber(topic, cls, callback, queue_size=args.queue_size, tcp_nodelay=args.tcp_nodelay)
     if not wait_registered(rosgraph.get_master_uri(), caller_id, topic, False, min(20.0, args.duration)):

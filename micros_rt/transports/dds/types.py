@@ -647,7 +647,7 @@ def _describe_value(value: Any, base: str, where: str) -> str | None:
 def _is_a(value: Any, cls: Type[genpy.Message]) -> bool:
     """``value`` is a ``cls`` message: that class, or another class of the same type and definition (a run-time
     class of a type that is also installed, e.g. the std_msgs/Header a run-time type nests)."""
-    return isinstance(value, cls) or (getattr(value, "_type", None) == cls._type
+    return isinstance(value, cls) or (isinstance(value, genpy.Message) and getattr(value, "_type", None) == cls._type
                                       and getattr(value, "_md5sum", None) == cls._md5sum)
 
 
