@@ -1,7 +1,7 @@
 #!/bin/bash
 # Set up, type-check (mypy strict, config in pyproject.toml) and run the test suite.
 # pytest runs even when mypy fails; the script exits non-zero if either failed.
-#   scripts/test.sh            everything (CI, README): ~20 min on 2 cores, the 25 slowest tests listed at the end
+#   scripts/test.sh            everything (CI, README): ~24 min on 2 cores, the 25 slowest tests listed at the end
 #   scripts/test.sh --fast     the edit loop's tier: unit, contract and doctests, and one integration test per
 #                              transport and per program (tests/conftest.py SMOKE): < 3 min on 2 cores
 # Extra arguments go to pytest, e.g.  scripts/test.sh -k harness -x
