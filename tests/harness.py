@@ -56,6 +56,21 @@ _SCRUB_ENV = (
 
 # --------------------------------------------------------------------------- generic helpers
 
+def wait_still(value: Callable[[], Any], still_for: float, timeout: float, interval: float = 0.05) -> Any:
+    """Poll ``value()`` until it has not changed for ``still_for`` seconds (or ``timeout`` passed); return it.
+
+    For "nothing more is coming": the last messages a loaded machine reads late are counted before a snapshot.
+    """
+    last, since = value(), time.monotonic()
+    bound = since + timeout
+    while time.monotonic() - since < still_for and time.monotonic() < bound:
+        time.sleep(interval)
+        now = value()
+        if now != last:
+            last, since = now, time.monotonic()
+    return last
+
+
 def wait_until(cond: Callable[[], Any], timeout: float, interval: float = 0.02, message: str = "") -> Any:
     """Poll ``cond()`` until it returns something truthy; return that value.
 

@@ -126,11 +126,7 @@ def _lifespan_run(spawn: harness.Spawner, topic: str, talker_qos: dict[str, Any]
     sent = talker.count("sent")
     # with a lifespan the expired messages never come and --exit-after is not reached: once nothing has come for
     # 1.5 s (the slow callback takes 0.1 s per message), the listener is stopped and says "done" as it ends
-    last, quiet_since, bound = listener.count("recv"), time.monotonic(), time.monotonic() + 30
-    while not listener.events("done") and time.monotonic() - quiet_since < 1.5 and time.monotonic() < bound:
-        time.sleep(0.05)
-        if listener.count("recv") != last:
-            last, quiet_since = listener.count("recv"), time.monotonic()
+    harness.wait_still(lambda: (listener.count("recv"), listener.count("done")), 1.5, 30)
     if not listener.events("done"):
         listener.stop()
     listener.wait_for("done", 35)

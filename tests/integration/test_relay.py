@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import signal
 import subprocess
-import time
 from pathlib import Path
 from typing import Any, Dict, Iterator, List, Optional, Tuple
 
@@ -470,12 +469,7 @@ def test_micros_rt_subscribers_read_the_exporting_relay_straight_without_a_hop_t
         def counts() -> Tuple[int, int]:
             return len(through.events("recv")), len(stock.events("recv"))
 
-        frozen, still_since = counts(), time.monotonic()  # ... once neither count moved for 0.5 s (a loaded
-        bound = still_since + 10                          # machine may read a socket's last message late)
-        while time.monotonic() - still_since < 0.5 and time.monotonic() < bound:
-            time.sleep(0.05)
-            if counts() != frozen:
-                frozen, still_since = counts(), time.monotonic()
+        frozen = harness.wait_still(counts, 0.5, 10)  # ... once neither count moved for 0.5 s
         direct.wait_for_count("recv", mark + 23, timeout=30)
         renamed.wait_for_count("recv", mark_renamed + 20, timeout=30)
         assert (len(through.events("recv")), len(stock.events("recv"))) == frozen
