@@ -4,7 +4,9 @@ run's domain; no master): the GUIDs follow readers that come and go, also with s
 from __future__ import annotations
 
 import threading
-from typing import List, Set
+import time
+from typing import Any, Dict, List, Optional, Set
+
 
 from std_msgs.msg import String
 
@@ -103,3 +105,41 @@ def test_large_samples_are_taken_with_the_gil_released_and_arrive_the_same() -> 
     finally:
         reader.close()
         writer.close()
+
+
+def test_a_writer_read_as_untagged_is_read_again_and_a_tagged_one_is_not() -> None:
+    """A relay import refuses untagged writers: a writer's match data read once without its micros_rt tag must not
+    make it untagged for good (it refused all 1,809 samples of a tagged exporter in a suite run)."""
+    from cyclonedds.qos import Policy, Qos
+
+    from micros_rt.transports.dds import endpoints
+    from micros_rt.transports.dds.endpoints import make_user_data
+
+    class Data:
+        def __init__(self, user_data: bytes) -> None:
+            self.key, self.participant_key = "writer-guid", "participant-guid"
+            self.qos = Qos(Policy.Userdata(user_data)) if user_data else Qos()
+
+    answers = [Data(b""), Data(make_user_data(graph="g", relay="robot_a"))]
+    reads: List[int] = []
+
+    class Reader:
+        def get_matched_publication_data(self, handle: int) -> Data:
+            reads.append(handle)
+            return answers[min(len(reads), len(answers)) - 1]
+
+    reader: Any = object.__new__(DDSReader)
+    reader._writers, reader._recheck, reader._lock, reader._reader = {}, {}, threading.Lock(), Reader()
+
+    def tag() -> Optional[Dict[str, str]]:
+        info = reader.writer_info(7)
+        assert info is not None
+        return info.tag  # type: ignore[no-any-return]
+
+    assert tag() is None                         # the first read: no tag
+    assert tag() is None and len(reads) == 1     # within UNTAGGED_RECHECK: the cached answer
+    assert 0 < reader._recheck[7] - time.monotonic() <= endpoints.UNTAGGED_RECHECK
+    reader._recheck[7] = 0.0                     # UNTAGGED_RECHECK passed
+    assert tag() == {"graph": "g", "relay": "robot_a"} and len(reads) == 2
+    assert 7 not in reader._recheck
+    assert tag() is not None and len(reads) == 2  # a tagged writer is never read again

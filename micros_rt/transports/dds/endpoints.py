@@ -33,6 +33,11 @@ _log = nonblocking_logger("rosout.micros_rt.dds")
 _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
 
 
+#: Seconds a writer read as untagged (no micros_rt tag in its match data) is taken as such before its match data
+#: is read again. A relay's import refuses an untagged writer's samples: cached for good, one incomplete read made
+#: it refuse every sample of a tagged exporter (seen twice in full suite runs, cause not established).
+UNTAGGED_RECHECK = 1.0
+
 #: A reader whose last sample was at least this large (bytes) takes the next ones with the GIL released.
 RELEASED_TAKE_MIN = 64 * 1024
 
@@ -284,6 +289,7 @@ class DDSReader:
         self.condition = ReadCondition(self._reader, _ANY)
         self.guid = str(self._reader.guid)
         self._writers: Dict[int, WriterInfo] = {}
+        self._recheck: Dict[int, float] = {}  # handle of an untagged writer -> when to read its match data again
         self._lock = threading.Lock()
         self._large = False   # the last sample taken was large (see take_raw)
         self.closed = False
@@ -307,11 +313,11 @@ class DDSReader:
     def writer_info(self, handle: int) -> Optional[WriterInfo]:
         """The writer behind a sample's publication_handle (cached)."""
         info = self._writers.get(handle)
-        if info is not None:
+        if info is not None and (info.tag is not None or time.monotonic() < self._recheck.get(handle, 0.0)):
             return info
         data = matched_data(self._reader.get_matched_publication_data, handle)
         if data is None:
-            return None
+            return info  # the match ended meanwhile: what was known of it
         import_cyclonedds()
         from cyclonedds.qos import Policy
 
@@ -323,6 +329,10 @@ class DDSReader:
         info = WriterInfo(str(data.key), parse_user_data(user_data), str(data.participant_key))
         with self._lock:
             self._writers[handle] = info
+            if info.tag is None:
+                self._recheck[handle] = time.monotonic() + UNTAGGED_RECHECK
+            else:
+                self._recheck.pop(handle, None)
         return info
 
     def matched_writer_guids(self) -> List[str]:
@@ -336,6 +346,7 @@ class DDSReader:
             with self._lock:
                 for gone in set(self._writers) - set(handles):
                     del self._writers[gone]
+                    self._recheck.pop(gone, None)
         return out
 
     def close(self) -> None:
