@@ -259,8 +259,9 @@ def check_dds_network(env: Mapping[str, str], interfaces: Optional[Mapping[str, 
                      f"{chosen})")
     address = participant._ros_address(env)
     if participant._is_loopback(env):
+        bursts = "" if participant._shm_off(env) else " in bursts of 128 kB (what ROS 2 readers' buffers hold)"
         return Check(name, OK, f"interface lo ({address} is loopback): multicast off, unicast discovery on "
-                     f"127.0.0.1, 63 KB fragments, {chosen}")
+                     f"127.0.0.1, 63 KB fragments{bursts}, {chosen}")
     iface = ifaces.get(address, "no interface holds it")
     return Check(name, OK, f"interface {iface} ({address}): multicast on (Cyclone's default), {chosen}")
 

@@ -90,6 +90,19 @@ def test_loopback_nodes_use_large_fragments_and_network_nodes_do_not() -> None:
     assert "MaxMessageSize" not in net
 
 
+def test_bursts_fit_a_ros2_readers_buffer_where_dds_carries_data_to_ros2() -> None:
+    # a loopback node with shared memory on talks DDS to ROS 2 nodes (Fast DDS, 212 kB receive buffers): a sample
+    # leaves in bursts of at most 128 kB; where micros_rt nodes talk DDS to each other (shared memory off), and
+    # between hosts, samples go whole
+    from micros_rt.transports.dds.participant import ROS2_BURST_CONFIG
+
+    assert "<MaxInitTransmit>0</MaxInitTransmit>" in ROS2_BURST_CONFIG
+    assert "<MaxRexmit>128kB</MaxRexmit>" in ROS2_BURST_CONFIG
+    assert ROS2_BURST_CONFIG in micros_rt_defaults({"ROS_IP": "127.0.0.1"})
+    assert "BurstSize" not in micros_rt_defaults({"ROS_IP": "127.0.0.1", "MICROS_RT_DISABLE_SHM": "1"})
+    assert "BurstSize" not in micros_rt_defaults({"ROS_IP": "10.1.2.3"})
+
+
 def test_network_fragments_are_one_packet_of_the_interfaces_mtu() -> None:
     from micros_rt.transports.dds.participant import interface_mtu, network_transport
 

@@ -163,6 +163,20 @@ LOOPBACK_TRANSPORT = "<General><MaxMessageSize>65500B</MaxMessageSize><FragmentS
 RECEIVE_BUFFER_CONFIG = '<SocketReceiveBufferSize max="8MB"/>'
 
 
+#: On a loopback node with shared memory on, DDS carries what a micros_rt node exchanges with the ROS 2 nodes of its
+#: host (micros_rt nodes of the host use shared memory), and Fast DDS, rclpy's DDS, reads with the kernel's default
+#: UDP receive buffer (``net.core.rmem_default``, 212,992 B here: three 63 KB datagrams). Cyclone sends a new sample
+#: whole, and presumes a reader that is not Cyclone's has a buffer as large as its own socket's (8 MB): a 640x480
+#: rgb8 Image (921 kB, 15 datagrams) overflowed Fast DDS's socket on every frame, the repair bursts overflowed it
+#: again, and a reader of depth 10 got 48-209 of 240 frames at p50 61-218 ms (benchmarks/camera_ros2.py). With a
+#: sample's first burst and each repair burst at most 128 kB (two datagrams; the rest follows on the reader's
+#: NACKs, ~3 ms a round here): 240 of 240, no datagram dropped, p50 25 ms (rclpy to rclpy 14-15 ms). Cyclone's
+#: limit is per writer, for every reader of it; where micros_rt nodes of one host talk DDS to each other
+#: (``MICROS_RT_DISABLE_SHM``) large samples go whole, as before (the limit would cost them a NACK round per 128 kB).
+#: A best-effort reader is sent every sample whole (Cyclone's rule: it cannot repair).
+ROS2_BURST_CONFIG = "<BurstSize><MaxInitTransmit>0</MaxInitTransmit><MaxRexmit>128kB</MaxRexmit></BurstSize>"
+
+
 #: Between hosts a large sample leaves in datagrams of up to 64 KB (Cyclone's default: 14,720 B), which the
 #: kernel cuts into IP fragments of the link's MTU. What a sample costs there is per packet and per send
 #: call, in the sending host's kernel (with hosts in network namespaces behind a Linux bridge, the receivers'
@@ -221,16 +235,27 @@ def micros_rt_defaults(env: Mapping[str, str] = os.environ) -> str:
     """Settings micros_rt applies under any configuration (a user's ``CYCLONEDDS_URI`` overrides them):
     the participant lease, a receive buffer large samples fit in, the send buffer when
     ``MICROS_RT_SEND_BUFFER`` asks (:func:`send_buffer`), and large datagrams (on a loopback node, large
-    fragments too; on a network, fragments of the interface's MTU)."""
+    fragments too, and with shared memory on, bursts ROS 2 readers' buffers hold: :data:`ROS2_BURST_CONFIG`;
+    on a network, fragments of the interface's MTU)."""
+    burst = ""
     if _is_loopback(env):
         transport = LOOPBACK_TRANSPORT
+        if not _shm_off(env):
+            burst = ROS2_BURST_CONFIG
     else:
         transport = network_transport(interface_mtu(_ros_address(env)))
     size = send_buffer(env)
     sending = "" if size is None else f'<SocketSendBufferSize min="{size}B" max="{size}B"/>'
     return (f'<CycloneDDS><Domain id="any">{transport}<Discovery>'
             f"<LeaseDuration>{lease_duration(env):g}s</LeaseDuration>"
-            f"</Discovery><Internal>{RECEIVE_BUFFER_CONFIG}{sending}</Internal></Domain></CycloneDDS>")
+            f"</Discovery><Internal>{RECEIVE_BUFFER_CONFIG}{sending}{burst}</Internal></Domain></CycloneDDS>")
+
+
+def _shm_off(env: Mapping[str, str]) -> bool:
+    try:
+        return bool(settings.DISABLE_SHM.get(env))
+    except SettingError as exc:
+        raise DDSUnavailableError(str(exc)) from None
 
 
 def cyclone_config(env: Mapping[str, str] = os.environ) -> str:
