@@ -87,3 +87,44 @@ def test_importing_the_watch_loads_no_dds_library() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]", out.stdout
+
+
+def test_the_watcher_follows_participants_coming_and_going_reading_only_what_is_new() -> None:
+    # a real Cyclone domain of this process (loopback): the watcher's view is kept from the samples discovery
+    # brought since its last look (each deserialised once); one that leaves is dropped, and a full read still
+    # sees everything
+    import time
+
+    from cyclonedds.domain import Domain, DomainParticipant
+    from cyclonedds.qos import Policy, Qos
+
+    from micros_rt.transports.dds.discovery import Discovery
+    from micros_rt.transports.dds.participant import LOOPBACK_CONFIG, delete_entity
+
+    domain = Domain(225, LOOPBACK_CONFIG)
+    watcher = DomainParticipant(225)
+    seen = Discovery(watcher, kinds=("participants",))
+
+    def guids(deadline_s: float, want: "set[str]", absent: "set[str]" = set()) -> "set[str]":
+        deadline = time.monotonic() + deadline_s
+        while True:
+            now = {p.guid for p in seen.followed_participants()}
+            if (want <= now and not absent & now) or time.monotonic() > deadline:
+                return now
+            time.sleep(0.02)
+
+    try:
+        assert str(watcher.guid) in guids(10, {str(watcher.guid)})
+        other = DomainParticipant(225, qos=Qos(Policy.Userdata(b"enclave=/;")))
+        other_guid = str(other.guid)
+        now = guids(10, {other_guid})
+        assert other_guid in now
+        assert [p.user_data for p in seen.followed_participants() if p.guid == other_guid] == [b"enclave=/;"]
+        assert guids(0.3, set()) == now  # nothing new: the same view
+        delete_entity(other)
+        now = guids(10, set(), {other_guid})
+        assert other_guid not in now and str(watcher.guid) in now
+        assert {p.guid for p in seen.participants()} == now
+    finally:
+        seen.close()
+        del watcher, domain

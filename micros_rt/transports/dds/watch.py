@@ -208,7 +208,7 @@ class Ros2Watch:
         if reader is None:
             return
         foreign = set()
-        for p in reader.participants():
+        for p in reader.followed_participants():
             user_data = p.user_data
             if not is_micros_rt_participant(user_data):
                 foreign.add(p.guid)
