@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import struct
+import time
 from typing import Any, Dict, List, Tuple
 
 import pytest
@@ -118,3 +119,36 @@ def test_a_node_keeping_its_shared_memory_elsewhere_is_declined_in_words() -> No
     other_user = ShmOffer("boot/net/mnt/1000/u", "992c", "std_msgs/String", SubscribeQoSOptions())
     assert "another Unix user" in decide_shm(other_user, facts, host="boot/net/mnt/0/u", unavailable=None,
                                              subscriber="/l").reason
+
+
+def test_a_peer_process_is_dead_once_it_exited_even_unreaped_and_never_by_a_reused_pid() -> None:
+    # channels and links ask each housekeeping tick whether their peer runs: a pidfd, one poll, no /proc read
+    import os
+    import signal
+    import subprocess
+
+    from micros_rt.transports.shm.host import PeerProcess, process_alive
+
+    child = subprocess.Popen(["sleep", "60"])
+    peer = PeerProcess(child.pid)
+    try:
+        assert peer.alive() and peer.alive()
+        os.kill(child.pid, signal.SIGKILL)
+        deadline = time.monotonic() + 10
+        while peer.alive() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert not peer.alive()  # a zombie (not reaped yet) is dead for us
+        assert not process_alive(child.pid)  # as the fallback says
+        child.wait()
+        assert not peer.alive()  # and stays dead: the pid may be reused now
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait()
+        peer.close()
+    assert PeerProcess(0).alive()  # unknown: alive
+    gone = PeerProcess(child.pid)  # reaped before it was asked about
+    assert not gone.alive()
+    mine = PeerProcess(os.getpid())
+    mine.close()  # closed: asked the slow way, still right
+    assert mine.alive()

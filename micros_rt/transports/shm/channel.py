@@ -36,7 +36,7 @@ from ...exceptions import MicrosRtError, PublishTimeoutError, TransportError
 from ...log import nonblocking_logger
 from ...negotiation.protocol import SHM
 from ..base import send_with_backoff
-from .host import (ATTACH_TIMEOUT, cleanup_dead_nodes, commit_segments, iceoryx2, process_alive, shm_free_bytes,
+from .host import (ATTACH_TIMEOUT, PeerProcess, cleanup_dead_nodes, commit_segments, iceoryx2, shm_free_bytes,
                    shm_node, warn_if_full, why_failed)
 
 __all__ = ["MalformedFrameError", "ShmChannel", "ShmLink", "ShmWriter", "TRANSIT_DEPTH", "PUBLISH_BLOCK_TIMEOUT",
@@ -154,6 +154,7 @@ class ShmChannel:
         self.lossless = lossless
         self._slots = depth + 4  # iceoryx2's samples: the subscriber's buffer, history and loans
         self.peer_pid = peer_pid    # the subscriber's process (0: unknown)
+        self._peer = PeerProcess(peer_pid)
         # held while a port is used or deleted: iceoryx2 aborts the process on a deleted port's use
         self._lock = threading.Lock()
         self.name = _channel_name()
@@ -278,13 +279,14 @@ class ShmChannel:
 
     def subscriber_dead(self) -> bool:
         """The subscriber's process is gone (SIGKILLed: its port stays in the service until cleaned up)."""
-        return not process_alive(self.peer_pid)
+        return not self._peer.alive()
 
     def close(self) -> None:
         """Stop the channel; never waits: a signal handler (rospy's shutdown hooks) may run it in the very thread
         that holds the lock inside :meth:`try_send`, so whoever holds the lock deletes the ports on letting go of
         it (iceoryx2 aborts the process on a deleted port's use). Harmless twice."""
         self.closed = True
+        self._peer.close()
         self._delete_ports()
 
     def _delete_ports(self) -> None:
@@ -517,6 +519,7 @@ class ShmLink:
         #: callbacks added later), whichever thread drains the link
         self._on_latched = on_latched
         self.peer_pid = peer_pid      # the publisher's process (0: unknown)
+        self._peer = PeerProcess(peer_pid)
         self.channel = channel
         self.qos = qos                # the publisher's QoS (lifespan, latency budget), from its answer
         self.closed = False
@@ -599,7 +602,7 @@ class ShmLink:
 
     def publisher_gone(self) -> bool:
         """The publisher's process died (its memory is reclaimed then), or its port is gone (it unregistered)."""
-        if not process_alive(self.peer_pid):
+        if not self._peer.alive():
             cleanup_dead_nodes()
             return True
         service = self._service
@@ -622,6 +625,7 @@ class ShmLink:
         if self.closed:
             return
         self.closed = True
+        self._peer.close()
         thread = self._thread
         if thread is not None and not thread.is_alive():
             self.release()  # else the thread releases the ports when it sees ``closed`` (within its poll)

@@ -10,6 +10,7 @@ only: an aarch64 robot has none), uses DDS or TCPROS, and ``unavailable_reason()
 from __future__ import annotations
 
 import os
+import select
 import stat
 import threading
 from typing import Any, Mapping, Optional, Set
@@ -17,7 +18,7 @@ from typing import Any, Mapping, Optional, Set
 from ... import settings
 
 __all__ = ["ATTACH_TIMEOUT", "MIN_FREE_BYTES", "cleanup_dead_nodes", "close_node", "commit_segments", "host_identity",
-           "iceoryx2", "iceoryx2_root", "permission_problem", "process_alive", "shm_free_bytes", "shm_node",
+           "iceoryx2", "iceoryx2_root", "permission_problem", "PeerProcess", "process_alive", "shm_free_bytes", "shm_node",
            "unavailable_reason", "wait_set", "warn_if_full", "why_failed"]
 
 #: How long a channel waits for its subscriber's port (a 60-node graph starting on 2 cores took more than 10 s).
@@ -214,6 +215,55 @@ def process_alive(pid: int) -> bool:
             return f.read().rsplit(b")", 1)[1].split()[0] != b"Z"
     except (OSError, IndexError):
         return True
+
+
+class PeerProcess:
+    """A peer's process, asked on every housekeeping tick whether it still runs (for each channel and link): a
+    pidfd (Linux 5.3+) polled without waiting, one system call (1.3 us here, against 14.8 us for
+    :func:`process_alive`: ``kill``, then ``/proc/<pid>/stat`` opened and read for a zombie). It turns readable when
+    the process exits, a zombie too, and a pid reused since cannot fool it. Where ``pidfd_open`` is refused (an
+    older kernel), :func:`process_alive`. Thread-safe; :meth:`close` lets go of the descriptor."""
+
+    __slots__ = ("pid", "_fd", "_poll", "_dead", "_lock")
+
+    def __init__(self, pid: int) -> None:
+        self.pid = pid
+        self._fd = -1
+        self._poll: Any = None  # select.poll, not select.select: descriptors above 1023 too
+        self._dead = False
+        self._lock = threading.Lock()
+        if pid > 0:
+            try:
+                self._fd = os.pidfd_open(pid)
+            except ProcessLookupError:
+                self._dead = True
+            except (OSError, AttributeError):
+                return
+            else:
+                self._poll = select.poll()
+                self._poll.register(self._fd, select.POLLIN)
+
+    def alive(self) -> bool:
+        """Whether the process still runs; True when unknown (pid 0)."""
+        with self._lock:
+            if self._dead:
+                return False
+            if self._fd < 0:
+                return process_alive(self.pid)
+            if self._poll.poll(0):
+                self._dead = True
+                self._release()
+                return False
+            return True
+
+    def close(self) -> None:
+        with self._lock:
+            self._release()
+
+    def _release(self) -> None:
+        fd, self._fd, self._poll = self._fd, -1, None
+        if fd >= 0:
+            os.close(fd)
 
 
 def cleanup_dead_nodes() -> None:
