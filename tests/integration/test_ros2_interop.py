@@ -285,27 +285,34 @@ def test_same_rclpy_writer_matches_when_ordering_relaxed(ros_master: harness.Ros
 
 def udp_drops(pid: int) -> int:
     """Datagrams the kernel dropped on ``pid``'s UDP sockets because their receive buffer was full."""
+    inodes = set()
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        try:
+            inodes.add(os.readlink(f"/proc/{pid}/fd/{fd}"))
+        except OSError:  # closed meanwhile
+            continue
     lines = open(f"/proc/{pid}/net/udp").read().splitlines()[1:]
-    inodes = {os.readlink(f"/proc/{pid}/fd/{fd}") for fd in os.listdir(f"/proc/{pid}/fd")}
     return sum(int(cols[-1]) for cols in (line.split() for line in lines) if f"socket:[{cols[9]}]" in inodes)
 
 
 def test_a_camera_reaches_an_rclpy_subscriber_frame_by_frame(ros_master: harness.RosMaster,
                                                               spawn: harness.Spawner) -> None:
-    """A 640x480 rgb8 Image at 30 Hz from a micros_rt node to a reliable rclpy subscriber of depth 10 (what
+    """A 640x480 rgb8 Image from a micros_rt node to a reliable rclpy subscriber of depth 10 (what
     ``create_subscription(Image, topic, cb, 10)`` asks): every frame published once they matched arrives, and
-    Fast DDS's socket drops no datagram. Cyclone sent each 921 kB frame as one burst of 63 KB datagrams into
-    Fast DDS's 212 kB receive buffer (the kernel's default); the rest was dropped, the repairs overflowed it again,
-    and frames were replaced before they were whole: 48-209 of 240 (benchmarks/camera_ros2.py). A loopback node
-    with shared memory on now sends at most 128 kB a burst (participant.ROS2_BURST_CONFIG)."""
-    frames, topic = 90, "/interop/camera_frames"
+    Fast DDS's socket drops next to nothing. Cyclone sent each 921 kB frame as one burst of 63 KB datagrams into
+    Fast DDS's 212 kB receive buffer (the kernel's default); the rest was dropped (1,325-2,013 datagrams for 90
+    frames), the repairs overflowed it again, and frames were replaced before they were whole: 48-209 of 240 at
+    30 Hz (benchmarks/camera_ros2.py). A loopback node with shared memory on now sends at most 128 kB a burst
+    (participant.ROS2_BURST_CONFIG). 20 Hz, not the benchmark's 30: a frame takes ~25 ms of NACK rounds, and a
+    loaded machine must not turn that into a backlog; the old bursts overflow at any rate."""
+    frames, topic = 60, "/interop/camera_frames"
     # --full-msg: each frame's data printed as its length and hash (printed whole, 2.7 MB of JSON a frame, the
-    # listener itself could not keep 30 Hz)
+    # listener itself could not keep up)
     listener = spawn(ros2("listen", "--topic", topic, "--type", "sensor_msgs/msg/Image", "--depth", 10,
                           "--full-msg", "--duration", 60), name="rclpy_camera")
     listener.wait_for("ready", T)
     drops0 = udp_drops(listener.pid)
-    talker = spawn(mrt("talk", "--topic", topic, "--type", "sensor_msgs/Image", "--count", frames, "--rate", 30,
+    talker = spawn(mrt("talk", "--topic", topic, "--type", "sensor_msgs/Image", "--count", frames, "--rate", 20,
                        "--data-json", json.dumps(CASES["sensor_msgs/Image"]), "--wait-dds-readers", 1,
                        "--linger", 30), name="mrt_camera")
     talker.wait_for("dds_matched", T)
@@ -319,6 +326,8 @@ def test_a_camera_reaches_an_rclpy_subscriber_frame_by_frame(ros_master: harness
     print(f"\ncamera into rclpy: {len(stamps)} of {frames} frames, in {stamps[-1] - stamps[0]:.2f} s; "
           f"subscriber UDP drops {drops}" if stamps else "\ncamera into rclpy: no frame")
     assert len(stamps) == frames, f"{len(stamps)} of {frames} frames; subscriber UDP drops {drops}"
+    # whole bursts dropped ~15 datagrams a frame; a burst that a loaded reader took late may lose one
+    assert drops < frames, f"subscriber UDP drops {drops} for {frames} frames"
 
 
 def test_latched_micros_rt_publisher_reaches_late_rclpy_transient_local_subscriber(

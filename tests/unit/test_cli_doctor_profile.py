@@ -66,6 +66,9 @@ def test_consistent_addresses_pass(env: dict[str, str]) -> None:
 def test_dds_network_reports_what_micros_rt_picks(tmp_path: Path) -> None:
     loop = check_dds_network({"ROS_IP": "127.0.0.1"}, IFACES)
     assert loop.status == OK and "interface lo" in loop.detail and "multicast off" in loop.detail
+    assert "63 KB fragments in bursts of 128 kB" in loop.detail  # what ROS 2 readers' buffers hold
+    no_shm = check_dds_network({"ROS_IP": "127.0.0.1", "MICROS_RT_DISABLE_SHM": "1"}, IFACES)
+    assert "63 KB fragments, " in no_shm.detail and "bursts" not in no_shm.detail
     lan = check_dds_network({"ROS_IP": "10.1.2.3"}, IFACES)
     assert lan.status == OK and "interface eth0" in lan.detail and "multicast on" in lan.detail
     cfg = tmp_path / "cyclone.xml"

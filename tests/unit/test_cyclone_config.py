@@ -103,6 +103,15 @@ def test_bursts_fit_a_ros2_readers_buffer_where_dds_carries_data_to_ros2() -> No
     assert "BurstSize" not in micros_rt_defaults({"ROS_IP": "10.1.2.3"})
 
 
+def test_where_shared_memory_cannot_work_micros_rt_peers_talk_dds_and_samples_go_whole(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # no iceoryx2 wheel (aarch64): a host's micros_rt nodes exchange large samples over DDS, unthrottled
+    from micros_rt.transports.shm import host
+
+    monkeypatch.setattr(host, "_reason", "the iceoryx2 package is not installed")
+    assert "BurstSize" not in micros_rt_defaults({"ROS_IP": "127.0.0.1"})
+
+
 def test_network_fragments_are_one_packet_of_the_interfaces_mtu() -> None:
     from micros_rt.transports.dds.participant import interface_mtu, network_transport
 

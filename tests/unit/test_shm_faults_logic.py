@@ -129,10 +129,12 @@ def test_a_peer_process_is_dead_once_it_exited_even_unreaped_and_never_by_a_reus
 
     from micros_rt.transports.shm.host import PeerProcess, process_alive
 
+    fds_before = len(os.listdir("/proc/self/fd"))
     child = subprocess.Popen(["sleep", "60"])
     peer = PeerProcess(child.pid)
     try:
         assert peer.alive() and peer.alive()
+        assert peer._fd >= 0  # the pidfd, not the /proc fallback (Linux 5.3+, as Debian 12's 6.1)
         os.kill(child.pid, signal.SIGKILL)
         deadline = time.monotonic() + 10
         while peer.alive() and time.monotonic() < deadline:
@@ -150,5 +152,7 @@ def test_a_peer_process_is_dead_once_it_exited_even_unreaped_and_never_by_a_reus
     gone = PeerProcess(child.pid)  # reaped before it was asked about
     assert not gone.alive()
     mine = PeerProcess(os.getpid())
-    mine.close()  # closed: asked the slow way, still right
-    assert mine.alive()
+    assert mine.alive() and mine._fd >= 0
+    mine.close()  # closed: its descriptor let go, then asked the slow way, still right
+    assert mine._fd < 0 and mine.alive() and mine._fd < 0
+    assert len(os.listdir("/proc/self/fd")) == fds_before  # no descriptor left behind

@@ -87,7 +87,6 @@ class Discovery:
         self._on_change = on_change  # called (on Cyclone's thread) when discovery brings something
         self._followed: Dict[str, Dict[str, Tuple[str, str]]] = {}
         self._participants: Dict[str, DiscoveredParticipant] = {}  # followed_participants()
-        self._fresh: Any = None  # its read condition: samples not read yet
         for kind in kinds:
             self._reader(kind)
 
@@ -100,7 +99,7 @@ class Discovery:
             from cyclonedds.core import DDSException, InstanceState, ReadCondition, SampleState, ViewState
 
             topic = {"participants": BuiltinTopicDcpsParticipant, "writers": BuiltinTopicDcpsPublication,
-                     "readers": BuiltinTopicDcpsSubscription}[kind]
+                     "readers": BuiltinTopicDcpsSubscription}[kind.partition(":")[0]]  # "<kind>:<use>": one more
             try:
                 if self._on_change is None:
                     reader = BuiltinDataReader(self._dp, topic)
@@ -140,18 +139,16 @@ class Discovery:
         """The participants alive, kept up to date from the samples discovery brought since the last call: each is
         deserialised once (:meth:`participants` deserialises every participant's sample, QoS included, on every
         call: 62 us a call with one participant on the domain, the host's watcher calling it twice a second). It
-        reads (never takes) what is new, so :meth:`participants` still sees everything."""
+        takes the samples from a built-in reader of its own, so :meth:`participants` still sees everything."""
         import_cyclonedds()
-        from cyclonedds.core import DDSException, InstanceState, ReadCondition, SampleState, ViewState
+        from cyclonedds.core import DDSException, InstanceState
         from cyclonedds.qos import Policy
 
         with self._lock:
-            reader, _alive = self._reader("participants")
-            if self._fresh is None:
-                self._fresh = ReadCondition(reader, SampleState.NotRead | ViewState.Any | InstanceState.Any)
+            reader, _alive = self._reader("participants:followed")
             known = self._participants
             try:
-                for p in reader.read(N=_READ_MAX, condition=self._fresh):
+                for p in reader.take(N=_READ_MAX):
                     info = p.sample_info
                     key = str(p.key)
                     if info.instance_state == InstanceState.Alive and info.valid_data:
@@ -198,6 +195,8 @@ class Discovery:
 
         with self._lock:
             readers, self._readers = list(self._readers.values()), {}
+            self._participants = {}
+            self._followed = {}
         for reader, _alive in readers:
             delete_entity(reader)
 

@@ -171,9 +171,10 @@ RECEIVE_BUFFER_CONFIG = '<SocketReceiveBufferSize max="8MB"/>'
 #: again, and a reader of depth 10 got 48-209 of 240 frames at p50 61-218 ms (benchmarks/camera_ros2.py). With a
 #: sample's first burst and each repair burst at most 128 kB (two datagrams; the rest follows on the reader's
 #: NACKs, ~3 ms a round here): 240 of 240, no datagram dropped, p50 25 ms (rclpy to rclpy 14-15 ms). Cyclone's
-#: limit is per writer, for every reader of it; where micros_rt nodes of one host talk DDS to each other
-#: (``MICROS_RT_DISABLE_SHM``) large samples go whole, as before (the limit would cost them a NACK round per 128 kB).
-#: A best-effort reader is sent every sample whole (Cyclone's rule: it cannot repair).
+#: limit is per writer, for every reader of it; where micros_rt nodes of one host talk DDS to each other (shared
+#: memory turned off by ``MICROS_RT_DISABLE_SHM``, or unusable: no iceoryx2 wheel, as on aarch64) large samples go
+#: whole, as before (the limit would cost them a NACK round per 128 kB). While a best-effort reader is matched, a
+#: writer sends every sample whole to all its readers (Cyclone's rule: it cannot repair for that one).
 ROS2_BURST_CONFIG = "<BurstSize><MaxInitTransmit>0</MaxInitTransmit><MaxRexmit>128kB</MaxRexmit></BurstSize>"
 
 
@@ -252,8 +253,13 @@ def micros_rt_defaults(env: Mapping[str, str] = os.environ) -> str:
 
 
 def _shm_off(env: Mapping[str, str]) -> bool:
+    """Whether this process's micros_rt peers of the host talk DDS, not shared memory: turned off
+    (``MICROS_RT_DISABLE_SHM``), or shared memory cannot work here (no iceoryx2 wheel, as on aarch64; /dev/shm
+    missing or full)."""
+    from ..shm.host import unavailable_reason  # the one question DDS's configuration asks of shared memory
+
     try:
-        return bool(settings.DISABLE_SHM.get(env))
+        return unavailable_reason(env) is not None
     except SettingError as exc:
         raise DDSUnavailableError(str(exc)) from None
 

@@ -190,7 +190,7 @@ class Ros2Watch:
             self._release()
             return
         try:
-            self._reader = Discovery(participant.dp, kinds=("participants",))
+            self._reader = Discovery(participant.dp, kinds=("participants:followed",))
         except TransportError as exc:
             self.failed = True
             self._release()

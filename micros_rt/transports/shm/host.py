@@ -221,49 +221,68 @@ class PeerProcess:
     """A peer's process, asked on every housekeeping tick whether it still runs (for each channel and link): a
     pidfd (Linux 5.3+) polled without waiting, one system call (1.3 us here, against 14.8 us for
     :func:`process_alive`: ``kill``, then ``/proc/<pid>/stat`` opened and read for a zombie). It turns readable when
-    the process exits, a zombie too, and a pid reused since cannot fool it. Where ``pidfd_open`` is refused (an
-    older kernel), :func:`process_alive`. Thread-safe; :meth:`close` lets go of the descriptor."""
+    the process exits, a zombie too, and a pid reused since cannot fool it. The pidfd is opened at the first
+    question (a channel that failed to build never holds one) and let go by :meth:`close` (or with the object);
+    where ``pidfd_open`` is refused (an older kernel, no descriptor left), :func:`process_alive` answers.
+    Thread-safe; :meth:`close` never waits (a signal handler may run it while another thread asks)."""
 
-    __slots__ = ("pid", "_fd", "_poll", "_dead", "_lock")
+    __slots__ = ("pid", "_fd", "_poll", "_dead", "_opened", "_closing", "_lock", "__weakref__")
 
     def __init__(self, pid: int) -> None:
         self.pid = pid
         self._fd = -1
         self._poll: Any = None  # select.poll, not select.select: descriptors above 1023 too
         self._dead = False
+        self._opened = False    # pidfd_open tried
+        self._closing = False   # close() came while alive() held the lock: alive() lets go
         self._lock = threading.Lock()
-        if pid > 0:
-            try:
-                self._fd = os.pidfd_open(pid)
-            except ProcessLookupError:
-                self._dead = True
-            except (OSError, AttributeError):
-                return
-            else:
-                self._poll = select.poll()
-                self._poll.register(self._fd, select.POLLIN)
 
     def alive(self) -> bool:
         """Whether the process still runs; True when unknown (pid 0)."""
         with self._lock:
-            if self._dead:
-                return False
-            if self._fd < 0:
-                return process_alive(self.pid)
-            if self._poll.poll(0):
-                self._dead = True
-                self._release()
-                return False
-            return True
+            try:
+                if self._dead:
+                    return False
+                if not self._opened and not self._closing and self.pid > 0:
+                    self._open()
+                if self._fd < 0:
+                    return process_alive(self.pid)
+                if self._poll.poll(0):
+                    self._dead = True
+                    self._release()
+                    return False
+                return True
+            finally:
+                if self._closing:
+                    self._release()
+
+    def _open(self) -> None:
+        self._opened = True
+        try:
+            self._fd = os.pidfd_open(self.pid)
+        except ProcessLookupError:
+            self._dead = True
+            return
+        except (OSError, AttributeError):
+            return
+        self._poll = select.poll()
+        self._poll.register(self._fd, select.POLLIN)
 
     def close(self) -> None:
-        with self._lock:
-            self._release()
+        self._closing = True
+        if self._lock.acquire(blocking=False):  # else alive() lets go of it on its way out
+            try:
+                self._release()
+            finally:
+                self._lock.release()
 
     def _release(self) -> None:
         fd, self._fd, self._poll = self._fd, -1, None
         if fd >= 0:
             os.close(fd)
+
+    def __del__(self) -> None:
+        self._release()
 
 
 def cleanup_dead_nodes() -> None:
