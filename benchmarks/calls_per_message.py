@@ -2,6 +2,7 @@
 """Python function calls per received 64 B message, counted in every thread of the subscriber's process.
 
     flock /tmp/micros_rt-bench.lock .venv/bin/python benchmarks/calls_per_message.py [--count 2000] [--rate 500]
+    ... --rate 10 --count 100 --skip 20 --out calls_per_message_10hz.json    # each message a wake of its own
 
 Each case is a publisher and a subscriber in separate processes beside a rosmaster of its own (loopback, its own
 DDS domain): stock rospy to stock rospy (TCPROS, under /usr/bin/python3), micros_rt to micros_rt under the defaults
@@ -11,7 +12,7 @@ over DDS (shared memory off, ROS 2 visibility on: the plane between hosts, loopb
 function in every thread before any is started (``threading.setprofile``) and counts Python ``call`` events while
 its window is open (``CALLS_BY_FUNCTION=1``: and prints them by function): from its ``--skip``-th message to ``--count`` messages later. The count is deterministic up to
 the housekeeping threads' ticks inside the window (a few per second), so the publisher sends at ``--rate``.
-Prints a table and writes ``benchmarks/results/calls_per_message.json``.
+Prints a table and writes ``benchmarks/results/calls_per_message.json`` (``--out``: another name there).
 """
 
 from __future__ import annotations
@@ -192,6 +193,8 @@ def main() -> None:
     ap.add_argument("--rate", type=float, default=500.0)
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--only", default="", help="run the cases whose name contains this")
+    ap.add_argument("--out", default="calls_per_message.json",
+                    help="file name under benchmarks/results/ (e.g. calls_per_message_10hz.json for --rate 10)")
     args = ap.parse_args()
     rows = []
     domain = 100 + os.getpid() % 100
@@ -217,7 +220,7 @@ def main() -> None:
         print(f"{row['case']:64s} {min(row['calls_per_message']) / base:.2f}x rospy's")
     results = HERE / "results"
     results.mkdir(exist_ok=True)
-    (results / "calls_per_message.json").write_text(json.dumps(
+    (results / args.out).write_text(json.dumps(
         {"count": args.count, "rate": args.rate, "rows": rows, "time": time.strftime("%Y-%m-%d %H:%M:%S")},
         indent=1) + "\n")
 
