@@ -1,6 +1,7 @@
 """The one reader of DDS discovery: what a participant has discovered on its domain, from Cyclone's built-in
 DCPSParticipant, DCPSPublication and DCPSSubscription topics (read, never taken: every call sees all that is
-alive now), and ROS 2's ``ros_discovery_info`` (which nodes each participant announces).
+alive now; the ``followed_*`` views take, each from its own reader or kind, and keep what came), and ROS 2's
+``ros_discovery_info`` (which nodes each participant announces).
 
 Its users: the relay's directories of writers and readers (:class:`~micros_rt.transports.dds.feed.WriterDirectory`,
 the ``ros2:`` section), the host's ROS 2 watcher (:mod:`micros_rt.transports.dds.watch`) and the tools' view of the
